@@ -1,0 +1,28 @@
+"""Exceptions raised by the sky layer.
+
+Every exception names the offending value and says how to fix the problem. All of them
+subclass :class:`ValueError` so callers that only guard against bad input keep working.
+"""
+
+__all__ = ["NaiveDatetimeError", "SunBelowHorizonError", "InvalidParameterError"]
+
+
+class InvalidParameterError(ValueError):
+    """A physical parameter is outside its valid range (latitude, d_max, tau, albedo, ...)."""
+
+
+class NaiveDatetimeError(InvalidParameterError):
+    """A time has no timezone; skysim never guesses UTC.
+
+    Fix: localise it, e.g. ``pd.Timestamp(t).tz_localize("Asia/Shanghai")`` or
+    ``datetime(..., tzinfo=timezone(timedelta(hours=8)))``.
+    """
+
+
+class SunBelowHorizonError(InvalidParameterError):
+    """The sun is at or below the horizon where a sunlit sky is required.
+
+    Single-scattering and plane-parallel models of the daylight sky are not valid for a sun
+    below the horizon (twilight needs a spherical atmosphere); skysim raises instead of
+    returning numbers that look like an answer.
+    """

@@ -1,0 +1,146 @@
+"""The ``Sky`` interface every sky model implements, and model selection by name.
+
+A sensor never depends on one sky model: it asks a :class:`Sky` for the Stokes vector
+arriving from given view directions for a given sun, and derives DoP, AoP and the E-vector
+from it through :class:`SkyField`.
+
+Models (select with :func:`make_sky`):
+
+- ``"rayleigh"``: single scattering with a free d_max (:mod:`skysim.rayleigh`).
+- ``"multiple"``: plane-parallel multiple-scattering Rayleigh atmosphere over a Lambertian
+  ground (optional extra ``skysim[rt]``).
+- ``"berry"``: the analytic neutral-point singularity model of Berry, Dennis & Lee (2004).
+"""
+
+from __future__ import annotations
+
+import abc
+import importlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import rayleigh
+from .geometry import e_vector_from_aop, wrap_axial_deg
+from .validation import check_dop, check_finite, check_in_range, check_sun_above_horizon
+
+__all__ = ["SkyField", "Sky", "RayleighSky", "make_sky", "SKY_MODELS"]
+
+
+@dataclass(frozen=True)
+class SkyField:
+    """Stokes parameters of the light from a set of view directions.
+
+    Attributes
+    ----------
+    view_elevation_deg, view_azimuth_deg : ndarray
+        View directions [deg] (broadcast to the field's shape).
+    I, Q, U : ndarray
+        Stokes parameters in the local-meridian basis (Q > 0: E-vector along the meridian).
+        The unit of ``I`` is model specific and stated by the model.
+    """
+
+    view_elevation_deg: np.ndarray
+    view_azimuth_deg: np.ndarray
+    I: np.ndarray
+    Q: np.ndarray
+    U: np.ndarray
+
+    @property
+    def dop(self) -> np.ndarray:
+        """Degree of linear polarization sqrt(Q^2 + U^2) / I."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.hypot(self.Q, self.U) / self.I
+
+    @property
+    def aop_deg(self) -> np.ndarray:
+        """Angle of polarization [deg, in [-90, 90)] from the local meridian towards +azimuth."""
+        return wrap_axial_deg(0.5 * np.degrees(np.arctan2(self.U, self.Q)))
+
+    @property
+    def e_vector(self) -> np.ndarray:
+        """Unit E-vector in ENU, shape ``(..., 3)`` (sign arbitrary: it is an axis)."""
+        return e_vector_from_aop(self.view_elevation_deg, self.view_azimuth_deg, self.aop_deg)
+
+
+class Sky(abc.ABC):
+    """A clear-sky polarization model.
+
+    Subclasses implement :meth:`_stokes`; :meth:`field` validates the input and broadcasts.
+    """
+
+    name: str = "abstract"
+
+    def field(self, view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+              sun_azimuth_deg) -> SkyField:
+        """Stokes field for view directions and sun positions (all in degrees, broadcast).
+
+        Raises
+        ------
+        SunBelowHorizonError
+            If any sun elevation is <= 0 deg.
+        InvalidParameterError
+            If a view direction is below the horizon or an input is not finite.
+        """
+        check_sun_above_horizon(sun_elevation_deg)
+        check_in_range("view_elevation_deg", view_elevation_deg, 0.0, 90.0,
+                       hint="ground-based sky models only look up")
+        check_finite("view_azimuth_deg", view_azimuth_deg)
+        check_finite("sun_azimuth_deg", sun_azimuth_deg)
+        vel, vaz, sel, saz = np.broadcast_arrays(
+            *(np.asarray(a, dtype=float) for a in (view_elevation_deg, view_azimuth_deg,
+                                                    sun_elevation_deg, sun_azimuth_deg)))
+        I, Q, U = self._stokes(vel, vaz, sel, saz)
+        return SkyField(vel, vaz, I, Q, U)
+
+    @abc.abstractmethod
+    def _stokes(self, view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                sun_azimuth_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """Return broadcast ``(I, Q, U)`` arrays for already validated inputs."""
+
+    def describe(self) -> dict:
+        """Model name and parameters, for sidecars."""
+        return {"model": self.name}
+
+
+class RayleighSky(Sky):
+    """Single-scattering Rayleigh sky with maximum degree of polarization ``dmax``.
+
+    ``I`` is the relative radiance (3/4)(1 + cos^2 g) (mean 1 over the sphere).
+    """
+
+    name = "rayleigh"
+
+    def __init__(self, dmax: float = 1.0):
+        if dmax != 1.0:
+            check_dop("dmax", dmax)
+        self.dmax = float(dmax)
+
+    def _stokes(self, vel, vaz, sel, saz):
+        return rayleigh.stokes(vel, vaz, sel, saz, self.dmax)
+
+    def describe(self) -> dict:
+        return {"model": self.name, "dmax": self.dmax}
+
+
+SKY_MODELS = {
+    "rayleigh": "skysim.sky:RayleighSky",
+    "multiple": "skysim.multiple:MultipleScatteringSky",
+    "berry": "skysim.berry:BerrySky",
+}
+"""Registered sky models: name -> 'module:Class' (imported lazily)."""
+
+
+def make_sky(model: str = "rayleigh", **params) -> Sky:
+    """Build a sky model by name, e.g. ``make_sky("rayleigh", dmax=0.7)``.
+
+    Raises
+    ------
+    ValueError
+        For an unknown model name (the message lists the valid ones).
+    """
+    if model not in SKY_MODELS:
+        raise ValueError(f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
+    module_name, cls_name = SKY_MODELS[model].split(":")
+    cls = getattr(importlib.import_module(module_name), cls_name)
+    return cls(**params)

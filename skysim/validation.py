@@ -1,0 +1,78 @@
+"""Input checks shared by every layer: one place, one wording for each error."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .exceptions import InvalidParameterError, SunBelowHorizonError
+
+__all__ = [
+    "check_latitude",
+    "check_longitude",
+    "check_finite",
+    "check_dop",
+    "check_in_range",
+    "check_sun_above_horizon",
+]
+
+
+def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
+    idx = np.flatnonzero(bad)
+    first = np.asarray(values).ravel()[idx[0]]
+    more = f" (and {idx.size - 1} more)" if idx.size > 1 else ""
+    return f"{first!r} at flat index {idx[0]}{more}"
+
+
+def check_finite(name: str, values) -> np.ndarray:
+    """Return ``values`` as a float array; raise ``InvalidParameterError`` on NaN or inf."""
+    arr = np.asarray(values, dtype=float)
+    bad = ~np.isfinite(arr)
+    if bad.any():
+        raise InvalidParameterError(f"{name} must be finite; got {_first_bad(arr, bad)}")
+    return arr
+
+
+def check_in_range(name: str, values, low: float, high: float, *, low_open=False,
+                   high_open=False, hint: str = "") -> np.ndarray:
+    """Check ``low <= values <= high`` (bounds optionally open); return a float array."""
+    arr = check_finite(name, values)
+    too_low = arr <= low if low_open else arr < low
+    too_high = arr >= high if high_open else arr > high
+    bad = too_low | too_high
+    if bad.any():
+        lb = "(" if low_open else "["
+        hb = ")" if high_open else "]"
+        raise InvalidParameterError(
+            f"{name} must lie in {lb}{low}, {high}{hb}; got {_first_bad(arr, bad)}"
+            + (f". {hint}" if hint else ""))
+    return arr
+
+
+def check_latitude(latitude_deg) -> np.ndarray:
+    """Latitude in [-90, 90] degrees."""
+    return check_in_range("latitude_deg", latitude_deg, -90.0, 90.0,
+                          hint="Latitude is north-positive in degrees; did you swap lat and lon?")
+
+
+def check_longitude(longitude_deg) -> np.ndarray:
+    """Longitude in [-180, 360] degrees (east-positive)."""
+    return check_in_range("longitude_deg", longitude_deg, -180.0, 360.0)
+
+
+def check_dop(name: str, values) -> np.ndarray:
+    """A degree of polarization (or d_max) must satisfy 0 < d < 1.
+
+    d = 1 makes the log-ratio of the opponent sensor infinite; d <= 0 carries no heading.
+    """
+    return check_in_range(name, values, 0.0, 1.0, low_open=True, high_open=True)
+
+
+def check_sun_above_horizon(sun_elevation_deg) -> np.ndarray:
+    """Raise :class:`SunBelowHorizonError` when any sun elevation is <= 0 degrees."""
+    el = check_finite("sun_elevation_deg", sun_elevation_deg)
+    bad = el <= 0.0
+    if bad.any():
+        raise SunBelowHorizonError(
+            f"sun elevation must be above the horizon; got {_first_bad(el, bad)} deg. "
+            "Choose times between sunrise and sunset at this site (check the timezone).")
+    return el
