@@ -1,0 +1,25 @@
+"""Errors raised by estimators. A fit either succeeds or raises one of these: never a NaN."""
+
+__all__ = ["CalibrationError", "TooFewSamplesError", "RankDeficientError", "ConvergenceError"]
+
+
+class CalibrationError(RuntimeError):
+    """Base class of estimation failures."""
+
+
+class TooFewSamplesError(CalibrationError, ValueError):
+    """Fewer samples than parameters: the least-squares problem is under-determined."""
+
+
+class RankDeficientError(CalibrationError):
+    """The normal matrix is singular: some parameter is not observable from these samples
+    (e.g. every sample at the same heading). Spread the headings over [-90, 90) deg."""
+
+
+class ConvergenceError(CalibrationError):
+    """The iteration did not converge; ``last_step`` holds the size of the last update."""
+
+    def __init__(self, message: str, last_step: float | None = None, iterations: int = 0):
+        super().__init__(message)
+        self.last_step = last_step
+        self.iterations = iterations

@@ -1,0 +1,120 @@
+"""Heading (polarization azimuth) from pairs of opponent channels.
+
+Ideal model, eqs. (5)-(9) of Yang et al. (2014) [1]_: invert each channel's log ratio to
+``p_k = d cos 2(phi + a_k)`` (with gain g: ``p_k = tanh(U_k ln10 / (2g))``), then two channels
+give a linear system in ``C = d cos 2phi`` and ``S = d sin 2phi``. ``atan`` alone gives phi
+modulo 90 deg; requiring ``d > 0`` (``atan2(S, C)``) resolves it, so phi covers [-90, 90).
+
+Compensated model: with calibrated mounting errors and transmittance terms the channel
+equations are no longer linear in (C, S); :func:`solve_pair_compensated` solves the two
+equations for (phi, d) per sample by Newton's method started from the ideal solution.
+
+References
+----------
+.. [1] J. Yang, N. Zhou, Y. Huang, X. Liu, Opt. Precision Eng. 22(6):1424 (2014),
+   doi:10.3788/OPE.20142206.1424, eqs. (5)-(9).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
+from skysim.geometry import wrap_axial_deg
+
+from .exceptions import ConvergenceError
+from .model import channel_jacobian
+
+__all__ = ["PAIRS", "pair_index", "solve_pair", "solve_pair_compensated", "heading_error_deg"]
+
+PAIRS = ((1, 2), (1, 3), (2, 3))
+"""Channel pairs of the paper (1-based channel numbers: U1 = 60 deg, U2 = 0, U3 = 120)."""
+
+
+def pair_index(pair) -> tuple[int, int]:
+    """0-based column indices of a pair such as ``(1, 2)``; raises ``ValueError`` otherwise."""
+    i, j = (int(pair[0]), int(pair[1]))
+    if i == j or not {i, j} <= {1, 2, 3}:
+        raise ValueError(f"pair must be two different channels of 1, 2, 3; got {pair!r}")
+    return i - 1, j - 1
+
+
+def solve_pair(U, pair=(1, 2), gain: float = GAIN) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal-model polarization azimuth [deg, in [-90, 90)] and DoP from a channel pair.
+
+    Parameters
+    ----------
+    U : array (..., 3)
+        Channel outputs U1, U2, U3 [V].
+    pair : (int, int)
+        Which two channels to use.
+    gain : float
+        Amplifier gain [V/decade].
+    """
+    i, j = pair_index(pair)
+    U = np.asarray(U, dtype=float)
+    p_i = np.tanh(U[..., i] * np.log(10.0) / (2.0 * gain))
+    p_j = np.tanh(U[..., j] * np.log(10.0) / (2.0 * gain))
+    ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
+    det = np.sin(ai - aj)
+    C = (p_j * np.sin(ai) - p_i * np.sin(aj)) / det
+    S = (p_j * np.cos(ai) - p_i * np.cos(aj)) / det
+    phi = wrap_axial_deg(0.5 * np.degrees(np.arctan2(S, C)))
+    return phi, np.hypot(C, S)
+
+
+def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float = GAIN,
+                           max_iter: int = 30, tol_deg: float = 1e-10):
+    """Polarization azimuth [deg] and DoP from a pair, with calibrated errors.
+
+    Parameters
+    ----------
+    U : array (..., 3)
+        Channel outputs [V].
+    pair : (int, int)
+    misalignment_deg : 4 floats
+        ``(e1_i, e2_i, e1_j, e2_j)`` [deg]: numerator/denominator mounting errors of the pair.
+    transmittance : 2 floats
+        ``(f_i, f_j)``.
+
+    Raises
+    ------
+    ConvergenceError
+        If Newton's method has not converged for every sample after ``max_iter`` steps.
+    """
+    i, j = pair_index(pair)
+    U = np.asarray(U, dtype=float)
+    e = np.asarray(misalignment_deg, dtype=float)
+    f = np.asarray(transmittance, dtype=float)
+    a = CHANNEL_ANGLES_DEG[[i, j]]
+    Up = U[..., [i, j]]
+    # start: ideal solve on outputs with the transmittance offsets and mean mounting error removed
+    U0 = np.zeros(U.shape)
+    U0[..., [i, j]] = Up - gain * f
+    phi, d = solve_pair(U0, pair, gain)
+    phi = phi - 0.25 * e.sum()
+    d = np.clip(d, 1e-3, 0.999)
+    step = np.inf
+    for it in range(max_iter):
+        val, jac = channel_jacobian(phi[..., None], d[..., None], a, e[0::2], e[1::2], f, gain,
+                                    wrt=("phi", "dop"))
+        r = val - Up                               # (..., 2)
+        J_phi, J_d = jac["phi"], jac["dop"]        # (..., 2) each; phi derivative per deg
+        det = J_phi[..., 0] * J_d[..., 1] - J_phi[..., 1] * J_d[..., 0]
+        dphi = -(J_d[..., 1] * r[..., 0] - J_d[..., 0] * r[..., 1]) / det
+        dd = -(-J_phi[..., 1] * r[..., 0] + J_phi[..., 0] * r[..., 1]) / det
+        phi = phi + dphi
+        d = np.clip(d + dd, 1e-6, 0.999999)
+        step = float(np.nanmax(np.abs(dphi))) if dphi.size else 0.0
+        if step < tol_deg:
+            break
+    else:
+        raise ConvergenceError(
+            f"compensated heading solve did not converge in {max_iter} iterations "
+            f"(last step {step:.3g} deg)", last_step=step, iterations=max_iter)
+    return wrap_axial_deg(phi), d
+
+
+def heading_error_deg(phi_estimated_deg, phi_reference_deg) -> np.ndarray:
+    """Axial heading error [deg] in [-90, 90): ``wrap(phi_est - phi_ref)``."""
+    return wrap_axial_deg(np.asarray(phi_estimated_deg) - np.asarray(phi_reference_deg))

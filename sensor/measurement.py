@@ -1,0 +1,167 @@
+"""Measurement tables, schema "skysim.measurement/1" (see ``docs/schemas.md``).
+
+One row per sample; CSV or Parquet by file extension; a JSON sidecar ``<name>.json`` beside
+the data file. Required columns: ``time`` (ISO 8601 with UTC offset), ``heading_deg``,
+``U1_V``, ``U2_V``, ``U3_V``. Unknown extra columns are kept as metadata.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from skysim.io import _json_default, atomic_write_many, sidecar_path
+from skysim.sun import Site
+
+__all__ = ["MEASUREMENT_SCHEMA", "REQUIRED_COLUMNS", "CHANNEL_COLUMNS", "Measurement",
+           "MeasurementFormatError", "read_measurement", "format_iso_times", "parse_iso_times"]
+
+MEASUREMENT_SCHEMA = "skysim.measurement/1"
+CHANNEL_COLUMNS = ("U1_V", "U2_V", "U3_V")
+REQUIRED_COLUMNS = ("time", "heading_deg") + CHANNEL_COLUMNS
+_OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d)$"
+
+
+class MeasurementFormatError(ValueError):
+    """A measurement file or table does not follow its schema (message says what and where)."""
+
+
+def format_iso_times(times: pd.Series) -> pd.Series:
+    """ISO 8601 strings with a ``+hh:mm`` offset (vectorised)."""
+    s = pd.Series(times).dt.strftime("%Y-%m-%dT%H:%M:%S.%f%z")
+    return s.str.replace(r"([+-]\d\d)(\d\d)$", r"\1:\2", regex=True)
+
+
+def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
+    """Parse ISO 8601 times that must carry an offset; raise naming the first bad row."""
+    if pd.api.types.is_datetime64_any_dtype(values):
+        if getattr(values.dt, "tz", None) is None:
+            raise MeasurementFormatError(f"{where}: column 'time' is timezone-naive")
+        return values
+    s = values.astype(str)
+    ok = s.str.contains(_OFFSET_RE, regex=True)
+    if not ok.all():
+        row = int(np.flatnonzero(~ok.to_numpy())[0])
+        raise MeasurementFormatError(
+            f"{where}: time {s.iloc[row]!r} in row {row} has no UTC offset; "
+            "write times as ISO 8601 with offset, e.g. 2013-05-22T17:10:00+08:00")
+    try:
+        return pd.to_datetime(s, format="ISO8601", utc=True)
+    except (ValueError, TypeError) as exc:
+        raise MeasurementFormatError(f"{where}: unparseable time ({exc})") from exc
+
+
+def check_numeric_columns(table: pd.DataFrame, columns, where: str) -> None:
+    """Raise :class:`MeasurementFormatError` for missing, non-numeric or NaN columns."""
+    missing = [c for c in columns if c not in table.columns]
+    if missing:
+        raise MeasurementFormatError(
+            f"{where}: missing required column(s) {missing}; found {list(table.columns)}")
+    for c in columns:
+        col = pd.to_numeric(table[c], errors="coerce")
+        bad = ~np.isfinite(col.to_numpy(dtype=float))
+        if bad.any():
+            row = int(np.flatnonzero(bad)[0])
+            raise MeasurementFormatError(
+                f"{where}: column {c!r} has {int(bad.sum())} NaN/non-numeric value(s), "
+                f"first in row {row} ({table[c].iloc[row]!r})")
+
+
+@dataclass
+class Measurement:
+    """A measurement table and its sidecar.
+
+    Attributes
+    ----------
+    table : pandas.DataFrame
+        Columns per schema v1; ``time`` is timezone-aware.
+    sidecar : dict
+        ``schema``, ``site``, ``sensor`` and (for generated data) ``generator``.
+    """
+
+    table: pd.DataFrame
+    sidecar: dict
+
+    def __post_init__(self):
+        self.validate("measurement")
+
+    def validate(self, where: str) -> None:
+        if self.sidecar.get("schema") != MEASUREMENT_SCHEMA:
+            raise MeasurementFormatError(
+                f"{where}: sidecar schema is {self.sidecar.get('schema')!r}, "
+                f"expected {MEASUREMENT_SCHEMA!r}")
+        if "site" not in self.sidecar:
+            raise MeasurementFormatError(
+                f"{where}: sidecar has no 'site' (latitude_deg, longitude_deg, altitude_m); "
+                "the sun position cannot be computed without it")
+        if "time" not in self.table.columns:
+            raise MeasurementFormatError(f"{where}: missing required column 'time'")
+        self.table["time"] = parse_iso_times(self.table["time"], where)
+        check_numeric_columns(self.table, REQUIRED_COLUMNS[1:], where)
+
+    @property
+    def site(self) -> Site:
+        return Site.from_dict(self.sidecar["site"])
+
+    @property
+    def channels(self) -> np.ndarray:
+        """Channel outputs, shape (n, 3) [V]."""
+        return self.table[list(CHANNEL_COLUMNS)].to_numpy(dtype=float)
+
+    def write(self, path) -> Path:
+        """Write the table (``.csv`` or ``.parquet``) and its sidecar atomically."""
+        path = Path(path)
+        suffix = path.suffix.lower()
+        if suffix not in (".csv", ".parquet"):
+            raise ValueError(f"unsupported extension {path.suffix!r}; use .csv or .parquet")
+
+        def write_table(tmp: Path):
+            if suffix == ".csv":
+                out = self.table.copy()
+                out["time"] = format_iso_times(out["time"])
+                out.to_csv(tmp, index=False)
+            else:
+                self.table.to_parquet(tmp, index=False)
+
+        def write_sidecar(tmp: Path):
+            tmp.write_text(json.dumps(self.sidecar, indent=2, default=_json_default) + "\n")
+
+        atomic_write_many([(path, write_table), (sidecar_path(path), write_sidecar)])
+        return path
+
+
+def read_measurement(path) -> Measurement:
+    """Read a measurement table and its sidecar.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the data file or the sidecar is missing.
+    MeasurementFormatError
+        For a malformed sidecar, a missing/NaN column or times without offsets.
+    """
+    path = Path(path)
+    side = sidecar_path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no measurement file {path}")
+    if not side.exists():
+        raise FileNotFoundError(f"no sidecar {side} beside {path} (schema {MEASUREMENT_SCHEMA})")
+    try:
+        sidecar = json.loads(side.read_text())
+    except json.JSONDecodeError as exc:
+        raise MeasurementFormatError(f"{side}: not valid JSON ({exc})") from exc
+    try:
+        if path.suffix.lower() == ".parquet":
+            table = pd.read_parquet(path)
+        else:
+            table = pd.read_csv(path)
+    except Exception as exc:  # pandas/pyarrow raise many types for corrupt files
+        raise MeasurementFormatError(f"{path}: cannot read table ({exc})") from exc
+    m = Measurement.__new__(Measurement)
+    m.table, m.sidecar = table, sidecar
+    m.validate(str(path))
+    return m
