@@ -1,0 +1,1 @@
+"""experiments: scripted reproductions, studies, figures and the ``skysim`` command line."""

@@ -1,0 +1,63 @@
+"""The ``skysim`` command line.
+
+Sub-commands are contributed by modules of the :mod:`experiments` package: every module that
+defines ``register(subparsers)`` adds its commands (and ``reproduce`` targets via
+``register_reproduce(targets)``, a dict name -> function(args)). Modules keep heavy imports
+inside their command functions so that ``skysim --help`` stays fast.
+"""
+
+from __future__ import annotations
+
+import argparse
+import importlib
+import pkgutil
+import sys
+
+import experiments
+
+__all__ = ["main", "build_parser"]
+
+
+def _command_modules():
+    for info in sorted(pkgutil.iter_modules(experiments.__path__), key=lambda m: m.name):
+        if info.name == "cli" or info.name.startswith("_"):
+            continue
+        mod = importlib.import_module(f"experiments.{info.name}")
+        yield mod
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(
+        prog="skysim", description="Skylight-polarization simulator and virtual sensor testbed.")
+    sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
+    targets: dict = {}
+    modules = list(_command_modules())
+    for mod in modules:
+        if hasattr(mod, "register_reproduce"):
+            mod.register_reproduce(targets)
+    rep = sub.add_parser("reproduce", help="run a published experiment's reproduction",
+                         description="Run a scripted reproduction; writes tables and figures.")
+    rep.add_argument("target", choices=sorted(targets), help="which experiment")
+    rep.add_argument("--trials", type=int, default=None, help="Monte-Carlo trials")
+    rep.add_argument("--seed", type=int, default=20140601, help="master random seed")
+    rep.add_argument("--out", default=None, help="output folder (default results/<target>)")
+    rep.set_defaults(func=lambda args: targets[args.target](args))
+    for mod in modules:
+        if hasattr(mod, "register"):
+            mod.register(sub)
+    return parser
+
+
+def main(argv=None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        rc = args.func(args)
+    except (ValueError, FileNotFoundError, RuntimeError) as exc:
+        print(f"skysim {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    return int(rc or 0)
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())
