@@ -1,0 +1,37 @@
+# skysim: `make run` (set up + Yang 2014 reproduction), `make test`, `make bench`.
+PYTHON ?= python3
+VENV   := .venv
+BIN    := $(VENV)/bin
+PIP    := $(BIN)/python -m pip
+
+.PHONY: run test bench clean venv
+
+$(BIN)/python:
+	$(PYTHON) -m venv $(VENV)
+	$(PIP) install --quiet --upgrade pip
+
+# Stamps re-install when pyproject.toml changes.
+$(VENV)/.installed-run: pyproject.toml | $(BIN)/python
+	$(PIP) install --quiet -e .
+	@touch $@
+
+$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
+	$(PIP) install --quiet -e '.[test,rt,sweep]'
+	@touch $@ $(VENV)/.installed-run
+
+venv: $(VENV)/.installed-run
+
+run: $(VENV)/.installed-run
+	$(BIN)/skysim reproduce yang2014
+
+test: $(VENV)/.installed-test
+	$(BIN)/python -m pytest -q
+
+bench: $(VENV)/.installed-test
+	@mkdir -p .benchmarks
+	$(BIN)/python -m pytest tests/benchmarks -q --benchmark-enable --benchmark-only \
+		--benchmark-json=.benchmarks/latest.json -p no:randomly
+	$(BIN)/python tests/benchmarks/ratios.py .benchmarks/latest.json
+
+clean:
+	rm -rf $(VENV) results .benchmarks .pytest_cache
