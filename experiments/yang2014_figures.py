@@ -28,8 +28,8 @@ def plot_error_vs_phi(result: dict, out: Path) -> None:
     phi_ref, _, cal, U, _ = ex[(groups[0], PAIRS[0])]
     order = np.argsort(phi_ref)
     fig, ax = plt.subplots(figsize=(6.4, 4))
-    ideal = channel_outputs(phi_ref[order], np.clip(cal.dop_scale * 0 + np.median(
-        result["geometry"][groups[0]][3]) * cal.dop_scale, 1e-3, 0.999))
+    dop_shape = result["geometry"][groups[0]][3]
+    ideal = channel_outputs(phi_ref[order], cal.dop_scale * dop_shape[order])
     for c, name in enumerate(("U1 (60°)", "U2 (0°)", "U3 (120°)")):
         ax.plot(phi_ref[order], U[order, c], ".", ms=3, label=f"{name} simulated")
         ax.plot(phi_ref[order], ideal[:, c], "-", lw=0.8, color="k")

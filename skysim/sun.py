@@ -95,8 +95,12 @@ def as_utc_index(times) -> pd.DatetimeIndex:
                 f"times are timezone-naive (first: {idx[0] if len(idx) else '<empty>'}); "
                 "localise them, e.g. times.tz_localize('Asia/Shanghai')")
         return idx.tz_convert("UTC")
-    seq = [times] if isinstance(times, (_dt.datetime, pd.Timestamp, str, np.datetime64)) \
-        else list(np.atleast_1d(times))
+    if isinstance(times, (_dt.datetime, pd.Timestamp, str, np.datetime64)):
+        seq = [times]
+    elif isinstance(times, (list, tuple)):
+        seq = list(times)
+    else:
+        seq = list(np.atleast_1d(times))
     out = []
     for t in seq:  # list input: per-element tz check (arrays should be DatetimeIndex)
         ts = pd.Timestamp(t)
