@@ -20,11 +20,13 @@ References
 from __future__ import annotations
 
 import datetime as _dt
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 import pandas as pd
 from pysolar import solar as _solar
+from pysolar import solartime as _solartime
 
 from .exceptions import NaiveDatetimeError
 from .geometry import direction_vector, elevation_azimuth
@@ -112,13 +114,31 @@ def as_utc_index(times) -> pd.DatetimeIndex:
     return pd.DatetimeIndex(out)
 
 
+def _ut1_shift_s(when: _dt.datetime) -> float:
+    """Seconds pysolar's UT1 runs ahead of UTC: ``(TT - UTC) - dT_pysolar``.
+
+    pysolar derives UT1 as ``UTC + (leap seconds + 32.184 s) - dT`` with a tabulated dT that
+    stops in 2017 (67.389 s) while TT - UTC has been 69.184 s since then, so from 2017 on its
+    Earth-rotation angle is 1.8 s (0.0075 deg) ahead. UTC is kept within 0.9 s of UT1 by
+    definition, so we evaluate pysolar at ``UTC - shift``: UT1 = UTC as in NREL SPA with
+    dUT1 = 0. The ephemeris time then moves by the same < 2 s (< 3e-5 deg of solar longitude).
+    """
+    with warnings.catch_warnings():
+        # pysolar warns that its leap-second table ends; none was added after 2016-12-31.
+        warnings.simplefilter("ignore", UserWarning)
+        return _solartime.get_leap_seconds(when) + 32.184 - _solartime.get_delta_t(when)
+
+
 def _pysolar_vectors(site: Site, when_utc: pd.DatetimeIndex, refraction: bool) -> np.ndarray:
     """Direct pysolar evaluation, one call per time (the library has no array API)."""
     lat, lon, alt = site.latitude_deg, site.longitude_deg, site.altitude_m
     el = np.empty(len(when_utc))
     az = np.empty(len(when_utc))
     for k, t in enumerate(when_utc.to_pydatetime()):
-        dec, ha = _solar.get_topocentric_position(lat, lon, t, alt)
+        t = t - _dt.timedelta(seconds=_ut1_shift_s(t))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # see _ut1_shift_s
+            dec, ha = _solar.get_topocentric_position(lat, lon, t, alt)
         e = _solar.get_topocentric_elevation_angle(lat, dec, ha)
         if refraction:
             e = e + _solar.get_refraction_correction(101325.0, 283.0, e)
@@ -137,8 +157,9 @@ def sun_vector(times, site: Site, refraction: bool = False, method: str = "inter
     refraction : bool
         Apply atmospheric refraction (default False: geometric position).
     method : {'interpolated', 'pysolar'}
-        'interpolated' evaluates pysolar on 15-minute knots and interpolates (fast);
-        'pysolar' calls pysolar for every time (reference, slow).
+        'interpolated' evaluates pysolar on 15-minute knots and interpolates (fast; when
+        the times are so sparse that they need more knots than times, pysolar is called
+        directly instead); 'pysolar' calls pysolar for every time (reference, slow).
     """
     idx = as_utc_index(times)
     if method == "pysolar":
@@ -152,6 +173,8 @@ def sun_vector(times, site: Site, refraction: bool = False, method: str = "inter
     x = t_s / KNOT_SPACING_S - k  # in [0, 1)
     offsets = np.arange(-1, 3)
     knots, inverse = np.unique(k[:, None] + offsets[None, :], return_inverse=True)
+    if knots.size >= len(idx):  # sparse times: direct calls are fewer and exact
+        return _pysolar_vectors(site, idx, refraction), idx
     inverse = inverse.reshape(len(k), 4)
     knot_times = pd.to_datetime(knots * int(KNOT_SPACING_S), unit="s", utc=True)
     knot_vec = _pysolar_vectors(site, knot_times, refraction)
@@ -225,7 +248,10 @@ def apparent_solar_time(times, longitude_deg: float, latitude_deg: float = 0.0) 
     check_longitude(longitude_deg)
     hours = np.empty(len(idx))
     for k, t in enumerate(idx.to_pydatetime()):
-        _, ha = _solar.get_topocentric_position(latitude_deg, longitude_deg, t, 0.0)
+        t = t - _dt.timedelta(seconds=_ut1_shift_s(t))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", UserWarning)  # see _ut1_shift_s
+            _, ha = _solar.get_topocentric_position(latitude_deg, longitude_deg, t, 0.0)
         hours[k] = np.mod(12.0 + ha / 15.0, 24.0)
     return pd.Series(hours, index=_original_index(times, idx), name="apparent_solar_time_h")
 

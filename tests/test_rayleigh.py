@@ -1,0 +1,105 @@
+"""Single-scattering Rayleigh sky: closed-form limits and geometric invariants."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skysim import rayleigh
+from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
+from skysim.geometry import direction_vector, elevation_azimuth, wrap_axial_deg
+from skysim.sky import RayleighSky, make_sky
+
+elevations = st.floats(0.5, 89.5)
+azimuths = st.floats(0.0, 359.99)
+
+
+def test_dop_closed_form_limits():
+    """d = d_max sin^2 g/(1+cos^2 g) (Yang et al. 2014 eq. 1): 0 at g = 0 and 180 deg,
+    d_max at 90 deg, and (sin^2 60)/(1+cos^2 60) = 0.75/1.25 = 0.6 of d_max at 60 deg."""
+    d = rayleigh.degree_of_polarization([0.0, 180.0, 90.0, 60.0], dmax=0.7)
+    np.testing.assert_allclose(d, [0.0, 0.0, 0.7, 0.42], atol=1e-15)
+
+
+def test_dop_zero_at_sun_and_dmax_at_90_from_it():
+    sky = RayleighSky(dmax=0.8)
+    f = sky.field([30.0, 60.0], [120.0, 300.0], 30.0, 120.0)   # at the sun; 90 deg from it
+    np.testing.assert_allclose(f.dop, [0.0, 0.8], atol=1e-12)
+
+
+@settings(max_examples=200, deadline=None)
+@given(sun_el=elevations, sun_az=azimuths, view_az=azimuths)
+def test_zenith_e_vector_perpendicular_to_solar_meridian(sun_el, sun_az, view_az):
+    """DESIGN.md invariant: at the zenith the E-vector is perpendicular to the solar meridian,
+    whatever meridian (view azimuth) the AoP is referred to."""
+    f = RayleighSky().field(90.0, view_az, sun_el, sun_az)
+    e = f.e_vector
+    sun_horizontal = direction_vector(0.0, sun_az)
+    assert abs(np.dot(e, sun_horizontal)) < 1e-9
+    assert abs(e[2]) < 1e-9
+
+
+@settings(max_examples=200, deadline=None)
+@given(v_el=elevations, v_az=azimuths, s_el=elevations, s_az=azimuths)
+def test_e_vector_perpendicular_to_view_and_sun(v_el, v_az, s_el, s_az):
+    e = rayleigh.e_vector(v_el, v_az, s_el, s_az)
+    if np.isnan(e).any():  # view parallel to the sun: undefined, DoP 0
+        return
+    assert abs(np.dot(e, direction_vector(v_el, v_az))) < 1e-9
+    assert abs(np.dot(e, direction_vector(s_el, s_az))) < 1e-9
+
+
+@settings(max_examples=200, deadline=None)
+@given(v_el=elevations, v_az=azimuths, s_el=elevations, s_az=azimuths)
+def test_stokes_consistent_with_dop_and_aop(v_el, v_az, s_el, s_az):
+    f = RayleighSky(dmax=0.75).field(v_el, v_az, s_el, s_az)
+    gamma = rayleigh.scattering_angle_deg(v_el, v_az, s_el, s_az)
+    assert f.dop == pytest.approx(rayleigh.degree_of_polarization(gamma, 0.75), abs=1e-12)
+    if f.dop > 1e-6:
+        aop = rayleigh.angle_of_polarization_deg(v_el, v_az, s_el, s_az)
+        assert abs(wrap_axial_deg(f.aop_deg - aop)) < 1e-6
+
+
+def test_aop_reference_and_sense():
+    """Closed-form cases of the documented convention (AoP from the local meridian):
+    - in the solar vertical plane the E-vector is horizontal: AoP = -90 (== +90);
+    - sun on the horizon (el -> 0), view on the horizon 90 deg from it: the scattering plane
+      is horizontal, E is vertical, along the meridian: AoP = 0;
+    - sense: view north at 45 deg, sun east at 45 deg: E ~ v x s = (1, 1, -1)/sqrt3, whose
+      components on e_el = (0, -1, 1)/sqrt2 and e_az = (1, 0, 0) give
+      atan2(1/sqrt3, -sqrt(2/3)) = 144.74 deg -> -35.26 deg."""
+    aop = rayleigh.angle_of_polarization_deg([40.0, 40.0], [200.0, 20.0], 30.0, 200.0)
+    np.testing.assert_allclose(aop, [-90.0, -90.0], atol=1e-9)
+    assert rayleigh.angle_of_polarization_deg(1.0, 90.0, 1e-6, 0.0) == pytest.approx(0.0, abs=1e-4)
+    expected = wrap_axial_deg(np.degrees(np.arctan2(1 / np.sqrt(3), -np.sqrt(2 / 3))))
+    assert rayleigh.angle_of_polarization_deg(45.0, 0.0, 45.0, 90.0) == pytest.approx(expected)
+    assert expected == pytest.approx(-35.264, abs=1e-3)
+
+
+def test_broadcasting_over_shapes():
+    el = np.linspace(1, 89, 12).reshape(3, 4)
+    f = RayleighSky(0.7).field(el[..., None], np.array([0.0, 90.0]), 25.0, 270.0)
+    assert f.dop.shape == (3, 4, 2) and f.e_vector.shape == (3, 4, 2, 3)
+
+
+def test_geometry_round_trip():
+    rng = np.random.default_rng(0)
+    el, az = rng.uniform(-89, 89, 100), rng.uniform(0, 360, 100)
+    el2, az2 = elevation_azimuth(direction_vector(el, az))
+    np.testing.assert_allclose(el2, el, atol=1e-10)
+    np.testing.assert_allclose(az2, az, atol=1e-9)
+
+
+def test_bad_input():
+    with pytest.raises(SunBelowHorizonError, match="-2.0"):
+        RayleighSky().field(90.0, 0.0, -2.0, 100.0)
+    with pytest.raises(InvalidParameterError, match="view_elevation_deg"):
+        RayleighSky().field(-5.0, 0.0, 20.0, 100.0)
+    with pytest.raises(InvalidParameterError, match="dmax"):
+        RayleighSky(dmax=1.2)
+    with pytest.raises(InvalidParameterError, match="dmax"):
+        RayleighSky(dmax=0.0)
+    with pytest.raises(InvalidParameterError, match="nan"):
+        RayleighSky().field(np.nan, 0.0, 20.0, 100.0)
+    with pytest.raises(ValueError, match="valid: berry, multiple, rayleigh"):
+        make_sky("mie")
