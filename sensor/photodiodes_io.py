@@ -256,9 +256,14 @@ def _validate_table(table: pd.DataFrame, columns: list[str], where: str) -> None
             "Each unit i with polarizer angles a needs a column u{i}_p{a:03d}",
             missing, unexpected)
     _require("time" in table.columns, where, "missing required column 'time'")
-    table["time"] = parse_iso_times(table["time"], where)
     optional = [c for c in ("pitch_deg", "roll_deg", *ACCEL_COLUMNS) if c in table.columns]
-    check_numeric_columns(table, ["yaw_deg", *optional], where)
+    try:   # the measurement schema's checks, re-raised as this schema's error
+        table["time"] = parse_iso_times(table["time"], where)
+        check_numeric_columns(table, ["yaw_deg", *optional], where)
+    except PhotodiodeFormatError:
+        raise
+    except MeasurementFormatError as exc:
+        raise PhotodiodeFormatError(str(exc)) from exc
     for c in columns:  # readings may be NaN (flagged as missing) but never text
         coerced = pd.to_numeric(table[c], errors="coerce")
         bad = coerced.isna() & table[c].notna()
