@@ -33,7 +33,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 from scipy.spatial.transform import Rotation
@@ -219,8 +219,11 @@ def _rotate(rotvec, v):
             + k * np.sum(k * v, axis=-1, keepdims=True) * (1 - np.cos(th)))
 
 
-def _check_observable(J, what: str, frame: str, directions: dict):
-    """Raise for too few samples or an unobservable axis of the (weighted) Jacobian J (N, 3)."""
+def _check_observable(J, what: str, frame: str, directions):
+    """Raise for too few samples or an unobservable axis of the (weighted) Jacobian J (N, 3).
+
+    ``directions()`` returns named physical directions (same frame) used to describe the
+    unobservable axes, e.g. {"the sun direction": ...}."""
     if J.shape[0] < 3:
         raise TooFewSamplesError(
             f"{what}: {J.shape[0]} usable sample(s) for 3 unknown rotation angles; record at "
@@ -230,7 +233,7 @@ def _check_observable(J, what: str, frame: str, directions: dict):
     weak = ratio < RCOND
     if weak.any():
         Q = vec[:, weak]
-        named = [name for name, d in directions.items()
+        named = [name for name, d in directions().items()
                  if np.linalg.norm(Q.T @ (d / np.linalg.norm(d))) > 0.95]
         axes = "; ".join(np.array2string(q, precision=3, suppress_small=True) for q in Q.T)
         along = f" (along {' and '.join(named)})" if named else ""
@@ -243,10 +246,17 @@ def _check_observable(J, what: str, frame: str, directions: dict):
 
 
 def _finish(params, J, r, w, frame, iterations) -> InstallationEstimate:
+    # Sandwich (heteroscedasticity-consistent, HC1) covariance: the residual noise varies with
+    # the geometry and DoP in ways the weights only approximate, so the plain s^2 (J^T W J)^-1
+    # would understate it. White (1980), doi:10.2307/1912934, eq. (2.4); MacKinnon & White's
+    # n/(n-k) small-sample factor.
     n = r.size
     dof = max(n - 3, 1)
     s2 = float(np.sum((w * r) ** 2) / dof)
-    cov = s2 * np.linalg.inv((J * w[:, None]).T @ (J * w[:, None]))
+    Jw, rw = J * w[:, None], w * r
+    bread = np.linalg.inv(Jw.T @ Jw)
+    meat = (Jw * rw[:, None] ** 2).T @ Jw
+    cov = n / dof * bread @ meat @ bread
     cov_deg2 = cov * np.degrees(1.0) ** 2
     lam = np.linalg.eigvalsh(J.T @ J)
     return InstallationEstimate(np.degrees(params), np.sqrt(np.diag(cov_deg2)), cov_deg2, frame,
@@ -280,7 +290,7 @@ def estimate_body_installation(e_zenith_sensor, reference_attitude: Rotation, su
     e, s_b = e[ok], s_b[ok]
     R = Rotation.identity()
     J = np.cross(e, s_b)
-    _check_observable(J, "sensor-to-body installation error phi_1", "sensor",
+    _check_observable(J, "sensor-to-body installation error phi_1", "sensor", lambda:
                       {"the sun direction": s_b.mean(0), "the E-vector": _axial_mean(e),
                        "the zenith-unit axis (sensor z)": np.array([0.0, 0.0, 1.0])})
     for it in range(1, max_iter + 1):
@@ -346,7 +356,8 @@ def _step3_residual(params, e1, e_unit, nominal, up, sin_h):
 
 def estimate_unit_installation(e_zenith_sensor, e_unit, unit_matrices_nominal, up_sensor,
                                sun_elevation_deg, weights=None, unit_labels=None,
-                               max_iter: int = 30, tol_deg: float = 1e-9):
+                               up_rotation_covariance_deg2=None, max_iter: int = 30,
+                               tol_deg: float = 1e-9):
     """Step 3: installation errors ``phi_i`` [deg, unit frame] of units from the sun-gravity angle.
 
     All units are fitted together (batched Gauss-Newton, numerical Jacobian, 3 parameters
@@ -368,6 +379,11 @@ def estimate_unit_installation(e_zenith_sensor, e_unit, unit_matrices_nominal, u
     weights : (n, m), optional
         Residual weights (e.g. the unit's DoP, to which the E-vector noise is inversely
         proportional); default 1.
+    up_rotation_covariance_deg2 : (3, 3), optional
+        Covariance [deg^2] of a common rotation error of ``up_sensor`` -- the uncertainty of
+        ``phi_1`` from step 1, through which ``up_sensor`` was computed. It is the same for
+        every sample, so it does not average out: it is propagated linearly into each unit's
+        covariance (``G C G^T``, G the sensitivity of ``phi_i`` to that rotation).
 
     Returns
     -------
@@ -405,7 +421,7 @@ def estimate_unit_installation(e_zenith_sensor, e_unit, unit_matrices_nominal, u
     for i in range(m):
         use = ok[:, i]
         _check_observable(J[use, i] * w[use, i, None], f"installation error of {labels[i]}",
-                          labels[i], {"the unit's E-vector": _axial_mean(eu[use, i]),
+                          labels[i], lambda: {"the unit's E-vector": _axial_mean(eu[use, i]),
                                       "the unit's optical axis (z)": np.array([0.0, 0, 1])})
     for it in range(1, max_iter + 1):
         r = _step3_residual(params, *args) * w
@@ -422,8 +438,23 @@ def estimate_unit_installation(e_zenith_sensor, e_unit, unit_matrices_nominal, u
                                f"iterations (last step {step:.3g} deg)", step, max_iter)
     r = _step3_residual(params, *args)
     J = jacobian(params)
-    return [_finish(params[i], J[ok[:, i], i], r[ok[:, i], i], w[ok[:, i], i], labels[i], it)
-            for i in range(m)]
+    out = [_finish(params[i], J[ok[:, i], i], r[ok[:, i], i], w[ok[:, i], i], labels[i], it)
+           for i in range(m)]
+    if up_rotation_covariance_deg2 is None:
+        return out
+    # sensitivity of the fixed point to a common rotation of `up` (one Gauss-Newton step)
+    Jw = J * w[..., None]
+    A_inv = np.linalg.inv(np.einsum("nmi,nmj->mij", Jw, Jw))
+    G = np.empty((m, 3, 3))
+    for k in range(3):
+        rot = np.zeros(3)
+        rot[k] = h
+        dr = (_step3_residual(params, e1, eu, args[2], _rotate(rot, up), sin_h) - r) / h
+        G[:, :, k] = -np.einsum("mij,nmj,nm->mi", A_inv, Jw, dr * w)
+    extra = G @ np.asarray(up_rotation_covariance_deg2, float) @ np.swapaxes(G, 1, 2)
+    return [replace(e, covariance_deg2=e.covariance_deg2 + extra[i],
+                    std_deg=np.sqrt(np.diag(e.covariance_deg2 + extra[i])))
+            for i, e in enumerate(out)]
 
 
 def attitude_from_sun_gravity(sun_body, up_body, sun_enu) -> Rotation:
@@ -508,7 +539,8 @@ def calibrate_installation(data: PhotodiodeData, sensor: CompoundEyeSensor | Non
     nominal = sensor.unit_matrices(False)
     units = estimate_unit_installation(
         e_s[:, 0], pol.e_unit[:, 1:], nominal[1:], up_s, np.degrees(np.arcsin(sun_enu[:, 2])),
-        weights=pol.dop[:, 1:], unit_labels=[f"unit {i}" for i in range(1, sensor.n_units)])
+        weights=pol.dop[:, 1:], unit_labels=[f"unit {i}" for i in range(1, sensor.n_units)],
+        up_rotation_covariance_deg2=body.covariance_deg2)
     compensated = sensor.with_installation(
         body.rotvec_deg, np.vstack([np.zeros(3)] + [u.rotvec_deg for u in units]))
     return InstallationCalibration(body, units, compensated, len(data.table),
