@@ -38,7 +38,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
-from sensor.compound_eye import CompoundEyeSensor, body_attitude
+from sensor.compound_eye import CompoundEyeSensor, attitude_angles, body_attitude
 from sensor.opponent import GAIN
 from sensor.photodiodes_io import ACCEL_COLUMNS, PhotodiodeData
 from skysim.sun import sun_vector
@@ -50,7 +50,7 @@ __all__ = ["UnobservableError", "SaturatedUnitError", "InstallationEstimate",
            "InstallationCalibration", "UnitPolarization", "polarization_from_photodiodes",
            "unit_polarization", "e_vectors_sensor", "estimate_body_installation",
            "sun_vector_sensor", "estimate_unit_installation", "attitude_from_sun_gravity",
-           "calibrate_installation", "attitude_from_data", "RCOND"]
+           "calibrate_installation", "attitude_from_data", "yaw_offset_from_sky", "RCOND"]
 
 RCOND = 1e-4
 """Smallest eigenvalue ratio of the normal matrix accepted as observable: below it the weakest
@@ -486,15 +486,18 @@ def _reference_attitude(data: PhotodiodeData) -> Rotation:
     return body_attitude(sense * t["yaw_deg"].to_numpy(float), pitch, roll)
 
 
-def _up_body(data: PhotodiodeData, reference: Rotation | None) -> np.ndarray:
-    """Up in the body frame: accelerometer specific force if recorded, else the reference."""
+def _up_body(data: PhotodiodeData) -> np.ndarray:
+    """Up in the body frame: accelerometer specific force if recorded, else from the recorded
+    pitch and roll (yaw does not matter, so relative yaw is fine)."""
+    t = data.table
     if data.has_accelerometer:
-        f = data.table[list(ACCEL_COLUMNS)].to_numpy(float)
+        f = t[list(ACCEL_COLUMNS)].to_numpy(float)
         return f / np.linalg.norm(f, axis=1, keepdims=True)
-    if reference is None:
-        raise CalibrationError("no accelerometer columns (accel_x/y/z_mps2) and no reference "
-                               "attitude: the up direction is unknown")
-    return reference.inv().apply(np.array([0.0, 0.0, 1.0])).reshape(-1, 3)
+    if "pitch_deg" not in t or "roll_deg" not in t:
+        raise CalibrationError("no accelerometer columns (accel_x/y/z_mps2) and no pitch_deg/"
+                               "roll_deg: the up direction in the body frame is unknown")
+    tilt = body_attitude(0.0, t["pitch_deg"].to_numpy(float), t["roll_deg"].to_numpy(float))
+    return tilt.inv().apply(np.array([0.0, 0.0, 1.0])).reshape(-1, 3)
 
 
 @dataclass(frozen=True)
@@ -535,7 +538,7 @@ def calibrate_installation(data: PhotodiodeData, sensor: CompoundEyeSensor | Non
     e_s = e_vectors_sensor(pol, sensor, compensated=False)
     body = estimate_body_installation(e_s[:, 0], ref, sun_enu)
     R_bs = Rotation.from_rotvec(body.rotvec_deg, degrees=True)
-    up_s = R_bs.inv().apply(_up_body(data, ref))
+    up_s = R_bs.inv().apply(_up_body(data))
     nominal = sensor.unit_matrices(False)
     units = estimate_unit_installation(
         e_s[:, 0], pol.e_unit[:, 1:], nominal[1:], up_s, np.degrees(np.arcsin(sun_enu[:, 2])),
@@ -556,8 +559,34 @@ def attitude_from_data(data: PhotodiodeData, sensor: CompoundEyeSensor, min_dop:
     """
     pol = unit_polarization(data, min_dop, method)
     R_bs = sensor.body_installation()
-    up_b = _up_body(data, None if data.has_accelerometer else _reference_attitude(data))
+    up_b = _up_body(data)
     up_s = R_bs.inv().apply(up_b)
     sun_s, quality = sun_vector_sensor(e_vectors_sensor(pol, sensor, True), pol.dop, up_s)
     sun_enu, _ = sun_vector(data.table["time"], data.site)
     return attitude_from_sun_gravity(R_bs.apply(sun_s), up_b, sun_enu), quality
+
+
+def yaw_offset_from_sky(data: PhotodiodeData, sensor: CompoundEyeSensor | None = None,
+                        min_dop: float = 0.05, method: str = "stokes") -> tuple[float, float]:
+    """North reference of relative yaw: ``yaw_north = yaw_recorded + offset`` [deg].
+
+    For instruments that only record yaw relative to their start (e.g. a 45-deg ring with
+    four photodiodes per unit): the sky (sun from the E-vectors) and gravity give the absolute
+    heading per sample; the offset is their circular mean difference to the recorded yaw.
+
+    Returns
+    -------
+    offset_deg in [0, 360), standard error [deg] (circular spread / sqrt(n)).
+    """
+    sensor = sensor or CompoundEyeSensor.from_sidecar(data.sidecar)
+    att, _ = attitude_from_data(data, sensor, min_dop, method)
+    heading = attitude_angles(att)[0]
+    sense = 1.0 if data.sidecar["yaw_sense"] == "clockwise" else -1.0
+    d = np.radians(heading - sense * data.table["yaw_deg"].to_numpy(float))
+    d = d[np.isfinite(d)]
+    if d.size == 0:
+        raise CalibrationError("no sample with a usable sky heading (all units flagged or "
+                               "weakly polarized)")
+    mean = np.arctan2(np.sin(d).mean(), np.cos(d).mean())
+    spread = np.sqrt(np.mean(np.angle(np.exp(1j * (d - mean))) ** 2))
+    return float(np.mod(np.degrees(mean), 360.0)), float(np.degrees(spread) / np.sqrt(d.size))

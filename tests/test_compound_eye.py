@@ -167,3 +167,22 @@ def test_sample_records_reference_attitude_gravity_and_saturation(rng):
     assert data.flags.saturated.any()
     assert data.readings.max() == s.photodiode.saturation_value
     assert data.sidecar["generator"]["attitude_noise_deg"] == 0.1
+
+
+def test_reproduce_compound_eye_cli(tmp_path, capsys):
+    """`skysim reproduce compound-eye` end to end with 2 trials: table printed, files written,
+    goal met (with 2 trials x 27 angles the RMS is a rough but sufficient check)."""
+    import json
+
+    from experiments.cli import main
+    assert main(["reproduce", "compound-eye", "--trials", "2", "--seed", "7",
+                 "--out", str(tmp_path)]) == 0
+    printed = capsys.readouterr().out
+    assert "phi_1 sensor-to-body, axis x" in printed and "goal ≤ 0.05: met" in printed
+    for name in ("table.md", "installation_errors.csv", "attitude_errors.csv", "summary.json",
+                 "calibration_data.parquet", "calibration_data.json",
+                 "fig_recovered_vs_injected.png", "fig_heading_error_vs_yaw.png"):
+        assert (tmp_path / name).exists(), name
+    summary = json.loads((tmp_path / "summary.json").read_text())
+    h = summary["heading_rms_deg"]
+    assert h["compensated"] < 0.25 * h["uncompensated"]
