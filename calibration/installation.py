@@ -239,7 +239,7 @@ def _check_observable(J, what: str, frame: str, directions):
         along = f" (along {' and '.join(named)})" if named else ""
         raise UnobservableError(
             f"{what} is not observable from these {J.shape[0]} samples: rotation about the "
-            f"{frame}-frame axis {axes}{along} cannot be seen (eigenvalue ratio "
+            f"axis {axes} ({frame} frame){along} cannot be seen (eigenvalue ratio "
             f"{ratio[weak].max():.1e} < {RCOND:g}). Move the carrier through more attitudes: "
             "different yaws (at least 3) and some pitch/roll", Q.T, frame, named)
     return float(ratio[0])

@@ -211,3 +211,17 @@ def test_ring_with_relative_yaw_gets_its_north_offset(rng):
     offset, se = yaw_offset_from_sky(data)
     assert abs(offset - 123.4) < 0.05
     assert se < 0.02
+
+
+def test_step3_one_attitude_names_the_unit(sensor, rng):
+    """One attitude gives one scalar per unit: two of its three axes cannot be seen."""
+    sun, att, obs = _exact_inputs(sensor, 20, rng, same_attitude=True)
+    chi = np.radians(obs.aop_unit_deg[:, 1:3] + 1e-3 * rng.standard_normal((20, 2)))
+    e_unit = np.stack([np.cos(chi), np.sin(chi), np.zeros_like(chi)], axis=-1)
+    up_s = (att * sensor.body_installation()).inv().apply(UP)
+    with pytest.raises(UnobservableError, match="installation error of unit 1 is not") as exc:
+        estimate_unit_installation(obs.e_vector_sensor[:, 0], e_unit,
+                                   sensor.unit_matrices(False)[1:3], up_s,
+                                   np.degrees(np.arcsin(sun[:, 2])),
+                                   unit_labels=["unit 1", "unit 2"])
+    assert exc.value.axes.shape[0] == 2 and exc.value.frame == "unit 1"

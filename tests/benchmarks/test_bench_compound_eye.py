@@ -24,6 +24,11 @@ def _carrier(n, rng):
     return times, rng.uniform(0, 360, n), rng.uniform(-10, 10, n), rng.uniform(-10, 10, n)
 
 
+def _attitudes_and_sun(n, seed=1):
+    times, yaw, pitch, roll = _carrier(n, np.random.default_rng(seed))
+    return body_attitude(yaw, pitch, roll), sun_vector(times, SITE)[0]
+
+
 @pytest.fixture(scope="module")
 def sensor():
     return with_random_installation_errors(patent_configuration(), 1.0, np.random.default_rng(0))
@@ -32,10 +37,7 @@ def sensor():
 @pytest.mark.benchmark(group="compound-eye sampling")
 def test_observe_per_attitude_baseline(benchmark, sensor):
     """Baseline: observe() called for one attitude at a time (1,000 attitudes x 9 units)."""
-    rng = np.random.default_rng(1)
-    times, yaw, pitch, roll = _carrier(1000, rng)
-    sun = sun_vector(times, SITE)[0]
-    att = body_attitude(yaw, pitch, roll)
+    att, sun = _attitudes_and_sun(1000)
     benchmark.extra_info.update(items=1000 * 9, baseline=True)
     benchmark.pedantic(lambda: [sensor.observe(SKY, att[k:k + 1], sun[k:k + 1])
                                 for k in range(1000)], rounds=2, iterations=1)
@@ -43,10 +45,7 @@ def test_observe_per_attitude_baseline(benchmark, sensor):
 
 @pytest.mark.benchmark(group="compound-eye sampling")
 def test_observe_1e5_attitudes(benchmark, sensor):
-    rng = np.random.default_rng(1)
-    times, yaw, pitch, roll = _carrier(100_000, rng)
-    sun = sun_vector(times, SITE)[0]
-    att = body_attitude(yaw, pitch, roll)
+    att, sun = _attitudes_and_sun(100_000)
     benchmark.extra_info["items"] = 100_000 * 9
     obs = benchmark.pedantic(sensor.observe, args=(SKY, att, sun), rounds=3, iterations=1)
     assert obs.dop.shape == (100_000, 9)
