@@ -154,7 +154,8 @@ def polarization_from_photodiodes(readings, angles_deg, method: str = "stokes"):
         with np.errstate(divide="ignore", invalid="ignore"):
             U = np.stack([GAIN * np.log10(P[..., col[c]] / P[..., col[(c + 90) % 180]])
                           for c in (60, 0, 120)], axis=-1)
-        phi, dop = solve_pair(U, (1, 2), GAIN)   # U = g log10((1+d cos2(phi+a))/(1-...)), chi = -phi
+        # solve_pair's model is cos 2(phi + a); Malus's pair ratio is cos 2(chi - a): chi = -phi
+        phi, dop = solve_pair(U, (1, 2), GAIN)
         return np.mod(-phi + 90.0, 180.0) - 90.0, dop
     if method != "stokes":
         raise ValueError(f"unknown method {method!r}; valid: 'stokes', 'opponent'")
@@ -296,7 +297,7 @@ def estimate_body_installation(e_zenith_sensor, reference_attitude: Rotation, su
     for it in range(1, max_iter + 1):
         e_b = R.apply(e)
         r = np.sum(s_b * e_b, axis=1)
-        J = np.cross(e_b, s_b)                  # d r / d(delta), left perturbation R <- exp(delta) R
+        J = np.cross(e_b, s_b)     # d r / d(delta) for the left perturbation R <- exp(delta) R
         delta = np.linalg.lstsq(J, -r, rcond=None)[0]
         R = Rotation.from_rotvec(delta) * R
         if np.degrees(np.linalg.norm(delta)) < tol_deg:
@@ -517,7 +518,8 @@ class InstallationCalibration:
 
 
 def calibrate_installation(data: PhotodiodeData, sensor: CompoundEyeSensor | None = None,
-                           min_dop: float = 0.05, method: str = "stokes") -> InstallationCalibration:
+                           min_dop: float = 0.05,
+                           method: str = "stokes") -> InstallationCalibration:
     """The patent's three steps on a photodiode data set with reference attitude and gravity.
 
     Parameters

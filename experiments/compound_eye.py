@@ -88,7 +88,7 @@ def _attitude_errors(data, sensors: dict) -> dict:
     return out
 
 
-def run(trials: int = 20, seed: int = 2020, out=None, scenario: Scenario = SCENARIO,
+def run(trials: int = 50, seed: int = 2020, out=None, scenario: Scenario = SCENARIO,
         figures: bool = True, progress: bool = True) -> dict:
     """Monte-Carlo calibration trials; returns tables and a summary, writes them to ``out``."""
     from tqdm import tqdm
@@ -213,7 +213,8 @@ def plot_recovery(est: pd.DataFrame, path: Path) -> None:
     plt = _plt()
     fig, axes = plt.subplots(1, 3, figsize=(11, 3.6), sharey=True)
     for ax, axis in zip(axes, "xyz"):
-        for kind, marker, label in (("unit", ".", "units φ2..φ9"), ("body", "o", "φ1 sensor-body")):
+        for kind, marker, label in (("unit", ".", "units φ2..φ9"),
+                                    ("body", "o", "φ1 sensor-body")):
             s = est[(est.axis == axis) & (est.kind == kind)]
             ax.errorbar(s.injected_deg, s.error_deg, yerr=s.std_deg, fmt=marker, ms=3, lw=0.5,
                         alpha=0.7, label=label)
@@ -251,7 +252,7 @@ def plot_heading_errors(ex: dict, path: Path) -> None:
 
 
 def _reproduce(args) -> int:
-    trials = args.trials or 20
+    trials = args.trials or 50
     out = Path(args.out or "results/compound-eye")
     result = run(trials=trials, seed=args.seed, out=out)
     s = result["summary"]
@@ -259,7 +260,8 @@ def _reproduce(args) -> int:
           f"{SCENARIO.n_calibration} attitudes, reference {SCENARIO.attitude_noise_deg} deg")
     print(format_table(result["table"]))
     worst = max(s["rms_error_per_axis_deg"].values())
-    print(f"worst per-axis RMS {worst:.4f} deg (goal ≤ 0.05: {'met' if s['goal_met'] else 'NOT met'});"
+    verdict = "met" if s["goal_met"] else "NOT met"
+    print(f"worst per-axis RMS {worst:.4f} deg (goal ≤ 0.05: {verdict});"
           f" normalised error RMS {s['normalised_error_rms']:.2f} (1 = honest 1σ); "
           f"{s['elapsed_s']:.1f} s")
     print(f"wrote {out}/table.md, installation_errors.csv, attitude_errors.csv, summary.json, "

@@ -45,7 +45,7 @@ from skysim import __version__
 from skysim.exceptions import InvalidParameterError
 from skysim.geometry import elevation_azimuth, local_basis
 from skysim.sky import Sky
-from skysim.sun import Site, as_utc_index, sun_vector
+from skysim.sun import Site, sun_vector
 from skysim.validation import check_finite
 
 from .photodiodes_io import (ACCEL_COLUMNS, PHOTODIODES_SCHEMA, PhotodiodeData,
@@ -318,7 +318,8 @@ class CompoundEyeSensor:
         rec_yaw = np.mod(yaw + noise[0] - (yaw_offset_deg if yaw_reference == "relative" else 0.0),
                          360.0)
         up_body = att.inv().apply(np.array([0.0, 0.0, 1.0]))
-        accel = GRAVITY_MPS2 * up_body.reshape(n, 3) + accel_noise_mps2 * rng.standard_normal((n, 3))
+        accel = (GRAVITY_MPS2 * up_body.reshape(n, 3)
+                 + accel_noise_mps2 * rng.standard_normal((n, 3)))
         tz = getattr(times, "tz", None)
         cols = {"time": idx.tz_convert(tz) if tz is not None else idx, "yaw_deg": rec_yaw,
                 "pitch_deg": pitch + noise[1], "roll_deg": roll + noise[2]}
@@ -328,7 +329,8 @@ class CompoundEyeSensor:
         if sweep is not None:
             table["sweep"] = np.broadcast_to(np.asarray(sweep), (n,))
         if include_truth:
-            table["true_yaw_deg"], table["true_pitch_deg"], table["true_roll_deg"] = yaw, pitch, roll
+            table["true_yaw_deg"] = yaw
+            table["true_pitch_deg"], table["true_roll_deg"] = pitch, roll
         pm = self.photodiode
         sidecar = {
             "schema": PHOTODIODES_SCHEMA, "site": site.to_dict(), "yaw_reference": yaw_reference,

@@ -1,4 +1,4 @@
-"""Raw photodiode data, schema "skysim.photodiodes/1" (public contract: ``docs/photodiodes_schema.md``).
+"""Raw photodiode data, schema "skysim.photodiodes/1" (contract: ``docs/photodiodes_schema.md``).
 
 Multi-unit polarization instruments (rings or domes of units) record photodiode readings. One
 row per sample; CSV or Parquet by file extension; a JSON sidecar ``<name>.json`` beside it.

@@ -5,7 +5,6 @@ import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
-from scipy.spatial.transform import Rotation
 
 from calibration.installation import polarization_from_photodiodes
 from sensor.compound_eye import (FOUR_ANGLES_DEG, THREE_PAIR_ANGLES_DEG, CompoundEyeSensor,

@@ -1,4 +1,5 @@
-"""Installation-error calibration (patent's three steps): round trips, uncertainty, observability."""
+"""Installation-error calibration (the patent's three steps): round trips, uncertainty,
+observability."""
 
 import numpy as np
 import pandas as pd
