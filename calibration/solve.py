@@ -72,9 +72,10 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
     U : array (..., 3)
         Channel outputs [V].
     pair : (int, int)
-    misalignment_deg : 4 floats
+    misalignment_deg : array (4,) or (*B, 4)
         ``(e1_i, e2_i, e1_j, e2_j)`` [deg]: numerator/denominator mounting errors of the pair.
-    transmittance : 2 floats
+        With a batch shape ``B`` (one calibration per batch element), ``U`` is (*B, m, 3).
+    transmittance : array (2,) or (*B, 2)
         ``(f_i, f_j)``.
 
     Raises
@@ -86,17 +87,21 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
     U = np.asarray(U, dtype=float)
     e = np.asarray(misalignment_deg, dtype=float)
     f = np.asarray(transmittance, dtype=float)
+    e1, e2 = e[..., 0::2], e[..., 1::2]
+    mean_e = 0.25 * e.sum(axis=-1)
+    if e.ndim > 1:  # batched calibrations: align with the sample axis of U (*B, m, 3)
+        e1, e2, f, mean_e = e1[..., None, :], e2[..., None, :], f[..., None, :], mean_e[..., None]
     a = CHANNEL_ANGLES_DEG[[i, j]]
     Up = U[..., [i, j]]
     # start: ideal solve on outputs with the transmittance offsets and mean mounting error removed
     U0 = np.zeros(U.shape)
     U0[..., [i, j]] = Up - gain * f
     phi, d = solve_pair(U0, pair, gain)
-    phi = phi - 0.25 * e.sum()
+    phi = phi - mean_e
     d = np.clip(d, 1e-3, 0.999)
     step = np.inf
     for it in range(max_iter):
-        val, jac = channel_jacobian(phi[..., None], d[..., None], a, e[0::2], e[1::2], f, gain,
+        val, jac = channel_jacobian(phi[..., None], d[..., None], a, e1, e2, f, gain,
                                     wrt=("phi", "dop"))
         r = val - Up                               # (..., 2)
         J_phi, J_d = jac["phi"], jac["dop"]        # (..., 2) each; phi derivative per deg

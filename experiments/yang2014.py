@@ -31,7 +31,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calibration.lsq import fit_pair
+from calibration.lsq import fit_pairs
 from calibration.solve import PAIRS, heading_error_deg, solve_pair
 from sensor.daq import Daq
 from sensor.errors import OpponentErrors
@@ -41,7 +41,7 @@ from skysim.sky import RayleighSky
 from skysim.sun import Site
 
 __all__ = ["SITE", "GROUPS", "PAPER_TABLE1", "ERROR_MODEL", "ErrorModel", "sweep_geometry",
-           "run", "register_reproduce", "format_table1"]
+           "draw_trial_errors", "run", "register_reproduce", "format_table1"]
 
 SITE = Site(latitude_deg=34 + 8 / 60 + 41 / 3600, longitude_deg=108 + 32 / 60 + 48 / 3600,
             altitude_m=400.0, name="Xi'an rooftop (Yang et al. 2014)")
@@ -109,59 +109,77 @@ def sweep_geometry(start: str, model: ErrorModel = ERROR_MODEL):
     return times, headings, phi, dop_shape, sun_el, sun_az
 
 
-def _simulate_outputs(phi, dop, errors: OpponentErrors, daq: Daq, rng) -> np.ndarray:
-    u = channel_outputs(phi, dop, errors.misalignment_deg, errors.transmittance)
-    u = u + rng.standard_normal(u.shape) * np.asarray(errors.noise_V)
+def draw_trial_errors(rng: np.random.Generator, trials: int,
+                      model: ErrorModel = ERROR_MODEL) -> dict:
+    """Draw every trial's sensor errors and sky ``d_max`` at once (arrays over trials).
+
+    Same distributions as :meth:`sensor.errors.OpponentErrors.draw`: misalignments
+    ~ U(-max, max) [deg]; photodiode-path transmittances ``t ~ N(1, sd)`` with
+    ``f_i = log10(t_{2i-1}/t_{2i})``; per-channel noise level ~ U(noise_range_V) [V];
+    ``d_max`` ~ U(dmax_range).
+    """
+    t = 1.0 + model.transmittance_sd * rng.standard_normal((trials, 6))
+    return {"misalignment_deg": rng.uniform(-model.misalignment_max_deg,
+                                            model.misalignment_max_deg, (trials, 6)),
+            "transmittance": np.log10(t[:, 0::2] / t[:, 1::2]),
+            "noise_V": rng.uniform(*model.noise_range_V, (trials, 3)),
+            "dmax": rng.uniform(*model.dmax_range, trials)}
+
+
+def _simulate_outputs(phi, dop, errors: dict, daq: Daq, rng) -> np.ndarray:
+    """Outputs (trials, n, 3) [V] of each trial's sensor over a sweep ``phi`` (n,)."""
+    u = channel_outputs(phi, dop, errors["misalignment_deg"][:, None, :],
+                        errors["transmittance"][:, None, :])
+    u = u + rng.standard_normal(u.shape) * errors["noise_V"][:, None, :]
     return daq.acquire(u)[0]
 
 
-def _three_sigma(err) -> float:
-    return float(3.0 * np.sqrt(np.mean(np.square(err))))
+def _three_sigma(err, axis=-1):
+    return 3.0 * np.sqrt(np.mean(np.square(err), axis=axis))
 
 
 def run(trials: int = 200, seed: int = 20140601, out=None, model: ErrorModel = ERROR_MODEL,
         progress: bool = True, figures: bool = True) -> dict:
     """Run the Monte-Carlo reproduction; write tables/figures to ``out`` if given.
 
-    Returns a dict with the per-trial results (``trial_table``), Table 1 (``table1``) and
-    a ``summary``.
+    All trials are simulated and calibrated at once (numpy over the trial axis, batched
+    Gauss-Newton of :func:`calibration.lsq.fit_pairs`); the loops run over the 3 groups and
+    3 pairs only. Returns a dict with the per-trial results (``trial_table``), Table 1
+    (``table1``) and a ``summary``.
     """
     from tqdm import tqdm
 
     t_start = time.perf_counter()
-    ss = np.random.SeedSequence(seed)
-    trial_seeds = ss.spawn(trials)
+    rng = np.random.default_rng(seed)
+    errors = draw_trial_errors(rng, trials, model)
     geometry = {g: sweep_geometry(start, model) for g, start in GROUPS.items()}
     daq = Daq(model.daq_bits, model.daq_range_V)
     fit_idx = np.arange(model.n_stops) % 2 == 0
-    rows = []
-    examples = {}
-    for k in tqdm(range(trials), desc="yang2014 trials", disable=not progress, unit="trial"):
-        rng = np.random.default_rng(trial_seeds[k])
-        errors = OpponentErrors.draw(rng, misalignment_max_deg=model.misalignment_max_deg,
-                                     transmittance_sd=model.transmittance_sd,
-                                     noise_range_V=model.noise_range_V,
-                                     turntable_error_deg=model.turntable_error_deg)
-        dmax = rng.uniform(*model.dmax_range)
-        for g, (times, headings, phi, shape, sun_el, sun_az) in geometry.items():
-            U = _simulate_outputs(phi, dmax * shape, errors, daq, rng)
-            heading_read = headings + model.turntable_error_deg * rng.standard_normal(headings.size)
-            phi_ref = heading_error_deg(heading_read - sun_az, 0.0)
-            for pair in PAIRS:
-                raw_phi, _ = solve_pair(U, pair)
-                raw_err = heading_error_deg(raw_phi, phi_ref)
-                cal = fit_pair(phi_ref[fit_idx], U[fit_idx], pair, shape[fit_idx],
-                               fit_dop_scale=True)
-                comp_phi, _ = cal.solve(U[~fit_idx])
-                comp_err = heading_error_deg(comp_phi, phi_ref[~fit_idx])
-                rows.append({"trial": k, "group": g, "pair": f"{pair[0]}-{pair[1]}",
-                             "dmax": dmax, "raw_3sigma_deg": _three_sigma(raw_err[~fit_idx]),
-                             "raw_max_abs_deg": float(np.max(np.abs(raw_err))),
-                             "compensated_3sigma_deg": _three_sigma(comp_err),
-                             "dop_scale_fit": cal.dop_scale})
-                if k == 0:
-                    examples[(g, pair)] = (phi_ref, raw_err, cal, U, fit_idx)
-    trial_table = pd.DataFrame(rows)
+    tables, examples = [], {}
+    steps = tqdm(total=len(GROUPS) * len(PAIRS), desc=f"yang2014 ({trials} trials)",
+                 disable=not progress, unit="fit")
+    for g, (times, headings, phi, shape, sun_el, sun_az) in geometry.items():
+        U = _simulate_outputs(phi, errors["dmax"][:, None] * shape, errors, daq, rng)
+        heading_read = headings + model.turntable_error_deg * rng.standard_normal(U.shape[:2])
+        phi_ref = heading_error_deg(heading_read - sun_az, 0.0)            # (trials, n)
+        for pair in PAIRS:
+            raw_phi, _ = solve_pair(U, pair)
+            raw_err = heading_error_deg(raw_phi, phi_ref)
+            cal = fit_pairs(phi_ref[:, fit_idx], U[:, fit_idx], pair, shape[fit_idx],
+                            fit_dop_scale=True)
+            comp_phi, _ = cal.solve(U[:, ~fit_idx])
+            comp_err = heading_error_deg(comp_phi, phi_ref[:, ~fit_idx])
+            tables.append(pd.DataFrame({
+                "trial": np.arange(trials), "group": g, "pair": f"{pair[0]}-{pair[1]}",
+                "dmax": errors["dmax"], "raw_3sigma_deg": _three_sigma(raw_err[:, ~fit_idx]),
+                "raw_max_abs_deg": np.max(np.abs(raw_err), axis=-1),
+                "compensated_3sigma_deg": _three_sigma(comp_err),
+                "dop_scale_fit": cal.dop_scale}))
+            examples[(g, pair)] = (phi_ref[0], raw_err[0], cal.element(0), U[0], fit_idx)
+            steps.update()
+    steps.close()
+    trial_table = pd.concat(tables, ignore_index=True).sort_values(
+        ["trial", "group", "pair"], ignore_index=True)
     table1 = _table1(trial_table)
     elapsed = time.perf_counter() - t_start
     summary = _summary(table1, trial_table, trials, seed, model, elapsed)

@@ -68,16 +68,18 @@ def channel_outputs(phi_deg, dop, misalignment_deg=(0.0,) * 6, transmittance=(0.
         Polarization azimuth [deg].
     dop : array-like
         Degree of polarization, 0 < d < 1 (broadcast against ``phi_deg``).
-    misalignment_deg : 6 floats
-        ``dtheta_1..dtheta_6`` [deg].
-    transmittance : 3 floats
-        ``f_1..f_3`` [log10 units].
+    misalignment_deg : array (..., 6)
+        ``dtheta_1..dtheta_6`` [deg]; leading axes broadcast against
+        ``broadcast(phi, dop).shape`` (e.g. ``(trials, 1, 6)`` for ``phi`` of shape
+        ``(trials, n)``: one sensor per Monte-Carlo trial).
+    transmittance : array (..., 3)
+        ``f_1..f_3`` [log10 units], broadcast like ``misalignment_deg``.
     gain : float
         Amplifier gain [V/decade].
 
     Returns
     -------
-    ndarray, shape ``broadcast(phi, dop).shape + (3,)``.
+    ndarray, shape ``broadcast(phi, dop, misalignment[..., 0]).shape + (3,)``.
 
     Raises
     ------
@@ -88,7 +90,8 @@ def channel_outputs(phi_deg, dop, misalignment_deg=(0.0,) * 6, transmittance=(0.
     phi = check_finite("phi_deg", phi_deg)[..., None]
     mis = check_finite("misalignment_deg", misalignment_deg)
     f = check_finite("transmittance", transmittance)
-    return opponent_output(phi, d, CHANNEL_ANGLES_DEG, mis[0::2], mis[1::2], f, gain)
+    return opponent_output(phi, d, CHANNEL_ANGLES_DEG, mis[..., 0::2], mis[..., 1::2], f,
+                           gain)
 
 
 def zenith_polarization(sky: Sky, site: Site, times, headings_deg):

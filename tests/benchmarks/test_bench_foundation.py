@@ -9,7 +9,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from calibration.lsq import fit_pair
+from calibration.lsq import fit_pair, fit_pairs
 from calibration.solve import solve_pair
 from experiments.yang2014 import run
 from sensor.opponent import channel_outputs
@@ -70,6 +70,32 @@ def test_heading_solve_1e6(benchmark):
     benchmark.extra_info["items"] = 1_000_000
     phi, _ = benchmark(solve_pair, u, (1, 2))
     assert phi.shape == (1_000_000,)
+
+
+def _sensor_sweeps(trials, n=91, seed=4):
+    rng = np.random.default_rng(seed)
+    phi = np.broadcast_to(np.linspace(-90, 90, n, endpoint=False), (trials, n))
+    u = channel_outputs(phi, 0.6, rng.uniform(-1, 1, (trials, 1, 6)),
+                        0.01 * rng.standard_normal((trials, 1, 3)))
+    return phi, u + 4e-4 * rng.standard_normal(u.shape)
+
+
+@pytest.mark.benchmark(group="batched calibration")
+def test_calibrations_one_at_a_time_baseline(benchmark):
+    """Baseline: 100 sensors' calibrations (91 samples each) by fit_pair in a Python loop."""
+    phi, u = _sensor_sweeps(100)
+    benchmark.extra_info.update(items=100, baseline=True)
+    benchmark.pedantic(lambda: [fit_pair(phi[k], u[k], (1, 2), 0.6) for k in range(100)],
+                       rounds=3, iterations=1)
+
+
+@pytest.mark.benchmark(group="batched calibration")
+def test_calibrations_batched_10000(benchmark):
+    """10,000 sensors' calibrations in one batched Gauss-Newton (fit_pairs)."""
+    phi, u = _sensor_sweeps(10_000)
+    benchmark.extra_info["items"] = 10_000
+    cal = benchmark.pedantic(fit_pairs, args=(phi, u, (1, 2), 0.6), rounds=3, iterations=1)
+    assert cal.converged.all()
 
 
 def test_calibration_1000_samples(benchmark):
