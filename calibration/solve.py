@@ -110,8 +110,11 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
         dd = -(-J_phi[..., 1] * r[..., 0] + J_phi[..., 0] * r[..., 1]) / det
         phi = phi + dphi
         d = np.clip(d + dd, 1e-6, 0.999999)
+        # converged when both unknowns have stopped moving: phi alone can settle a step
+        # before d does
         step = float(np.nanmax(np.abs(dphi))) if dphi.size else 0.0
-        if step < tol_deg:
+        d_step = float(np.nanmax(np.abs(dd))) if dd.size else 0.0
+        if step < tol_deg and d_step < 1e-12:
             break
     else:
         raise ConvergenceError(
