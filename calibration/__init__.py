@@ -2,9 +2,11 @@
 
 from .exceptions import (CalibrationError, ConvergenceError, RankDeficientError,
                          TooFewSamplesError)
-from .lsq import PairCalibration, fit_pair
+from .installation import calibrate_installation
+from .lsq import BatchPairCalibration, PairCalibration, fit_pair, fit_pairs
 from .solve import PAIRS, heading_error_deg, solve_pair, solve_pair_compensated
 
 __all__ = ["CalibrationError", "ConvergenceError", "RankDeficientError", "TooFewSamplesError",
-           "PairCalibration", "fit_pair", "PAIRS", "solve_pair",
-           "solve_pair_compensated", "heading_error_deg"]
+           "PairCalibration", "BatchPairCalibration", "fit_pair", "fit_pairs",
+           "calibrate_installation", "PAIRS", "solve_pair", "solve_pair_compensated",
+           "heading_error_deg"]

@@ -7,15 +7,15 @@ the data file. Required columns: ``time`` (ISO 8601 with UTC offset), ``heading_
 
 from __future__ import annotations
 
-import json
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 import pandas as pd
 
-from skysim.io import _json_default, atomic_write_many, sidecar_path
 from skysim.sun import Site
+
+from .tables import format_iso_times, read_table_and_sidecar, write_table_and_sidecar
 
 __all__ = ["MEASUREMENT_SCHEMA", "REQUIRED_COLUMNS", "CHANNEL_COLUMNS", "Measurement",
            "MeasurementFormatError", "read_measurement", "format_iso_times", "parse_iso_times"]
@@ -28,12 +28,6 @@ _OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d)$"
 
 class MeasurementFormatError(ValueError):
     """A measurement file or table does not follow its schema (message says what and where)."""
-
-
-def format_iso_times(times: pd.Series) -> pd.Series:
-    """ISO 8601 strings with a ``+hh:mm`` offset (vectorised)."""
-    s = pd.Series(times).dt.strftime("%Y-%m-%dT%H:%M:%S.%f%z")
-    return s.str.replace(r"([+-]\d\d)(\d\d)$", r"\1:\2", regex=True)
 
 
 def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
@@ -114,24 +108,7 @@ class Measurement:
 
     def write(self, path) -> Path:
         """Write the table (``.csv`` or ``.parquet``) and its sidecar atomically."""
-        path = Path(path)
-        suffix = path.suffix.lower()
-        if suffix not in (".csv", ".parquet"):
-            raise ValueError(f"unsupported extension {path.suffix!r}; use .csv or .parquet")
-
-        def write_table(tmp: Path):
-            if suffix == ".csv":
-                out = self.table.copy()
-                out["time"] = format_iso_times(out["time"])
-                out.to_csv(tmp, index=False)
-            else:
-                self.table.to_parquet(tmp, index=False)
-
-        def write_sidecar(tmp: Path):
-            tmp.write_text(json.dumps(self.sidecar, indent=2, default=_json_default) + "\n")
-
-        atomic_write_many([(path, write_table), (sidecar_path(path), write_sidecar)])
-        return path
+        return write_table_and_sidecar(self.table, self.sidecar, path)
 
 
 def read_measurement(path) -> Measurement:
@@ -144,23 +121,7 @@ def read_measurement(path) -> Measurement:
     MeasurementFormatError
         For a malformed sidecar, a missing/NaN column or times without offsets.
     """
-    path = Path(path)
-    side = sidecar_path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no measurement file {path}")
-    if not side.exists():
-        raise FileNotFoundError(f"no sidecar {side} beside {path} (schema {MEASUREMENT_SCHEMA})")
-    try:
-        sidecar = json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
-        raise MeasurementFormatError(f"{side}: not valid JSON ({exc})") from exc
-    try:
-        if path.suffix.lower() == ".parquet":
-            table = pd.read_parquet(path)
-        else:
-            table = pd.read_csv(path)
-    except Exception as exc:  # pandas/pyarrow raise many types for corrupt files
-        raise MeasurementFormatError(f"{path}: cannot read table ({exc})") from exc
+    table, sidecar = read_table_and_sidecar(path, MEASUREMENT_SCHEMA, MeasurementFormatError)
     m = Measurement.__new__(Measurement)
     m.table, m.sidecar = table, sidecar
     m.validate(str(path))

@@ -17,7 +17,6 @@ file) and, per sample, repeated timestamps.
 
 from __future__ import annotations
 
-import json
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -25,11 +24,10 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skysim.io import sidecar_path
 from skysim.sun import Site
 
-from .measurement import (Measurement, MeasurementFormatError, check_numeric_columns,
-                          parse_iso_times)
+from .measurement import MeasurementFormatError, check_numeric_columns, parse_iso_times
+from .tables import read_table_and_sidecar, write_table_and_sidecar
 
 __all__ = ["PHOTODIODES_SCHEMA", "ACCEL_COLUMNS", "PhotodiodeFormatError",
            "SidecarMismatchError", "PhotodiodeFlags", "PhotodiodeData", "photodiode_column",
@@ -280,8 +278,7 @@ def write_photodiodes(data: PhotodiodeData, path) -> Path:
 
     The flags are not written: they are recomputed by the reader from the readings.
     """
-    # The data file + sidecar commit is the measurement schema's writer: same format rules.
-    return Measurement.write(data, path)
+    return write_table_and_sidecar(data.table, data.sidecar, path)
 
 
 def read_photodiodes(path) -> PhotodiodeData:
@@ -296,19 +293,6 @@ def read_photodiodes(path) -> PhotodiodeData:
         without offsets; :class:`SidecarMismatchError` when the sidecar's units do not match
         the photodiode columns.
     """
-    path = Path(path)
-    side = sidecar_path(path)
-    if not path.exists():
-        raise FileNotFoundError(f"no photodiode file {path}")
-    if not side.exists():
-        raise FileNotFoundError(f"no sidecar {side} beside {path} (schema {PHOTODIODES_SCHEMA})")
-    try:
-        sidecar = json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
-        raise PhotodiodeFormatError(f"{side}: not valid JSON ({exc})") from exc
-    try:
-        table = pd.read_parquet(path) if path.suffix.lower() == ".parquet" else \
-            pd.read_csv(path, dtype={"time": str})
-    except Exception as exc:  # pandas/pyarrow raise many types for corrupt files
-        raise PhotodiodeFormatError(f"{path}: cannot read table ({exc})") from exc
+    table, sidecar = read_table_and_sidecar(path, PHOTODIODES_SCHEMA, PhotodiodeFormatError,
+                                            dtype={"time": str})
     return PhotodiodeData(table, sidecar, where=str(path))

@@ -56,7 +56,7 @@ def test_reproduce_yang2014_small(tmp_path, capsys):
     (["sky", "--lat", "95", "--lon", "108", "--time", "2013-05-22T17:10Z"], "latitude"),
     (["sky", "--sun-elevation", "-3", "--sun-azimuth", "10"], "horizon"),
     (["sky", "--model", "mie", "--sun-elevation", "3", "--sun-azimuth", "10"], "valid"),
-    (["calibrate", "/nonexistent.csv"], "no measurement file"),
+    (["calibrate", "/nonexistent.csv"], "no data file"),
 ])
 def test_errors_exit_2_with_message(argv, msg, capsys):
     assert main(argv) == 2

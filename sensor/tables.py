@@ -1,0 +1,98 @@
+"""Shared file layer of the sensor data schemas: a table (CSV or Parquet) plus a JSON sidecar.
+
+Both "skysim.measurement/1" and "skysim.photodiodes/1" store one row per sample in
+``<name>.csv`` or ``<name>.parquet`` with ``<name>.json`` beside it (``docs/schemas.md``).
+These two functions hold the rules common to both: extensions, ISO 8601 times with offsets in
+CSV, atomic commit of both files (both or neither), and the errors for missing, non-JSON or
+unreadable files. Schema checks stay with each schema's reader.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import pandas as pd
+
+from skysim.io import _json_default, atomic_write_many, sidecar_path
+
+__all__ = ["TABLE_SUFFIXES", "write_table_and_sidecar", "read_table_and_sidecar",
+           "format_iso_times"]
+
+TABLE_SUFFIXES = (".csv", ".parquet")
+
+
+def format_iso_times(times: pd.Series) -> pd.Series:
+    """ISO 8601 strings with a ``+hh:mm`` offset (vectorised)."""
+    s = pd.Series(times).dt.strftime("%Y-%m-%dT%H:%M:%S.%f%z")
+    return s.str.replace(r"([+-]\d\d)(\d\d)$", r"\1:\2", regex=True)
+
+
+def write_table_and_sidecar(table: pd.DataFrame, sidecar: dict, path) -> Path:
+    """Write ``table`` (``.csv`` or ``.parquet`` by extension) and its JSON sidecar atomically.
+
+    In CSV the ``time`` column (timezone-aware) is written as ISO 8601 with ``+hh:mm``.
+    Both files appear together or not at all; a failure leaves no partial file behind.
+
+    Raises
+    ------
+    ValueError
+        For an extension other than ``.csv``/``.parquet``.
+    """
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in TABLE_SUFFIXES:
+        raise ValueError(f"unsupported extension {path.suffix!r}; use .csv or .parquet")
+
+    def write_table(tmp: Path):
+        if suffix == ".csv":
+            out = table.copy()
+            if "time" in out.columns and pd.api.types.is_datetime64_any_dtype(out["time"]):
+                out["time"] = format_iso_times(out["time"])
+            out.to_csv(tmp, index=False)
+        else:
+            table.to_parquet(tmp, index=False)
+
+    def write_sidecar(tmp: Path):
+        tmp.write_text(json.dumps(sidecar, indent=2, default=_json_default) + "\n")
+
+    atomic_write_many([(path, write_table), (sidecar_path(path), write_sidecar)])
+    return path
+
+
+def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
+                           **read_csv_kwargs) -> tuple[pd.DataFrame, dict]:
+    """Read a data file and its sidecar, without schema checks.
+
+    Parameters
+    ----------
+    path : path-like
+        ``.csv`` or ``.parquet`` data file; the sidecar is ``<stem>.json`` beside it.
+    schema : str
+        Schema name, for messages.
+    error_cls : exception class
+        Raised (with the path and cause) for a non-JSON sidecar or an unreadable table.
+    **read_csv_kwargs
+        Passed to :func:`pandas.read_csv`.
+
+    Raises
+    ------
+    FileNotFoundError
+        If the data file or the sidecar is missing.
+    """
+    path = Path(path)
+    side = sidecar_path(path)
+    if not path.exists():
+        raise FileNotFoundError(f"no data file {path} (schema {schema})")
+    if not side.exists():
+        raise FileNotFoundError(f"no sidecar {side} beside {path} (schema {schema})")
+    try:
+        sidecar = json.loads(side.read_text())
+    except json.JSONDecodeError as exc:
+        raise error_cls(f"{side}: not valid JSON ({exc})") from exc
+    try:
+        table = pd.read_parquet(path) if path.suffix.lower() == ".parquet" else \
+            pd.read_csv(path, **read_csv_kwargs)
+    except Exception as exc:  # pandas/pyarrow raise many types for corrupt files
+        raise error_cls(f"{path}: cannot read table ({exc})") from exc
+    return table, sidecar
