@@ -1,0 +1,488 @@
+"""Ground-truth data sets for other implementations: ``skysim generate`` and ``skysim compare``.
+
+``skysim generate CONFIG.toml --out DIR`` writes, per entry of the configuration,
+
+- ``[[sky_map]]``: a sky map (schema "skysim.skymap/1": DoP, AoP and Stokes I, Q, U on an
+  elevation-azimuth grid) of any sky model of :func:`skysim.sky.make_sky`;
+- ``[[measurement]]``: a three-pair sensor sweep (schema "skysim.measurement/1");
+- ``[[photodiodes]]``: a compound-eye instrument's raw readings (schema "skysim.photodiodes/1");
+
+each with its JSON sidecar, and ``manifest.json`` (schema "skysim.groundtruth/1": the whole
+configuration, the master seed and the SHA-256 of every file). Entry ``name`` draws its random
+numbers from ``SeedSequence(seed, spawn_key=(crc32(name),))``: the same configuration and seed
+give byte-identical files, and adding an entry leaves the others unchanged.
+
+``skysim compare THEIRS TRUTH`` compares another implementation's files (a file or a folder
+laid out like the generated one) with the truth: per quantity the maximum and RMS error, where
+the worst case is, and pass/fail against the tolerances of :data:`TOLERANCES` (overridable
+with ``--tol NAME=VALUE``). The contract is ``docs/ground_truth.md``.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import json
+import tomllib
+import zlib
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+from skysim.exceptions import InvalidParameterError
+
+__all__ = ["GROUNDTRUTH_SCHEMA", "TOLERANCES", "GenerateConfigError", "CompareError",
+           "dataset_rng", "generate", "compare_tables", "compare_paths", "register"]
+
+GROUNDTRUTH_SCHEMA = "skysim.groundtruth/1"
+SKYMAP_SCHEMA = "skysim.skymap/1"
+_KINDS = ("sky_map", "measurement", "photodiodes")
+
+TOLERANCES = {
+    "dop": 1e-6, "aop_deg": 1e-4, "I": 1e-6, "Q": 1e-6, "U": 1e-6,
+    "U1_V": 1e-6, "U2_V": 1e-6, "U3_V": 1e-6, "heading_deg": 1e-6,
+    "true_phi_deg": 1e-4, "true_dop": 1e-6, "true_sun_elevation_deg": 1e-3,
+    "yaw_deg": 1e-6, "pitch_deg": 1e-6, "roll_deg": 1e-6, "photodiode_counts": 1.0,
+}
+"""Default tolerances (absolute, in each quantity's unit). Double-precision evaluations of the
+same equations agree to ~1e-12; 1e-6 (DoP, Stokes, V) and 1e-4 deg (angles) leave room for
+another sun-position or float-summation order while staying far below any physical effect
+(the sun moves 1e-4 deg in 0.02 s). Photodiode counts are integers after rounding: 1 count
+allows a reading on the other side of a rounding boundary. ``true_sun_elevation_deg`` allows
+1e-3 deg: implementations of the NREL SPA differ by that much (pysolar vs pvlib)."""
+
+AOP_MIN_DOP = 1e-3
+"""AoP is compared only where the true DoP is at least this (undefined at neutral points)."""
+
+
+class GenerateConfigError(InvalidParameterError):
+    """A ground-truth configuration is invalid (the message names the entry and key)."""
+
+
+class CompareError(ValueError):
+    """Two files cannot be compared (schema, columns, rows or grid differ)."""
+
+
+def dataset_rng(seed: int, name: str) -> np.random.Generator:
+    """Random generator of entry ``name``: ``SeedSequence(seed, spawn_key=(crc32(name),))``."""
+    return np.random.default_rng(np.random.SeedSequence(seed, spawn_key=(_key(name),)))
+
+
+def _key(name: str) -> int:
+    return zlib.crc32(name.encode("utf-8"))
+
+
+# --------------------------------------------------------------------------- generate
+
+
+def _times(entry: dict, where: str):
+    import pandas as pd
+    for k in ("start", "n"):
+        if k not in entry:
+            raise GenerateConfigError(f"{where}: missing {k!r}")
+    n = int(entry["n"])
+    if n < 1:
+        raise GenerateConfigError(f"{where}: n must be >= 1; got {n}")
+    start = pd.Timestamp(entry["start"])
+    if start.tzinfo is None:
+        raise GenerateConfigError(f"{where}: start {entry['start']!r} has no UTC offset; write "
+                                  "e.g. 2013-05-22T17:10:00+08:00")
+    offsets = np.linspace(0.0, float(entry.get("duration_s", 600.0)), n)
+    return pd.DatetimeIndex(start + pd.to_timedelta(offsets, unit="s"))
+
+
+def _sky(entry: dict, where: str):
+    from skysim.sky import make_sky
+    spec = dict(entry.get("sky", {"model": "rayleigh", "dmax": 0.7}))
+    model = spec.pop("model", "rayleigh")
+    try:
+        return make_sky(model, **spec)
+    except TypeError as exc:
+        raise GenerateConfigError(f"{where}: sky parameters {spec} do not fit model "
+                                  f"{model!r} ({exc})") from exc
+
+
+def _write_table(table, sidecar: dict, path: Path) -> None:
+    from skysim.io import _json_default, atomic_write_many, sidecar_path
+    from sensor.measurement import format_iso_times
+
+    def data(tmp):
+        if path.suffix == ".csv":
+            out = table.copy()
+            if "time" in out:
+                out["time"] = format_iso_times(out["time"])
+            out.to_csv(tmp, index=False)
+        else:
+            table.to_parquet(tmp, index=False)
+    atomic_write_many([(path, data), (sidecar_path(path), lambda tmp: tmp.write_text(
+        json.dumps(sidecar, indent=2, default=_json_default) + "\n"))])
+
+
+def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
+    import pandas as pd
+
+    from skysim.sun import sun_position
+
+    from .commands import AOP_CONVENTION, sky_grid
+    sky = _sky(entry, where)
+    if "time" in entry:
+        pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,
+                           site.altitude_m)
+        sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
+        sun = {"site": site.to_dict(), "time": entry["time"]}
+    elif "sun_elevation_deg" in entry and "sun_azimuth_deg" in entry:
+        sun_el, sun_az = float(entry["sun_elevation_deg"]), float(entry["sun_azimuth_deg"])
+        sun = {}
+    else:
+        raise GenerateConfigError(f"{where}: give the sun as time (with [site]) or as "
+                                  "sun_elevation_deg and sun_azimuth_deg")
+    el, az = sky_grid(float(entry.get("grid_step_deg", 5.0)))
+    f = sky.field(el, az, sun_el, sun_az)
+    table = pd.DataFrame({"elevation_deg": el, "azimuth_deg": az, "dop": f.dop,
+                          "aop_deg": f.aop_deg, "I": f.I, "Q": f.Q, "U": f.U})
+    sidecar = {"schema": SKYMAP_SCHEMA, "sky": sky.describe(),
+               "sun": {**sun, "elevation_deg": sun_el, "azimuth_deg": sun_az},
+               "aop_convention": AOP_CONVENTION, "n_directions": int(el.size),
+               "generator": _generator(entry, seed)}
+    _write_table(table, sidecar, path)
+
+
+def _generator(entry: dict, seed: int) -> dict:
+    from skysim import __version__
+    return {"package": "skysim", "version": __version__, "command": "skysim generate",
+            "entry": entry, "master_seed": seed, "spawn_key": [_key(entry["name"])]}
+
+
+def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
+    from sensor.daq import Daq
+    from sensor.errors import OpponentErrors
+    from sensor.opponent import OpponentSensor, zenith_polarization
+
+    from .yang2014 import ERROR_MODEL
+    rng = dataset_rng(seed, entry["name"])
+    errors = entry.get("errors", "random")
+    if errors == "random":
+        m = ERROR_MODEL
+        errors = OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
+                                     transmittance_sd=m.transmittance_sd,
+                                     noise_range_V=m.noise_range_V,
+                                     turntable_error_deg=m.turntable_error_deg)
+    elif errors == "none":
+        errors = OpponentErrors()
+    elif isinstance(errors, dict):
+        errors = OpponentErrors(**errors)
+    else:
+        raise GenerateConfigError(f"{where}: errors must be 'random', 'none' or a table of "
+                                  f"OpponentErrors fields; got {errors!r}")
+    sky = _sky(entry, where)
+    times = _times(entry, where)
+    _, _, _, sun_az0 = zenith_polarization(sky, site, times[:1], [0.0])
+    headings = (sun_az0[0] + float(entry.get("heading_offset_deg", -90.0))
+                + np.linspace(0.0, 180.0, len(times), endpoint=False))
+    bits = entry.get("daq_bits", 16)
+    sensor = OpponentSensor(errors, daq=Daq(None if bits in (0, "none") else int(bits),
+                                            float(entry.get("daq_range_V", 10.0))))
+    meas = sensor.sample(sky, site, times, headings, rng, seed=seed)
+    meas.sidecar["generator"].update(_generator(entry, seed))
+    _write_table(meas.table, meas.sidecar, path)
+
+
+def _photodiodes(entry: dict, site, seed: int, path: Path, where: str) -> None:
+    from sensor.compound_eye import (PhotodiodeModel, patent_configuration,
+                                     ring_configuration, with_random_installation_errors)
+    rng = dataset_rng(seed, entry["name"])
+    pm = PhotodiodeModel(noise_counts=float(entry.get("noise_counts", 3.0)))
+    layout = entry.get("configuration", "ring")
+    if layout == "ring":
+        sensor = ring_configuration(int(entry.get("n_units", 8)),
+                                    float(entry.get("elevation_deg", 45.0)), photodiode=pm)
+    elif layout == "patent":
+        sensor = patent_configuration(float(entry.get("elevation_deg", 60.0)), photodiode=pm)
+    else:
+        raise GenerateConfigError(f"{where}: configuration {layout!r} unknown; valid: ring, "
+                                  "patent")
+    max_err = float(entry.get("installation_error_max_deg", 0.0))
+    if max_err > 0:
+        sensor = with_random_installation_errors(
+            sensor, max_err, rng, zenith_unit=0 if layout == "patent" else None)
+    times = _times(entry, where)
+    yaw = np.linspace(float(entry.get("yaw_start_deg", 0.0)),
+                      float(entry.get("yaw_end_deg", 360.0)), len(times), endpoint=False)
+    data = sensor.sample(_sky(entry, where), site, times, yaw,
+                         float(entry.get("pitch_deg", 0.0)), float(entry.get("roll_deg", 0.0)),
+                         rng, attitude_noise_deg=float(entry.get("attitude_noise_deg", 0.0)),
+                         seed=seed)
+    data.sidecar["generator"].update(_generator(entry, seed))
+    _write_table(data.table, data.sidecar, path)
+
+
+_WRITERS = {"sky_map": _sky_map, "measurement": _measurement, "photodiodes": _photodiodes}
+
+
+def load_generate_config(path) -> dict:
+    """Read and check a ground-truth configuration (TOML)."""
+    path = Path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no configuration {path}")
+    try:
+        raw = tomllib.loads(path.read_text())
+    except tomllib.TOMLDecodeError as exc:
+        raise GenerateConfigError(f"{path}: invalid TOML ({exc})") from exc
+    unknown = set(raw) - {"seed", "name", "site", *_KINDS}
+    if unknown:
+        raise GenerateConfigError(f"{path}: unknown key(s) {sorted(unknown)}; valid: seed, "
+                                  f"name, site, {', '.join(_KINDS)}")
+    if not isinstance(raw.get("seed"), int):
+        raise GenerateConfigError(f"{path}: 'seed' (an integer) is required so that the data "
+                                  "can be regenerated")
+    names = [e.get("name") for k in _KINDS for e in raw.get(k, [])]
+    if not names:
+        raise GenerateConfigError(f"{path}: nothing to generate; add [[sky_map]], "
+                                  "[[measurement]] or [[photodiodes]] entries")
+    bad = [n for n in names if not isinstance(n, str) or not n.replace("_", "").replace(
+        "-", "").isalnum()]
+    dup = sorted({n for n in names if names.count(n) > 1})
+    if bad or dup:
+        raise GenerateConfigError(f"{path}: every entry needs a unique name of letters, digits, "
+                                  f"'-' and '_' (bad: {bad}, repeated: {dup})")
+    return raw
+
+
+def generate(config: dict, out) -> dict:
+    """Write every entry of ``config`` into ``out`` and a manifest; return the manifest."""
+    from skysim.io import sidecar_path, write_json_atomic
+    from skysim.sun import Site
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    site = Site.from_dict(config["site"]) if "site" in config else None
+    files = {}
+    for kind in _KINDS:
+        for entry in config.get(kind, []):
+            where = f"[[{kind}]] {entry['name']!r}"
+            if site is None and (kind != "sky_map" or "time" in entry):
+                raise GenerateConfigError(f"{where}: needs [site] (latitude_deg, "
+                                          "longitude_deg, altitude_m)")
+            fmt = entry.get("format", "csv")
+            if fmt not in ("csv", "parquet"):
+                raise GenerateConfigError(f"{where}: format must be csv or parquet; got {fmt!r}")
+            path = out / f"{entry['name']}.{fmt}"
+            _WRITERS[kind](entry, site, config["seed"], path, where)
+            files[path.name] = {"kind": kind, "sha256": _sha256(path),
+                                "sidecar": sidecar_path(path).name,
+                                "sidecar_sha256": _sha256(sidecar_path(path))}
+    manifest = {"schema": GROUNDTRUTH_SCHEMA, "config": config, "seed": config["seed"],
+                "files": files}
+    write_json_atomic(out / "manifest.json", manifest)
+    return manifest
+
+
+def _sha256(path: Path) -> str:
+    return hashlib.sha256(Path(path).read_bytes()).hexdigest()
+
+
+# --------------------------------------------------------------------------- compare
+
+
+@dataclass(frozen=True)
+class QuantityResult:
+    """Deviation of one quantity: errors in the quantity's unit, worst case located."""
+
+    quantity: str
+    n: int
+    max_abs_error: float
+    rms_error: float
+    tolerance: float
+    worst_row: int
+    worst_at: str
+    theirs: float
+    truth: float
+
+    @property
+    def passed(self) -> bool:
+        return bool(self.max_abs_error <= self.tolerance)
+
+    def to_dict(self) -> dict:
+        return {**self.__dict__, "passed": self.passed}
+
+
+_ANGLE_PERIODS = {"aop_deg": 180.0, "true_phi_deg": 180.0, "heading_deg": 360.0,
+                  "yaw_deg": 360.0}
+
+
+def _read(path: Path):
+    import pandas as pd
+
+    from skysim.io import sidecar_path
+    side = sidecar_path(path)
+    if not path.is_file():
+        raise FileNotFoundError(f"no file {path}")
+    if not side.is_file():
+        raise FileNotFoundError(f"no sidecar {side} beside {path}")
+    try:
+        sidecar = json.loads(side.read_text())
+        table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
+    except Exception as exc:  # json/pandas/pyarrow raise many types for corrupt files
+        raise CompareError(f"{path}: cannot read ({exc})") from exc
+    return table, sidecar
+
+
+def _quantities(schema: str, truth) -> dict:
+    """Quantity name -> list of columns compared, per schema."""
+    if schema == SKYMAP_SCHEMA:
+        return {q: [q] for q in ("dop", "aop_deg", "I", "Q", "U")}
+    if schema == "skysim.measurement/1":
+        q = {c: [c] for c in ("heading_deg", "U1_V", "U2_V", "U3_V")}
+        q.update({c: [c] for c in ("true_phi_deg", "true_dop", "true_sun_elevation_deg")
+                  if c in truth})
+        return q
+    if schema == "skysim.photodiodes/1":
+        from sensor.photodiodes_io import _PD_RE
+        q = {c: [c] for c in ("yaw_deg", "pitch_deg", "roll_deg") if c in truth}
+        q["photodiode_counts"] = [c for c in truth.columns if _PD_RE.match(str(c))]
+        return q
+    raise CompareError(f"truth schema {schema!r} is not one skysim generates; expected "
+                       f"{SKYMAP_SCHEMA}, skysim.measurement/1 or skysim.photodiodes/1")
+
+
+def _row_labels(schema: str, truth, where: str, theirs) -> list[str] | None:
+    """Check the rows are the same samples/directions; return labels of the truth rows."""
+    if len(theirs) != len(truth):
+        raise CompareError(f"{where}: {len(theirs)} rows, truth has {len(truth)}")
+    if schema == SKYMAP_SCHEMA:
+        keys = ["elevation_deg", "azimuth_deg"]
+        a, b = theirs[keys].to_numpy(float), truth[keys].to_numpy(float)
+        bad = np.flatnonzero(np.any(np.abs(a - b) > 1e-9, axis=1))
+        if bad.size:
+            raise CompareError(f"{where}: direction of row {bad[0]} is {a[bad[0]].tolist()}, "
+                               f"truth {b[bad[0]].tolist()}: write the truth's grid in its order")
+        return None
+    import pandas as pd
+    ta = pd.to_datetime(theirs["time"], format="ISO8601", utc=True)
+    tb = pd.to_datetime(truth["time"], format="ISO8601", utc=True)
+    bad = np.flatnonzero((ta != tb).to_numpy())
+    if bad.size:
+        raise CompareError(f"{where}: time of row {bad[0]} is {ta.iloc[bad[0]]}, truth "
+                           f"{tb.iloc[bad[0]]}")
+    return None
+
+
+def compare_tables(theirs_path, truth_path, tolerances: dict | None = None):
+    """Compare another implementation's file with a generated truth file.
+
+    Returns
+    -------
+    list of QuantityResult
+
+    Raises
+    ------
+    CompareError
+        For an unknown schema, a missing column, other rows or another grid.
+    """
+    theirs_path, truth_path = Path(theirs_path), Path(truth_path)
+    tol = {**TOLERANCES, **(tolerances or {})}
+    truth, sidecar = _read(truth_path)
+    theirs, _ = _read(theirs_path)
+    schema = sidecar.get("schema")
+    where = str(theirs_path)
+    _row_labels(schema, truth, where, theirs)
+    results = []
+    for quantity, cols in _quantities(schema, truth).items():
+        missing = [c for c in cols if c not in theirs]
+        if missing:
+            raise CompareError(f"{where}: missing column(s) {missing} (schema {schema})")
+        a = theirs[cols].to_numpy(float)
+        b = truth[cols].to_numpy(float)
+        err = a - b
+        if quantity in _ANGLE_PERIODS:
+            p = _ANGLE_PERIODS[quantity]
+            err = (err + p / 2) % p - p / 2
+        if quantity == "aop_deg":
+            err = np.where(truth[["dop"]].to_numpy(float) >= AOP_MIN_DOP, err, 0.0)
+        abs_err = np.where(np.isfinite(err), np.abs(err), np.inf)
+        k = int(np.argmax(abs_err))
+        row, col = np.unravel_index(k, abs_err.shape)
+        at = (f"elevation {truth.elevation_deg.iloc[row]:g} deg, azimuth "
+              f"{truth.azimuth_deg.iloc[row]:g} deg" if schema == SKYMAP_SCHEMA
+              else f"time {truth.time.iloc[row]}")
+        if len(cols) > 1:
+            at += f", column {cols[col]}"
+        results.append(QuantityResult(
+            quantity, int(err.size), float(abs_err.max()),
+            float(np.sqrt(np.mean(np.square(np.where(np.isfinite(err), err, np.inf))))),
+            float(tol[quantity]), int(row), at, float(a[row, col]), float(b[row, col])))
+    return results
+
+
+def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
+    """Compare a file or a generated folder (its manifest's files) with the truth.
+
+    Returns ``{"passed": bool, "files": {name: [QuantityResult.to_dict(), ...]}}``.
+    """
+    theirs, truth = Path(theirs), Path(truth)
+    if truth.is_dir():
+        manifest = truth / "manifest.json"
+        if not manifest.is_file():
+            raise FileNotFoundError(f"{truth} has no manifest.json (not a skysim generate folder)")
+        names = list(json.loads(manifest.read_text())["files"])
+        pairs = [(theirs / n if theirs.is_dir() else theirs, truth / n) for n in names]
+    else:
+        pairs = [(theirs, truth)]
+    files = {p[1].name: [r.to_dict() for r in compare_tables(*p, tolerances)] for p in pairs}
+    return {"passed": all(r["passed"] for rs in files.values() for r in rs), "files": files}
+
+
+# --------------------------------------------------------------------------- CLI
+
+
+def _generate_command(args) -> int:
+    config = load_generate_config(args.config)
+    manifest = generate(config, args.out)
+    for name, info in manifest["files"].items():
+        print(f"{info['kind']:<12s} {name:<40s} sha256 {info['sha256'][:16]}")
+    print(f"wrote {len(manifest['files'])} data sets (+ sidecars) and manifest.json to {args.out}")
+    return 0
+
+
+def _parse_tolerances(items) -> dict:
+    tol = {}
+    for item in items or []:
+        name, _, value = item.partition("=")
+        if name not in TOLERANCES or not value:
+            raise ValueError(f"--tol {item!r}: use NAME=VALUE with NAME one of "
+                             f"{', '.join(TOLERANCES)}")
+        tol[name] = float(value)
+    return tol
+
+
+def _compare_command(args) -> int:
+    from skysim.io import write_json_atomic
+    report = compare_paths(args.theirs, args.truth, _parse_tolerances(args.tol))
+    for name, rows in report["files"].items():
+        print(f"\n{name}")
+        print(f"  {'quantity':<24s} {'n':>8s} {'max |err|':>11s} {'RMS':>11s} {'tolerance':>10s}"
+              f"  result  worst at")
+        for r in rows:
+            print(f"  {r['quantity']:<24s} {r['n']:>8d} {r['max_abs_error']:>11.3g} "
+                  f"{r['rms_error']:>11.3g} {r['tolerance']:>10.3g}  "
+                  f"{'pass' if r['passed'] else 'FAIL':<6s}  {r['worst_at']} "
+                  f"(theirs {r['theirs']:.6g}, truth {r['truth']:.6g})")
+    print(f"\noverall: {'PASS' if report['passed'] else 'FAIL'}")
+    if args.report:
+        write_json_atomic(args.report, report)
+    return 0 if report["passed"] else 1
+
+
+def register(sub) -> None:
+    g = sub.add_parser("generate", help="ground-truth sky maps and sensor streams from a TOML "
+                                        "configuration (byte-identical for the same seed)")
+    g.add_argument("config", help="configuration (.toml), see docs/ground_truth.md")
+    g.add_argument("--out", required=True, help="output folder")
+    g.set_defaults(func=_generate_command)
+    c = sub.add_parser("compare", help="compare another implementation's output with "
+                                       "generated ground truth (exit 1 on failure)")
+    c.add_argument("theirs", help="their file, or a folder with the truth's file names")
+    c.add_argument("truth", help="a generated file, or a `skysim generate` folder")
+    c.add_argument("--tol", action="append", metavar="NAME=VALUE",
+                   help="override a tolerance, e.g. --tol aop_deg=1e-3 (repeatable)")
+    c.add_argument("--report", help="write the comparison as JSON")
+    c.set_defaults(func=_compare_command)
