@@ -84,7 +84,7 @@ def check_unit_quaternion(name: str, q) -> np.ndarray:
     if bad.any():
         i = np.flatnonzero(bad.ravel())[0]
         raise NonUnitQuaternionError(
-            f"{name} must be unit quaternions; entry {i} has norm {norm.ravel()[i]!r} "
+            f"{name} must be unit quaternions; entry {i} has norm {float(norm.ravel()[i])!r} "
             f"({int(bad.sum())} bad). Normalise it (q / |q|) or build it with "
             "scipy.spatial.transform.Rotation")
     return q

@@ -54,7 +54,8 @@ class Trajectory:
     ----------
     times : DatetimeIndex (UTC), length n
     attitude : Rotation of length n, body-to-ENU ``R_nb``
-    rate_body_deg_s : (n, 3) true body angular rate [deg/s]
+    rate_body_deg_s : (n, 3) true instantaneous body angular rate [deg/s] (the gyro reads the
+        interval mean, :meth:`mean_rate_deg_s`)
     sample_rate_hz : float
     """
 
@@ -76,6 +77,19 @@ class Trajectory:
         """True ``(yaw, pitch, roll)`` [deg]."""
         return attitude_angles(self.attitude)
 
+    def mean_rate_deg_s(self) -> np.ndarray:
+        """Mean body rate over each sample interval [deg/s], (n, 3): ``rotvec(R_j^T R_j+1) / dt``.
+
+        What a strapdown gyro reports (its delta angle over the sample period divided by the
+        period); composing these increments reproduces the attitude exactly, without the
+        coning error that sampling the instantaneous rate would add. The last sample repeats
+        the previous interval.
+        """
+        if self.n < 2:
+            return np.zeros((self.n, 3))
+        inc = (self.attitude[:-1].inv() * self.attitude[1:]).as_rotvec(degrees=True)
+        return np.vstack([inc, inc[-1:]]) * self.sample_rate_hz
+
     def up_body(self) -> np.ndarray:
         """ENU up in the body frame, (n, 3)."""
         return self.attitude.inv().apply(np.array([0.0, 0.0, 1.0])).reshape(-1, 3)
@@ -84,9 +98,10 @@ class Trajectory:
 def _times(start, duration_s: float, sample_rate_hz: float) -> pd.DatetimeIndex:
     fs = check_rate("sample_rate_hz", sample_rate_hz)
     duration_s = float(check_finite("duration_s", duration_s))
-    n = int(np.floor(duration_s * fs + 1e-9)) + 1
     if duration_s <= 0.0:
-        raise TrajectoryTooShortError(f"duration_s must be > 0 s; got {duration_s!r}")
+        raise TrajectoryTooShortError(f"duration_s must be > 0 s; got {duration_s!r}. Give the "
+                                      "run length in seconds")
+    n = int(np.floor(duration_s * fs + 1e-9)) + 1
     t0 = as_utc_index([start])[0]
     return t0 + pd.to_timedelta(np.arange(n) / fs, unit="s")
 
@@ -206,7 +221,12 @@ def sample_run(trajectory: Trajectory, sensor: CompoundEyeSensor, sky: Sky, site
     k = int(polarization_every)
     if k < 1:
         raise InvalidParameterError(f"polarization_every must be an integer >= 1; got {k}")
-    gyro, bias = gyro_measurements(trajectory.rate_body_deg_s, imu, rng, n_trials)
+    if trajectory.n < k + 1:
+        raise TrajectoryTooShortError(
+            f"the trajectory has {trajectory.n} IMU samples, fewer than one update interval "
+            f"needs ({k + 1} at polarization_every={k}); make it longer than "
+            f"{k / trajectory.sample_rate_hz} s")
+    gyro, bias = gyro_measurements(trajectory.mean_rate_deg_s(), imu, rng, n_trials)
     accel = accel_measurements(trajectory.up_body(), imu, rng, n_trials)
     idx = np.arange(0, trajectory.n, k)
     sun, _ = sun_vector(trajectory.times[idx], site)
