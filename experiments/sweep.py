@@ -27,7 +27,9 @@ Forward model, vectorised over trials and stops:
 
 Randomness: trials are grouped in blocks of :data:`BLOCK_TRIALS`; block ``b`` draws from
 ``numpy.random.SeedSequence(seed, spawn_key=(b,))`` (the ``b``-th child of
-``SeedSequence(seed).spawn``), so results are identical for any chunking and backend.
+``SeedSequence(seed).spawn``), so results are identical for any chunking and backend. SALib
+designs (Sobol, Morris) use common random numbers: one noise realisation for all trials, so
+that the model the estimators see is a deterministic function of the parameters.
 
 References
 ----------
@@ -390,9 +392,12 @@ def run_chunk(task: ChunkTask) -> dict:
         tnoise.append(rng.standard_normal((hi - lo, cfg.stops)))
         blocks.append(np.full(hi - lo, b))
     params = {k: np.concatenate([p[k] for p in parts]) for k in PARAMETERS}
+    noise, tnoise = np.concatenate(noise), np.concatenate(tnoise)
+    if cfg.method != "montecarlo":  # common random numbers: a deterministic model for SALib
+        noise, tnoise = common_noise(cfg, task.stop - task.start)
     sky = make_sky(**cfg.sky)
     sim = simulate_trials(params, cfg.stops, sky, Daq(cfg.daq_bits, cfg.daq_range_V),
-                          np.concatenate(noise), np.concatenate(tnoise), GAIN)
+                          noise, tnoise, GAIN)
     outputs = evaluate_trials(sim, cfg.pairs, cfg.calibrate, GAIN)
     cols = {"trial": np.arange(task.start, task.stop), "block": np.concatenate(blocks),
             "condition_sun_elevation_deg": (np.full(task.stop - task.start, np.nan)
@@ -405,6 +410,17 @@ def run_chunk(task: ChunkTask) -> dict:
     atomic_write(task.path, lambda p: pq.write_table(table, p))
     return {"index": task.index, "path": task.path, "rows": task.stop - task.start,
             "elapsed_s": time.perf_counter() - t0}
+
+
+def common_noise(cfg: SweepConfig, n: int):
+    """One noise realisation shared by every trial of a SALib design (common random
+    numbers), from ``SeedSequence([seed, 1])``: Sobol and Morris estimators assume a
+    deterministic model, so trials differ only in their parameters; the noise *level*
+    ``noise_V`` (and ``turntable_error_deg``) scales this realisation."""
+    rng = np.random.default_rng(np.random.SeedSequence([cfg.seed, 1]))
+    v = rng.standard_normal((1, cfg.stops, 3))
+    t = rng.standard_normal((1, cfg.stops))
+    return np.broadcast_to(v, (n, cfg.stops, 3)), np.broadcast_to(t, (n, cfg.stops))
 
 
 def chunk_status(task: ChunkTask) -> str | None:
