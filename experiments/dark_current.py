@@ -1,0 +1,304 @@
+"""Dark current and weak light: the 2014 model against the dark-current model (issue 4).
+
+Monte-Carlo over simulated sensors (:meth:`sensor.photodiode.PhotodiodeChannels.draw`: mounting
+errors, responsivity spread, dark currents 20-100 pA (~0.4-2 lx equivalent), film-polarizer
+extinction ratios, log-amplifier gain and offset errors; channel noise U(0.25, 0.55) mV as in
+:data:`experiments.yang2014.ERROR_MODEL`; photocurrent shot noise; 16-bit DAQ). Per trial:
+
+- calibration set (integrating sphere [1]_): intensity levels :attr:`Config.cal_levels_lx`,
+  36 reference polarization angles over [-90, 90) and DoP 0.3 and 0.7 at each level;
+- (a) the 2014 model [2]_: Gauss-Newton LSM (:func:`calibration.lsq.fit_pair`, DoP scale
+  fitted) on the brightest level, the daylight practice of [2]_; heading from each pair;
+- (b) the dark-current model: :func:`calibration.dark_current.calibrate_dark_current` on all
+  levels, heading/DoP/intensity from :func:`calibration.dark_current.solve_opponent`;
+- evaluation sweep: illuminance from 1e4 lx down to 1 lx, 90 held-out polarization azimuths
+  (offset by 1 deg from the calibration angles), sky DoP :attr:`Config.dop`.
+
+Reported: heading-error 3 sigma (3 x RMS about zero) and DoP RMS error vs illuminance for (a)
+(pair 1-2 and the best pair per trial and level) and (b); recovered vs injected parameters
+with z-scores; the illuminance below which (a) fails and the factor by which (b) recovers.
+
+References
+----------
+.. [1] J. Yang, Y. You, P. Hu, X. Liu, L. Guo, "Underwater polarization sensor
+   multi-parameter optimization calibration method considering dark current", Chinese patent
+   application (2021).
+.. [2] J. Yang, N. Zhou, Y. Huang, X. Liu, Opt. Precision Eng. 22(6):1424 (2014),
+   doi:10.3788/OPE.20142206.1424.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from calibration.dark_current import ChannelModel, calibrate_dark_current, solve_opponent
+from calibration.lsq import fit_pair
+from calibration.solve import PAIRS, heading_error_deg
+from sensor.daq import Daq
+from sensor.photodiode import PhotodiodeChannels
+from skysim import __version__
+from skysim.io import atomic_write, write_json_atomic
+
+__all__ = ["Config", "run", "register_reproduce", "format_summary"]
+
+
+@dataclass(frozen=True)
+class Config:
+    """Experiment settings (all magnitudes fixed before looking at results).
+
+    cal_levels_lx : integrating-sphere levels spanning the dark level (~1 lx) up to daylight
+        laboratory levels.
+    cal_dops : two reference DoPs, so polarization efficiency and dark level separate.
+    sweep_lx : evaluation illuminances, 1e4 lx (overcast daylight) down to 1 lx (deep dusk,
+        or a few tens of metres of water).
+    dop : zenith DoP of the evaluated sky (a clear dusk sky; 0.3-0.5 under water).
+    noise_range_V : channel output noise, as in experiments.yang2014.ERROR_MODEL.
+    bandwidth_Hz : readout bandwidth for the shot noise.
+    """
+
+    cal_levels_lx: tuple = (1.0, 2.0, 5.0, 10.0, 30.0, 100.0, 1000.0)
+    cal_angles: int = 36
+    cal_dops: tuple = (0.3, 0.7)
+    sweep_lx: tuple = tuple(np.round(10.0 ** np.linspace(4.0, 0.0, 13), 3))
+    eval_angles: int = 90
+    dop: float = 0.6
+    noise_range_V: tuple = (0.25e-3, 0.55e-3)
+    bandwidth_Hz: float = 10.0
+    daq_bits: int = 16
+    daq_range_V: float = 10.0
+
+
+def _three_sigma(err, axis=-1):
+    return 3.0 * np.sqrt(np.mean(np.square(err), axis=axis))
+
+
+def _calibration_grid(cfg: Config):
+    phis = np.linspace(-90.0, 90.0, cfg.cal_angles, endpoint=False)
+    I, phi, d = np.meshgrid(np.asarray(cfg.cal_levels_lx), phis, np.asarray(cfg.cal_dops),
+                            indexing="ij")
+    return I.ravel(), phi.ravel(), d.ravel()
+
+
+def _trial(k: int, seed_seq, cfg: Config, daq: Daq):
+    """One simulated sensor: calibrate (a) and (b), evaluate the sweep. Returns rows."""
+    rng = np.random.default_rng(seed_seq)
+    params = PhotodiodeChannels.draw(rng)
+    noise = rng.uniform(*cfg.noise_range_V, 3)
+    noise_total = np.sqrt(noise ** 2 + daq.lsb_V ** 2 / 12.0)   # + quantisation
+    I_c, phi_c, d_c = _calibration_grid(cfg)
+    U_c, _ = params.sample(I_c, phi_c, d_c, rng, noise_V=noise, bandwidth_Hz=cfg.bandwidth_Hz,
+                           daq=daq)
+    cal_b = calibrate_dark_current(U_c, I_c, phi_c, d_c, noise_V=noise_total, daq=daq)
+    bright = I_c == max(cfg.cal_levels_lx)
+    cal_a = {pair: fit_pair(phi_c[bright], U_c[bright], pair, d_c[bright], fit_dop_scale=True)
+             for pair in PAIRS}
+
+    E = np.asarray(cfg.sweep_lx)[:, None]
+    phi_e = np.linspace(-89.0, 91.0, cfg.eval_angles, endpoint=False)[None, :]
+    phi_e = np.broadcast_to(phi_e, (E.size, phi_e.size))
+    U_e, _ = params.sample(np.broadcast_to(E, phi_e.shape), phi_e, cfg.dop, rng, noise_V=noise,
+                           bandwidth_Hz=cfg.bandwidth_Hz, daq=daq)
+    sol = solve_opponent(U_e, cal_b.model)
+    heading = {"b": _three_sigma(heading_error_deg(sol.phi_deg, phi_e))}
+    dop_err = {"b": np.sqrt(np.mean((sol.dop - cfg.dop) ** 2, axis=-1))}
+    int_err = np.median(np.abs(sol.intensity_lx / E - 1.0), axis=-1)
+    for pair, cal in cal_a.items():
+        phi_a, d_a = cal.solve(U_e)
+        name = f"a{pair[0]}{pair[1]}"
+        heading[name] = _three_sigma(heading_error_deg(phi_a, phi_e))
+        dop_err[name] = np.sqrt(np.mean((d_a / cal.dop_scale - cfg.dop) ** 2, axis=-1))
+    best = min((n for n in heading if n != "b"), key=lambda n: heading[n][0])
+    sweep_rows = [{"trial": k, "illuminance_lx": float(E[i, 0]),
+                   "heading_3sigma_b_deg": heading["b"][i],
+                   "heading_3sigma_a12_deg": heading["a12"][i],
+                   "heading_3sigma_a_best_deg": min(heading[n][i] for n in heading if n != "b"),
+                   "dop_rms_b": dop_err["b"][i], "dop_rms_a12": dop_err["a12"][i],
+                   "dop_rms_a_daylight_best_pair": dop_err[best][i],
+                   "intensity_rel_err_b_median": int_err[i]} for i in range(E.shape[0])]
+    truth = ChannelModel.from_photodiodes(params).to_vector()
+    est, se = cal_b.model.to_vector(), cal_b.standard_errors
+    param_rows = [{"trial": k, "parameter": name, "injected": truth[j], "recovered": est[j],
+                   "standard_error": se[j], "z": (est[j] - truth[j]) / se[j]}
+                  for j, name in enumerate(cal_b.parameter_names)]
+    return sweep_rows, param_rows
+
+
+def run(trials: int = 100, seed: int = 20210401, out=None, cfg: Config = Config(),
+        progress: bool = True, figures: bool = True) -> dict:
+    """Run the Monte-Carlo; write tables and figures to ``out`` if given."""
+    from tqdm import tqdm
+
+    t0 = time.perf_counter()
+    daq = Daq(cfg.daq_bits, cfg.daq_range_V)
+    seeds = np.random.SeedSequence(seed).spawn(trials)
+    sweep, params = [], []
+    for k in tqdm(range(trials), desc="dark-current trials", disable=not progress,
+                  unit="trial"):
+        s, p = _trial(k, seeds[k], cfg, daq)
+        sweep += s
+        params += p
+    sweep = pd.DataFrame(sweep)
+    params = pd.DataFrame(params)
+    by_level = _by_level(sweep)
+    param_table = _parameter_table(params)
+    summary = _summary(by_level, param_table, params, trials, seed, cfg,
+                       time.perf_counter() - t0)
+    result = {"sweep": sweep, "parameters": params, "by_level": by_level,
+              "parameter_table": param_table, "summary": summary}
+    if out is not None:
+        _write(Path(out), result, figures)
+    return result
+
+
+def _by_level(sweep: pd.DataFrame) -> pd.DataFrame:
+    g = sweep.groupby("illuminance_lx", sort=False)
+    t = g.median(numeric_only=True).drop(columns="trial")
+    t.columns = [f"{c}_median" for c in t.columns]
+    t["reduction_b_vs_a_best"] = (t["heading_3sigma_a_best_deg_median"]
+                                  / t["heading_3sigma_b_deg_median"])
+    return t.reset_index()
+
+
+def _parameter_table(params: pd.DataFrame) -> pd.DataFrame:
+    """Recovered vs injected per parameter: bias, spread, mean predicted se, z statistics."""
+    params = params.assign(error=params.recovered - params.injected,
+                           parameter_kind=params.parameter.str.split(".").str[1])
+    g = params.groupby("parameter", sort=False)
+    return pd.DataFrame({
+        "injected_mean": g.injected.mean(), "recovered_mean": g.recovered.mean(),
+        "error_mean": g.error.mean(), "error_sd": g.error.std(),
+        "standard_error_mean": g.standard_error.mean(),
+        "z_mean": g.z.mean(), "z_sd": g.z.std(),
+        "fraction_within_3sigma": g.z.apply(lambda z: float(np.mean(np.abs(z) < 3.0))),
+    }).reset_index()
+
+
+def _summary(by_level, param_table, params, trials, seed, cfg, elapsed) -> dict:
+    day = by_level.iloc[0]
+    a = by_level["heading_3sigma_a_best_deg_median"].to_numpy()
+    E = by_level["illuminance_lx"].to_numpy()
+    # (a) fails where its heading 3 sigma exceeds twice its daylight value
+    fails = a > 2.0 * day["heading_3sigma_a_best_deg_median"]
+    fail_below = float(E[np.argmax(fails)]) if fails.any() else None
+    dark = params[params.parameter.str.contains("dark_")]
+    low = by_level[by_level.illuminance_lx < 100.0]
+    red = low["reduction_b_vs_a_best"]
+    return {
+        "issue": 4, "trials": trials, "seed": seed, "config": asdict(cfg),
+        "package_version": __version__,
+        "daylight_heading_3sigma_deg": {"a_best": float(day["heading_3sigma_a_best_deg_median"]),
+                                        "b": float(day["heading_3sigma_b_deg_median"])},
+        "a_fails_below_lx": fail_below,
+        "a_fail_criterion": "median heading 3 sigma > 2 x its value at 1e4 lx",
+        "reduction_below_100lx": {"min": float(red.min()), "median": float(red.median()),
+                                  "at_lx": dict(zip(low.illuminance_lx.astype(float).tolist(),
+                                                    red.astype(float).tolist()))},
+        "dark_current_fraction_within_3sigma": float(np.mean(np.abs(dark.z) < 3.0)),
+        "dark_current_z_mean": float(dark.z.mean()), "dark_current_z_sd": float(dark.z.std()),
+        "all_parameters_fraction_within_3sigma": float(np.mean(np.abs(params.z) < 3.0)),
+        "acceptance": {
+            "dark_currents_within_3sigma (>= 99 % of |z| < 3 expected ~99.7 %)":
+                bool(np.mean(np.abs(dark.z) < 3.0) >= 0.99),
+            "heading_3sigma_halved_below_100lx": bool(red.min() >= 2.0)},
+        "elapsed_s": elapsed,
+    }
+
+
+def format_summary(result: dict) -> str:
+    """Markdown table of the sweep (medians over trials) and the key findings."""
+    t = result["by_level"]
+    s = result["summary"]
+    lines = ["| illuminance [lx] | (a) 3σ pair 1-2 [deg] | (a) 3σ best pair [deg] | "
+             "(b) 3σ [deg] | (a)/(b) | (a) DoP rms | (b) DoP rms | (b) |I/E-1| |",
+             "|---|---|---|---|---|---|---|---|"]
+    for r in t.itertuples():
+        lines.append(
+            f"| {r.illuminance_lx:g} | {r.heading_3sigma_a12_deg_median:.3f} "
+            f"| {r.heading_3sigma_a_best_deg_median:.3f} | {r.heading_3sigma_b_deg_median:.3f} "
+            f"| {r.reduction_b_vs_a_best:.1f} | {r.dop_rms_a12_median:.4f} "
+            f"| {r.dop_rms_b_median:.4f} | {r.intensity_rel_err_b_median_median:.3f} |")
+    fb = s["a_fails_below_lx"]
+    lines += ["", f"(a) fails below {fb:g} lx ({s['a_fail_criterion']})" if fb is not None
+              else "(a) does not fail in the swept range",
+              f"below 100 lx (b) reduces the heading 3σ of (a) by a factor "
+              f"{s['reduction_below_100lx']['min']:.1f} (min) .. "
+              f"{max(s['reduction_below_100lx']['at_lx'].values()):.1f} (max)",
+              f"dark-equivalent illuminances within 3σ of injected: "
+              f"{100 * s['dark_current_fraction_within_3sigma']:.1f} % of "
+              f"{s['trials'] * 6} (z mean {s['dark_current_z_mean']:+.2f}, "
+              f"sd {s['dark_current_z_sd']:.2f})"]
+    return "\n".join(lines)
+
+
+def _write(out: Path, result: dict, figures: bool):
+    out.mkdir(parents=True, exist_ok=True)
+    for name in ("sweep", "parameters", "by_level", "parameter_table"):
+        df = result[name]
+        atomic_write(out / f"{name}.csv", lambda p, df=df: df.to_csv(p, index=False,
+                                                                     float_format="%.6g"))
+    atomic_write(out / "summary.md", lambda p: p.write_text(
+        "# Dark current and weak light (issue 4)\n\n" + format_summary(result) + "\n"))
+    write_json_atomic(out / "summary.json", {**result["summary"], "schema":
+                                             "skysim.dark_current/1"})
+    if figures:
+        _plot(result, out)
+
+
+def _plot(result: dict, out: Path):
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    t = result["by_level"]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    E = t.illuminance_lx
+    ax1.loglog(E, t.heading_3sigma_a12_deg_median, "s--", label="(a) 2014 model, pair 1-2")
+    ax1.loglog(E, t.heading_3sigma_a_best_deg_median, "o-", label="(a) 2014 model, best pair")
+    ax1.loglog(E, t.heading_3sigma_b_deg_median, "^-", label="(b) dark-current model")
+    ax1.set(xlabel="illuminance [lx]", ylabel="heading error 3σ [deg] (median of trials)")
+    ax2.loglog(E, t.dop_rms_a12_median, "s--", label="(a) pair 1-2")
+    ax2.loglog(E, t.dop_rms_b_median, "^-", label="(b)")
+    ax2.set(xlabel="illuminance [lx]", ylabel="DoP RMS error")
+    for ax in (ax1, ax2):
+        ax.invert_xaxis()
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend()
+    atomic_write(out / "error_vs_illuminance.png", lambda p: fig.savefig(p, dpi=120,
+                                                                         format="png"))
+    plt.close(fig)
+
+    p = result["parameters"]
+    dark = p[p.parameter.str.contains("dark_")]
+    fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    ax1.errorbar(dark.injected, dark.recovered, yerr=3 * dark.standard_error, fmt=".", ms=3,
+                 alpha=0.5)
+    lim = [0, float(dark.injected.max()) * 1.1]
+    ax1.plot(lim, lim, "k-", lw=0.8)
+    ax1.set(xlabel="injected D/(K k) [lx]", ylabel="recovered ± 3σ [lx]")
+    ax2.hist(dark.z, bins=30, density=True, alpha=0.7)
+    zz = np.linspace(-4, 4, 200)
+    ax2.plot(zz, np.exp(-zz ** 2 / 2) / np.sqrt(2 * np.pi), "k-", lw=1)
+    ax2.set(xlabel="z = (recovered - injected) / se", ylabel="density")
+    atomic_write(out / "dark_current_recovery.png", lambda q: fig.savefig(q, dpi=120,
+                                                                          format="png"))
+    plt.close(fig)
+
+
+def _reproduce(args) -> int:
+    trials = args.trials or (20 if getattr(args, "quick", False) else 100)
+    out = Path(args.out or "results/dark_current")
+    result = run(trials=trials, seed=args.seed if args.seed is not None else 20210401, out=out)
+    print(f"Dark current and weak light — {trials} Monte-Carlo trials")
+    print(format_summary(result))
+    print(f"{result['summary']['elapsed_s']:.1f} s; wrote {out}/by_level.csv, "
+          "parameter_table.csv, sweep.csv, parameters.csv, summary.json, summary.md, figures")
+    return 0
+
+
+def register_reproduce(targets: dict) -> None:
+    targets["dark-current"] = _reproduce
