@@ -55,7 +55,11 @@ from sensor.platform import TrajectoryTooShortError
 from skysim.exceptions import InvalidParameterError
 from skysim.validation import check_finite, check_sun_above_horizon
 
-from .installation import UnitPolarization, e_vectors_sensor, polarization_from_photodiodes
+from .installation import (
+    UnitPolarization,
+    e_vectors_sensor,
+    polarization_from_photodiodes,
+)
 
 __all__ = ["NonUnitQuaternionError", "STEP_METHODS", "check_unit_quaternion", "rotate_to_body",
            "error_vector", "objective", "tangent_gradient", "dynamic_step", "gradient_step",
@@ -314,13 +318,12 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
     sun = np.asarray(sun_enu, float).reshape(K, 3)
     check_sun_above_horizon(np.degrees(np.arcsin(np.clip(sun[:, 2], -1, 1))))
     q = np.broadcast_to(check_unit_quaternion("q0", q0), (S, 4)).copy()
-    if method == "fixed":
-        if beta is None or not np.isfinite(beta) or beta < 0:
-            raise InvalidParameterError(f"method 'fixed' needs a gain beta >= 0 [1/s]; got "
-                                        f"{beta!r} (see madgwick_beta)")
+    if method == "fixed" and (beta is None or not np.isfinite(beta) or beta < 0):
+        raise InvalidParameterError(f"method 'fixed' needs a gain beta >= 0 [1/s]; got "
+                                    f"{beta!r} (see madgwick_beta)")
     step_len = (beta or 0.0) * every / fs
     ok = (np.all(np.isfinite(e_meas), axis=-1) if valid is None
-          else np.asarray(valid, bool)) 
+          else np.asarray(valid, bool))
     up = accel[:, ::every][:, :K]
     incr = _interval_increments(gyro, 1.0 / fs, every, K)
     incr = incr.as_quat().reshape(S, K - 1, 4)

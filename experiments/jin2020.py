@@ -172,7 +172,11 @@ def _simulate(kind: str, trials: int, rng, sc: Scenario) -> dict:
     """One run (static or dynamic) for all trials and all three methods."""
     from scipy.spatial.transform import Rotation
 
-    from calibration.attitude import attitude_error_deg, e_vectors_from_readings, estimate_attitude
+    from calibration.attitude import (
+        attitude_error_deg,
+        e_vectors_from_readings,
+        estimate_attitude,
+    )
     from sensor.compound_eye import PhotodiodeModel, patent_configuration
     from sensor.platform import dynamic_trajectory, sample_run, static_trajectory
     from skysim.sky import RayleighSky
@@ -281,8 +285,8 @@ def format_table(table: pd.DataFrame) -> str:
 
     The last column excludes the first half of each run (the convergence from the initial
     alignment error), so it compares the methods once they track."""
-    lines = ["| run | method | total [deg] | yaw [deg] | pitch [deg] | roll [deg] | "
-             "total, 2nd half of run [deg] |", "|---|---|---|---|---|---|---|"]
+    lines = [("| run | method | total [deg] | yaw [deg] | pitch [deg] | roll [deg] | "
+              "total, 2nd half of run [deg] |"), "|---|---|---|---|---|---|---|"]
     for r in table.itertuples():
         lines.append(f"| {r.run} | {LABELS[r.method]} | {r.total_rms_deg:.4f} | "
                      f"{r.yaw_rms_deg:.4f} | {r.pitch_rms_deg:.4f} | {r.roll_rms_deg:.4f} | "
@@ -291,8 +295,10 @@ def format_table(table: pd.DataFrame) -> str:
 
 
 def format_sun_table(sun: pd.DataFrame) -> str:
-    lines = ["| paper time | reading | Beijing clock | elevation [deg] | azimuth from S [deg] | "
-             "paper el / az | Δel | Δaz | LAST − clock [min] |", "|---|---|---|---|---|---|---|---|---|"]
+    """The sun-position discrepancy table as markdown."""
+    lines = [("| paper time | reading | Beijing clock | elevation [deg] | azimuth from S [deg] | "
+              "paper el / az | Δel | Δaz | LAST − clock [min] |"),
+             "|---|---|---|---|---|---|---|---|---|"]
     for r in sun.itertuples():
         lines.append(f"| {r.paper_time} | {r.reading} | {r.clock_time[11:19]} | "
                      f"{r.elevation_deg:.3f} | {r.azimuth_south_deg:.3f} | "
@@ -335,9 +341,9 @@ def _write(out: Path, result: dict, figures: bool, seed: int, sc: Scenario) -> N
         ts = _timeseries(r)
         sidecar = {"schema": "skysim.jin2020.timeseries/1", "run": kind, "seed": seed,
                    "seed_index": 0, "site": SITE.to_dict(), "start": r["start"].isoformat(),
-                   "columns": "t_s [s] since start; *_deg attitude [deg] (yaw clockwise from "
-                              "north in [-180, 180), pitch nose up, roll right side down); *_error_deg total "
-                              "attitude error angle [deg]",
+                   "columns": ("t_s [s] since start; *_deg attitude [deg] (yaw clockwise from "
+                               "north in [-180, 180), pitch nose up, roll right side down); "
+                               "*_error_deg total attitude error angle [deg]"),
                    "generator": {"package": "skysim", "version": __version__,
                                  "scenario": asdict(sc)}}
         csv = out / f"timeseries_{kind}.csv"
@@ -405,8 +411,9 @@ def _main(trials: int, seed: int, out, quick: bool) -> int:
     print(format_table(result["table"]))
     print("\nacceptance: " + ", ".join(f"{k}={v}" for k, v in s["acceptance"].items()))
     c = s["acceptance_counts"]
-    print(f"dynamic run: dynamic step below fixed step in {c['dynamic_run_seeds_dynamic_below_fixed']}"
-          f"/{trials} seeds (sign test p = {c['sign_test_p']:.2g}); static run: below gyro-only "
+    print("dynamic run: dynamic step below fixed step in "
+          f"{c['dynamic_run_seeds_dynamic_below_fixed']}/{trials} seeds (sign test p = "
+          f"{c['sign_test_p']:.2g}); static run: below gyro-only "
           f"in {c['static_run_seeds_dynamic_below_gyro']} (dynamic) and "
           f"{c['static_run_seeds_fixed_below_gyro']} (fixed) of {trials}")
     print(f"accepted: {s['accepted']}; {s['elapsed_s']:.1f} s; wrote {out}/")

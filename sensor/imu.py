@@ -24,7 +24,8 @@ modelled biases and is not added).
 References
 ----------
 .. [1] IEEE Std 952-1997, "IEEE Standard Specification Format Guide and Test Procedure for
-   Single-Axis Interferometric Fiber Optic Gyros", Annex C (Allan variance), doi:10.1109/IEEESTD.1998.86153.
+   Single-Axis Interferometric Fiber Optic Gyros", Annex C (Allan variance),
+   doi:10.1109/IEEESTD.1998.86153.
 .. [2] R. G. Brown, P. Y. C. Hwang, *Introduction to Random Signals and Applied Kalman
    Filtering*, 4th ed., Wiley (2012), sect. 2.9 and 4.3 (Gauss-Markov processes).
 """
@@ -151,7 +152,8 @@ def gauss_markov(shape, n_samples: int, sigma: float, tau_s: float, dt_s: float,
 
 
 def gyro_measurements(rate_true_deg_s, spec: ImuSpec, rng: np.random.Generator,
-                      n_trials: int | None = None, bias_deg_s=None) -> tuple[np.ndarray, np.ndarray]:
+                      n_trials: int | None = None,
+                      bias_deg_s=None) -> tuple[np.ndarray, np.ndarray]:
     """Gyro readings [deg/s] for true body rates (n, 3), for ``n_trials`` independent gyros.
 
     Parameters

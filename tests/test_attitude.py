@@ -12,10 +12,19 @@ from hypothesis import strategies as st
 from scipy.optimize import minimize_scalar
 from scipy.spatial.transform import Rotation
 
-from calibration.attitude import (NonUnitQuaternionError, attitude_error_deg, dynamic_step,
-                                  e_vectors_from_readings, error_vector, estimate_attitude,
-                                  gradient_step, madgwick_beta, objective, rotate_to_body,
-                                  tangent_gradient)
+from calibration.attitude import (
+    NonUnitQuaternionError,
+    attitude_error_deg,
+    dynamic_step,
+    e_vectors_from_readings,
+    error_vector,
+    estimate_attitude,
+    gradient_step,
+    madgwick_beta,
+    objective,
+    rotate_to_body,
+    tangent_gradient,
+)
 from sensor.compound_eye import PhotodiodeModel, patent_configuration
 from sensor.imu import ImuSpec, InvalidRateError
 from sensor.platform import TrajectoryTooShortError, dynamic_trajectory, sample_run

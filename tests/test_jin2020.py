@@ -7,8 +7,14 @@ import pandas as pd
 import pytest
 
 from experiments.cli import build_parser, main
-from experiments.jin2020 import (PAPER_SUN, QUICK, SITE, azimuth_from_south, run,
-                                 sun_discrepancy_table)
+from experiments.jin2020 import (
+    PAPER_SUN,
+    QUICK,
+    SITE,
+    azimuth_from_south,
+    run,
+    sun_discrepancy_table,
+)
 
 
 @pytest.fixture(scope="module")
