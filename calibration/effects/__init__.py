@@ -52,7 +52,8 @@ from skysim.geometry import direction_vector, elevation_azimuth, wrap_axial_deg
 from skysim.sun import Site, as_utc_index, sun_vector
 
 __all__ = ["EFFECT_NAMES", "BASE_NAMES", "UnknownEffectError", "Effect", "SunTrack", "Context",
-           "get_effect", "all_effects", "geometry", "outputs", "forward", "base_vector"]
+           "get_effect", "all_effects", "geometry", "outputs", "base_jacobian", "forward",
+           "base_vector"]
 
 EFFECT_NAMES = ("dark_current", "sun_motion", "clock_offset", "tilt", "turntable_periodic",
                 "extinction_ratio", "thermal_drift", "multiple_scattering")
@@ -317,6 +318,46 @@ def outputs(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None
                           extinction_intensity=k, extinction_efficiency=eta)
     return opponent_log_ratio(s[..., 0], s[..., 1], gain=gain * terms.get("gain_factor", 1.0),
                               offset_V=terms.get("offset_V", 0.0))
+
+
+def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None,
+                  p=None, gain: float = GAIN) -> np.ndarray:
+    """Analytic derivatives of :func:`outputs` with respect to the base parameters, (n, 3, 10).
+
+    With ``A = 1 + eta_1 d cos 2x_1 + delta_1``, ``B = 1 - eta_2 d cos 2x_2 + delta_2`` and
+    ``G`` the gain (module docstring)::
+
+        dU/de1 = -(G / ln10) 2 eta_1 d sin 2x_1 / A * pi/180
+        dU/de2 = -(G / ln10) 2 eta_2 d sin 2x_2 / B * pi/180
+        dU/df  = G
+        dU/ds  =  (G / ln10) shape (eta_1 cos 2x_1 / A + eta_2 cos 2x_2 / B)
+
+    (eq. 12 of Yang et al. 2014 generalised; reduces to :mod:`calibration.model` when
+    ``eta = 1``, ``delta = 0``). Columns for the mounting errors of other channels are zero.
+    """
+    base = np.asarray(base, float)
+    terms = {} if effect is None else effect.channel_terms(ctx, p)
+    shape = np.asarray(dop_shape, float)[:, None]
+    d = np.clip(base[9] * shape, 0.0, _DOP_MAX)
+    phi = np.asarray(phi_deg, float)[:, None]
+    x1 = np.radians(2.0 * (phi + _A + base[0:6:2]))
+    x2 = np.radians(2.0 * (phi + _A + base[1:6:2]))
+    _, eta = terms.get("extinction", (np.ones(6), np.ones(6)))
+    eta = np.broadcast_to(eta, (1, 6)) if np.ndim(eta) == 1 else eta
+    delta = np.broadcast_to(terms.get("dark_ratio", np.zeros((1, 6))), (len(phi), 6))
+    A = 1.0 + eta[:, 0::2] * d * np.cos(x1) + delta[:, 0::2]
+    B = 1.0 - eta[:, 1::2] * d * np.cos(x2) + delta[:, 1::2]
+    G = gain * np.broadcast_to(terms.get("gain_factor", 1.0), (len(phi), 3))
+    k = G / np.log(10.0)
+    J = np.zeros((len(phi), 3, 10))
+    rad = np.pi / 180.0
+    for c in range(3):
+        J[:, c, 2 * c] = -k[:, c] * 2 * eta[:, 2 * c] * d[:, 0] * np.sin(x1[:, c]) / A[:, c] * rad
+        J[:, c, 2 * c + 1] = (-k[:, c] * 2 * eta[:, 2 * c + 1] * d[:, 0] * np.sin(x2[:, c])
+                              / B[:, c] * rad)
+        J[:, c, 6 + c] = G[:, c]
+    J[:, :, 9] = k * shape * (eta[:, 0::2] * np.cos(x1) / A + eta[:, 1::2] * np.cos(x2) / B)
+    return J
 
 
 def forward(ctx: Context, base, effect: Effect | None = None, p=None,

@@ -73,11 +73,11 @@ class DarkCurrent(Effect):
     prior_sd = np.full(6, 0.05)
     fd_step = np.full(6, 1e-4)
     null = np.zeros(6)
-    generation_range = {"rho_level": "log-uniform [3e-4, 2e-2] at 10 klx",
+    generation_range = {"rho_level": "log-uniform [3e-4, 5e-2] at 10 klx",
                         "rho_k": "level x U(0.5, 1.5) per photodiode"}
 
     def draw(self, rng):
-        level = np.exp(rng.uniform(np.log(3e-4), np.log(2e-2)))
+        level = np.exp(rng.uniform(np.log(3e-4), np.log(5e-2)))
         return level * rng.uniform(0.5, 1.5, 6)
 
     def channel_terms(self, ctx, p):

@@ -49,7 +49,8 @@ def tilted_polarization(heading_deg, sun_el_deg, sun_az_deg, tilt_x_deg, tilt_y_
     """``(phi_deg, dop)`` seen by a tilted zenith sensor (module docstring)."""
     xs, ys, zs = tilted_frame(heading_deg, tilt_x_deg, tilt_y_deg)
     el, az = elevation_azimuth(zs)
-    fld = sky.field(np.minimum(el, 90.0), az, sun_el_deg, sun_az_deg)
+    # a fit may probe times past sunset (clock terms); evaluate the sky at the horizon there
+    fld = sky.field(np.minimum(el, 90.0), az, np.maximum(sun_el_deg, 1e-6), sun_az_deg)
     e = fld.e_vector
     alpha = np.degrees(np.arctan2(np.sum(e * ys, axis=-1), np.sum(e * xs, axis=-1)))
     return wrap_axial_deg(-alpha - 90.0), fld.dop
