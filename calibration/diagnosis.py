@@ -521,8 +521,9 @@ def decompose(data: DiagnosisData, residual, floor_V: float, phi_deg, sun_el_deg
 
     Harmonics are least-squares amplitudes per channel of ``cos/sin(m 2 phi)`` (m = 0..3, the
     polarization period and its overtones; m = 0 is the mean) and of ``cos/sin(n h)``
-    (n = 1, 2, once/twice per turntable revolution); the fraction of the residual variance
-    each explains is reported beside it.
+    (n = 1, 2, once/twice per turntable revolution), each fitted alone (they are not
+    orthogonal over a half-turn sweep); beside each, the fraction of the residual sum of
+    squares it removes.
     """
     r = residual
     ch = [{"slice": f"U{c + 1}_V", "rms_mV": 1e3 * _rms(r[:, c]),
@@ -540,23 +541,20 @@ def decompose(data: DiagnosisData, residual, floor_V: float, phi_deg, sun_el_deg
         basis[f"2phi m={m}"] = [np.cos(m * p2), np.sin(m * p2)]
     for n in (1, 2):
         basis[f"turntable n={n}/rev"] = [np.cos(n * h), np.sin(n * h)]
-    cols = [c for v in basis.values() for c in v]
     harm = []
-    total_var = np.nanmean(r ** 2)
-    amps = {name: np.zeros(3) for name in basis}
-    for c in range(3):
-        ok = np.isfinite(r[:, c])
-        X = np.stack([col[ok] for col in cols], axis=1)
-        coef, *_ = np.linalg.lstsq(X, r[ok, c], rcond=None)
-        i = 0
-        for name, v in basis.items():
-            amps[name][c] = np.hypot(*coef[i:i + len(v)]) if len(v) == 2 else abs(coef[i])
-            i += len(v)
-    for name, a in amps.items():
-        # a sinusoid of amplitude a has mean square a^2/2 (a constant: a^2)
-        ms = np.mean(a ** 2) * (1.0 if name.startswith("mean") else 0.5)
-        harm.append({"component": name, "amplitude_mV": (1e3 * a).tolist(),
-                     "fraction_of_variance": float(ms / total_var) if total_var > 0 else 0.0})
+    total = np.nansum(r ** 2)
+    for name, cols in basis.items():
+        amp = np.zeros(3)
+        explained = 0.0
+        for c in range(3):
+            ok = np.isfinite(r[:, c])
+            X = np.stack([col[ok] for col in cols], axis=1)
+            coef, *_ = np.linalg.lstsq(X, r[ok, c], rcond=None)
+            fit = X @ coef
+            explained += float(np.sum(r[ok, c] ** 2) - np.sum((r[ok, c] - fit) ** 2))
+            amp[c] = np.hypot(*coef) if len(cols) == 2 else abs(coef[0])
+        harm.append({"component": name, "amplitude_mV": (1e3 * amp).tolist(),
+                     "fraction_of_variance": explained / total if total > 0 else 0.0})
     limit_mV = 1e3 * floor_V * (1 + margin)
     carrying = sorted([dict(s, dimension=dim) for dim, tab in
                        (("channel", ch), ("time", by_time), ("illuminance", by_ill),
