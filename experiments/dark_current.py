@@ -44,6 +44,8 @@ from sensor.photodiode import PhotodiodeChannels
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
+from .yang2014 import ERROR_MODEL
+
 __all__ = ["Config", "run", "register_reproduce", "format_summary"]
 
 
@@ -67,10 +69,10 @@ class Config:
     sweep_lx: tuple = tuple(np.round(10.0 ** np.linspace(4.0, 0.0, 13), 3))
     eval_angles: int = 90
     dop: float = 0.6
-    noise_range_V: tuple = (0.25e-3, 0.55e-3)
+    noise_range_V: tuple = ERROR_MODEL.noise_range_V
     bandwidth_Hz: float = 10.0
-    daq_bits: int = 16
-    daq_range_V: float = 10.0
+    daq_bits: int = ERROR_MODEL.daq_bits
+    daq_range_V: float = ERROR_MODEL.daq_range_V
 
 
 def _three_sigma(err, axis=-1):
