@@ -94,7 +94,7 @@ def check_unit_quaternion(name: str, q) -> np.ndarray:
     return q
 
 
-def rotate_to_body(q, v_n) -> tuple[np.ndarray, np.ndarray]:
+def rotate_to_body(q, v_n, jacobian: bool = True):
     """``R(q)^T v`` and its Jacobian with respect to the four components of ``q``.
 
     For ``q = (u, w)`` (not necessarily unit), ``R(q) = (w^2 - u.u) I + 2 u u^T + 2 w [u]x``
@@ -110,19 +110,27 @@ def rotate_to_body(q, v_n) -> tuple[np.ndarray, np.ndarray]:
 
     Returns
     -------
-    v_b : (..., 3); jac : (..., 3, 4)
+    v_b : (..., 3); jac : (..., 3, 4) (only if ``jacobian``)
     """
     q = np.asarray(q, float)
-    v = np.broadcast_to(np.asarray(v_n, float), q.shape[:-1] + (3,))
+    v = np.asarray(v_n, float)
+    shape = np.broadcast_shapes(q.shape[:-1], v.shape[:-1])
+    q = np.broadcast_to(q, shape + (4,))
+    v = np.broadcast_to(v, shape + (3,))
     u, w = q[..., :3], q[..., 3:]
-    uv = np.sum(u * v, axis=-1, keepdims=True)
-    uxv = np.cross(u, v)
-    v_b = (w * w - np.sum(u * u, axis=-1, keepdims=True)) * v + 2.0 * u * uv - 2.0 * w * uxv
-    eye = np.eye(3)
-    vx = np.zeros(v.shape + (3,))
-    vx[..., 0, 1], vx[..., 0, 2], vx[..., 1, 2] = -v[..., 2], v[..., 1], -v[..., 0]
-    vx[..., 1, 0], vx[..., 2, 0], vx[..., 2, 1] = v[..., 2], -v[..., 1], v[..., 0]
-    d_u = 2.0 * (uv[..., None] * eye + u[..., :, None] * v[..., None, :]
+    x, y, z = v[..., 0], v[..., 1], v[..., 2]
+    uxv = np.empty(shape + (3,))                                       # u x v, by components
+    uxv[..., 0] = u[..., 1] * z - u[..., 2] * y
+    uxv[..., 1] = u[..., 2] * x - u[..., 0] * z
+    uxv[..., 2] = u[..., 0] * y - u[..., 1] * x
+    uv = np.einsum("...i,...i->...", u, v)[..., None]
+    v_b = (w * w - np.einsum("...i,...i->...", u, u)[..., None]) * v + 2.0 * u * uv - 2.0 * w * uxv
+    if not jacobian:
+        return v_b
+    vx = np.zeros(shape + (3, 3))                                      # [v]x
+    vx[..., 0, 1], vx[..., 0, 2], vx[..., 1, 2] = -z, y, -x
+    vx[..., 1, 0], vx[..., 2, 0], vx[..., 2, 1] = z, -y, x
+    d_u = 2.0 * (uv[..., None] * np.eye(3) + u[..., :, None] * v[..., None, :]
                  - v[..., :, None] * u[..., None, :] + w[..., None] * vx)
     d_w = 2.0 * w * v - 2.0 * uxv
     return v_b, np.concatenate([d_u, d_w[..., None]], axis=-1)
@@ -142,17 +150,31 @@ def error_vector(q, up_meas_b, e_meas_b, sun_n, valid=None,
     polarization_weight : float
         ``lambda``, weight of the polarization residuals against the gravity residuals.
     """
+    a, e_m = _prepare_measurements(up_meas_b, e_meas_b, valid, polarization_weight)
+    return _residuals(np.asarray(q, float), a, e_m, np.asarray(sun_n, float))
+
+
+def _prepare_measurements(up_meas_b, e_meas_b, valid, weight):
+    """Unit specific force and the weighted E-vectors with invalid units zeroed."""
     a = np.asarray(up_meas_b, float)
     a = a / np.linalg.norm(a, axis=-1, keepdims=True)
-    up_b, J_up = rotate_to_body(q, np.array([0.0, 0.0, 1.0]))
-    s_b, J_s = rotate_to_body(q, sun_n)
     e_m = np.asarray(e_meas_b, float)
     ok = np.all(np.isfinite(e_m), axis=-1) if valid is None else np.asarray(valid, bool)
-    e_m = np.where(ok[..., None], np.nan_to_num(e_m), 0.0) * polarization_weight
-    r_pol = np.einsum("...mi,...i->...m", e_m, s_b)
-    J_pol = np.einsum("...mi,...ij->...mj", e_m, J_s)
-    return (np.concatenate([up_b - a, r_pol], axis=-1),
-            np.concatenate([J_up, J_pol], axis=-2))
+    return a, np.where(ok[..., None], np.nan_to_num(e_m), 0.0) * weight
+
+
+def _residuals(q, a, e_m, sun, jacobian: bool = True):
+    """e(Q) (and J) for prepared measurements; up and sun rotated in one call."""
+    ref = np.stack(np.broadcast_arrays(np.array([0.0, 0.0, 1.0]), sun), axis=-2)  # (..., 2, 3)
+    out = rotate_to_body(q[..., None, :], ref, jacobian)
+    v_b = out[0] if jacobian else out
+    r = np.concatenate([v_b[..., 0, :] - a, np.einsum("...mi,...i->...m", e_m, v_b[..., 1, :])],
+                       axis=-1)
+    if not jacobian:
+        return r
+    J = out[1]
+    J_pol = np.einsum("...mi,...ij->...mj", e_m, J[..., 1, :, :])
+    return r, np.concatenate([J[..., 0, :, :], J_pol], axis=-2)
 
 
 def objective(e) -> np.ndarray:
@@ -322,9 +344,7 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
         raise InvalidParameterError(f"method 'fixed' needs a gain beta >= 0 [1/s]; got "
                                     f"{beta!r} (see madgwick_beta)")
     step_len = (beta or 0.0) * every / fs
-    ok = (np.all(np.isfinite(e_meas), axis=-1) if valid is None
-          else np.asarray(valid, bool))
-    up = accel[:, ::every][:, :K]
+    up, e_m = _prepare_measurements(accel[:, ::every][:, :K], e_meas, valid, polarization_weight)
     incr = _interval_increments(gyro, 1.0 / fs, every, K)
     incr = incr.as_quat().reshape(S, K - 1, 4)
     quat = np.empty((S, K, 4))
@@ -334,10 +354,9 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
         if k:
             q = (Rotation.from_quat(q) * Rotation.from_quat(incr[:, k - 1])).as_quat()
         if method != "gyro":
-            e, J = error_vector(q, up[:, k], e_meas[:, k], sun[k], ok[:, k], polarization_weight)
+            e, J = _residuals(q, up[:, k], e_m[:, k], sun[k])
             q, steps[:, k] = gradient_step(q, e, J, method, step_len)
-        e, _ = error_vector(q, up[:, k], e_meas[:, k], sun[k], ok[:, k], polarization_weight)
-        F[:, k] = objective(e)
+        F[:, k] = objective(_residuals(q, up[:, k], e_m[:, k], sun[k], jacobian=False))
         quat[:, k] = q
     return AttitudeEstimate(quat, np.arange(K) * every / fs, F, steps, method)
 
