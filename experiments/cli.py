@@ -26,6 +26,18 @@ def _command_modules():
         yield mod
 
 
+DEFAULT_SEED = 20140601
+"""Seed of a reproduction whose module defines no ``DEFAULT_SEED`` of its own."""
+
+
+def _run_target(targets: dict, args) -> int:
+    """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
+    func = targets[args.target]
+    if args.seed is None:
+        args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
+    return func(args)
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="skysim", description="Skylight-polarization simulator and virtual sensor testbed.")
@@ -38,10 +50,14 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="run a published experiment's reproduction",
                          description="Run a scripted reproduction; writes tables and figures.")
     rep.add_argument("target", choices=sorted(targets), help="which experiment")
-    rep.add_argument("--trials", type=int, default=None, help="Monte-Carlo trials")
-    rep.add_argument("--seed", type=int, default=20140601, help="master random seed")
+    rep.add_argument("--trials", type=int, default=None,
+                     help="Monte-Carlo trials (default: the target's own)")
+    rep.add_argument("--seed", type=int, default=None,
+                     help="master random seed (default: the target's DEFAULT_SEED)")
+    rep.add_argument("--quick", action="store_true",
+                     help="a small, fast run (few trials) for smoke tests")
     rep.add_argument("--out", default=None, help="output folder (default results/<target>)")
-    rep.set_defaults(func=lambda args: targets[args.target](args))
+    rep.set_defaults(func=lambda args: _run_target(targets, args))
     for mod in modules:
         if hasattr(mod, "register"):
             mod.register(sub)

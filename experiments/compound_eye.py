@@ -252,7 +252,7 @@ def plot_heading_errors(ex: dict, path: Path) -> None:
 
 
 def _reproduce(args) -> int:
-    trials = args.trials or 50
+    trials = args.trials or (10 if getattr(args, "quick", False) else 50)
     out = Path(args.out or "results/compound-eye")
     result = run(trials=trials, seed=args.seed, out=out)
     s = result["summary"]

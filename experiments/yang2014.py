@@ -47,6 +47,9 @@ SITE = Site(latitude_deg=34 + 8 / 60 + 41 / 3600, longitude_deg=108 + 32 / 60 + 
             altitude_m=400.0, name="Xi'an rooftop (Yang et al. 2014)")
 """Site of the experiment; altitude ~400 m (Xi'an city elevation; the paper gives none)."""
 
+DEFAULT_SEED = 20140601
+"""Master seed of ``skysim reproduce yang2014`` (the paper's publication month)."""
+
 GROUPS = {"a": "2013-05-22T17:10:00+08:00", "b": "2013-05-22T17:30:00+08:00",
           "c": "2013-05-22T18:00:00+08:00"}
 """Start time of each group's sweep (the paper's clock times, UTC+8)."""
@@ -272,7 +275,7 @@ def _write_example_data(out: Path, seed: int, model: ErrorModel):
 
 
 def _reproduce(args) -> int:
-    trials = args.trials or 200
+    trials = args.trials or (20 if getattr(args, "quick", False) else 200)
     out = Path(args.out or "results/yang2014")
     result = run(trials=trials, seed=args.seed, out=out)
     s = result["summary"]
