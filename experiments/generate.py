@@ -22,7 +22,6 @@ from __future__ import annotations
 
 import hashlib
 import json
-import tomllib
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -107,20 +106,9 @@ def _sky(entry: dict, where: str):
                                   f"{model!r} ({exc})") from exc
 
 
-def _write_table(table, sidecar: dict, path: Path) -> None:
-    from skysim.io import _json_default, atomic_write_many, sidecar_path
-    from sensor.measurement import format_iso_times
-
-    def data(tmp):
-        if path.suffix == ".csv":
-            out = table.copy()
-            if "time" in out:
-                out["time"] = format_iso_times(out["time"])
-            out.to_csv(tmp, index=False)
-        else:
-            table.to_parquet(tmp, index=False)
-    atomic_write_many([(path, data), (sidecar_path(path), lambda tmp: tmp.write_text(
-        json.dumps(sidecar, indent=2, default=_json_default) + "\n"))])
+def _write(table, sidecar: dict, path: Path) -> None:
+    from sensor.tables import write_table_and_sidecar
+    write_table_and_sidecar(table, sidecar, path)
 
 
 def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
@@ -149,7 +137,7 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
                "sun": {**sun, "elevation_deg": sun_el, "azimuth_deg": sun_az},
                "aop_convention": AOP_CONVENTION, "n_directions": int(el.size),
                "generator": _generator(entry, seed)}
-    _write_table(table, sidecar, path)
+    _write(table, sidecar, path)
 
 
 def _generator(entry: dict, seed: int) -> dict:
@@ -189,7 +177,7 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
                                             float(entry.get("daq_range_V", 10.0))))
     meas = sensor.sample(sky, site, times, headings, rng, seed=seed)
     meas.sidecar["generator"].update(_generator(entry, seed))
-    _write_table(meas.table, meas.sidecar, path)
+    _write(meas.table, meas.sidecar, path)
 
 
 def _photodiodes(entry: dict, site, seed: int, path: Path, where: str) -> None:
@@ -218,7 +206,7 @@ def _photodiodes(entry: dict, site, seed: int, path: Path, where: str) -> None:
                          rng, attitude_noise_deg=float(entry.get("attitude_noise_deg", 0.0)),
                          seed=seed)
     data.sidecar["generator"].update(_generator(entry, seed))
-    _write_table(data.table, data.sidecar, path)
+    _write(data.table, data.sidecar, path)
 
 
 _WRITERS = {"sky_map": _sky_map, "measurement": _measurement, "photodiodes": _photodiodes}
@@ -226,13 +214,8 @@ _WRITERS = {"sky_map": _sky_map, "measurement": _measurement, "photodiodes": _ph
 
 def load_generate_config(path) -> dict:
     """Read and check a ground-truth configuration (TOML)."""
-    path = Path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no configuration {path}")
-    try:
-        raw = tomllib.loads(path.read_text())
-    except tomllib.TOMLDecodeError as exc:
-        raise GenerateConfigError(f"{path}: invalid TOML ({exc})") from exc
+    from .sweep_config import read_toml
+    raw = read_toml(path, GenerateConfigError)
     unknown = set(raw) - {"seed", "name", "site", *_KINDS}
     if unknown:
         raise GenerateConfigError(f"{path}: unknown key(s) {sorted(unknown)}; valid: seed, "
@@ -315,20 +298,8 @@ _ANGLE_PERIODS = {"aop_deg": 180.0, "true_phi_deg": 180.0, "heading_deg": 360.0,
 
 
 def _read(path: Path):
-    import pandas as pd
-
-    from skysim.io import sidecar_path
-    side = sidecar_path(path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no file {path}")
-    if not side.is_file():
-        raise FileNotFoundError(f"no sidecar {side} beside {path}")
-    try:
-        sidecar = json.loads(side.read_text())
-        table = pd.read_parquet(path) if path.suffix == ".parquet" else pd.read_csv(path)
-    except Exception as exc:  # json/pandas/pyarrow raise many types for corrupt files
-        raise CompareError(f"{path}: cannot read ({exc})") from exc
-    return table, sidecar
+    from sensor.tables import read_table_and_sidecar
+    return read_table_and_sidecar(path, "any skysim schema", CompareError)
 
 
 def _quantities(schema: str, truth) -> dict:

@@ -548,6 +548,17 @@ def _pyplot():
     return plt
 
 
+def _finish(plt, fig, ax, path, xlabel: str, ylabel: str, **legend) -> None:
+    """Log y axis, labels, legend; save as PNG and close."""
+    ax.set_yscale("log")
+    ax.set_xlabel(xlabel)
+    ax.set_ylabel(ylabel)
+    ax.legend(**legend)
+    fig.tight_layout()
+    fig.savefig(path, dpi=110)
+    plt.close(fig)
+
+
 def plot_indices(indices, cfg: SweepConfig, path) -> None:
     """Bar charts of the sensitivity indices: one panel per output kind and sun elevation."""
     plt = _pyplot()
@@ -593,13 +604,8 @@ def plot_error_vs_elevation(summary, path) -> None:
                             marker="o", label=f"{kind}, pair {pair}")
             ax.fill_between(g.sun_elevation_deg, g[f"{kind}_3sigma_p05_deg"],
                             g[f"{kind}_3sigma_p95_deg"], color=line.get_color(), alpha=0.12)
-    ax.set_yscale("log")
-    ax.set_xlabel("sun elevation [deg]")
-    ax.set_ylabel("heading error 3σ [deg] (median, 5–95 %)")
-    ax.legend(fontsize=7, ncol=2)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(plt, fig, ax, path, "sun elevation [deg]",
+            "heading error 3σ [deg] (median, 5–95 %)", fontsize=7, ncol=2)
 
 
 def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
@@ -613,13 +619,8 @@ def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
         if col in trials:
             ax.scatter(noise_mV, trials[col], s=3, alpha=0.3, color=colour,
                        label=f"{kind}, pair {tag[1]}-{tag[2]}")
-    ax.set_yscale("log")
-    ax.set_xlabel("channel noise σ [mV]")
-    ax.set_ylabel("heading error 3σ [deg]")
-    ax.legend(fontsize=8, markerscale=4)
-    fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    _finish(plt, fig, ax, path, "channel noise σ [mV]", "heading error 3σ [deg]",
+            fontsize=8, markerscale=4)
 
 
 # --------------------------------------------------------------------------- driver

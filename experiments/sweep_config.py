@@ -47,7 +47,7 @@ from pathlib import Path
 from skysim.exceptions import InvalidParameterError
 
 __all__ = ["SweepConfigError", "ParameterSpec", "SweepConfig", "load_config", "parse_config",
-           "PARAMETERS", "GROUPS", "METHODS"]
+           "read_toml", "PARAMETERS", "GROUPS", "METHODS"]
 
 PARAMETERS = {
     **{f"dtheta{k}_deg": 0.0 for k in range(1, 7)},
@@ -302,11 +302,15 @@ def load_config(path) -> SweepConfig:
     SweepConfigError
         For invalid TOML or an invalid configuration (see :func:`parse_config`).
     """
+    return parse_config(read_toml(path, SweepConfigError))
+
+
+def read_toml(path, error_cls: type[Exception]) -> dict:
+    """Parse a TOML file; a missing file is ``FileNotFoundError``, bad TOML ``error_cls``."""
     path = Path(path)
     if not path.is_file():
-        raise FileNotFoundError(f"no sweep configuration {path}")
+        raise FileNotFoundError(f"no configuration file {path}")
     try:
-        raw = tomllib.loads(path.read_text())
+        return tomllib.loads(path.read_text())
     except tomllib.TOMLDecodeError as exc:
-        raise SweepConfigError(f"{path}: invalid TOML ({exc})") from exc
-    return parse_config(raw)
+        raise error_cls(f"{path}: invalid TOML ({exc})") from exc
