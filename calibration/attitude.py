@@ -18,14 +18,19 @@ which in a Rayleigh sky is perpendicular to the sun direction. Per update k:
    the tangent space of the unit sphere (its radial part only rescales ``Q``).
 4. **One gradient step** ``Q_k = normalise(Q_w - mu_k g)``:
 
-   (a) *fixed step* (Madgwick's form, [2]_ eqs. 42-44): ``mu g = beta dt g / |g|`` with a
+   (a) *fixed step* (Madgwick's form, [2]_ eqs. 42-43): ``mu g = beta dt g / |g|`` with a
        constant quaternion-rate gain ``beta`` [1/s]; Madgwick's choice ``beta = sqrt(3/4)
        omega_err`` for a gyro error ``omega_err`` [rad/s] ([2]_ eq. 50) is
        :func:`madgwick_beta`;
    (b) *dynamic step* from an exact line search on the local quadratic model of ``F``:
        ``mu_k = argmin_mu 1/2 ||e - mu J g||^2 = |g|^2 / |J g|^2`` (Cauchy step of steepest
-       descent; [3]_ eq. 3.55), so the step shrinks when the measurements agree with the gyro
-       and grows when they do not.
+       descent; [3]_ sect. 3.3, eq. 3.25), so the step shrinks when the measurements agree
+       with the gyro and grows when they do not.
+
+The structure (gyro quaternion update, error vector from E-vector and gravity, F = 1/2 |e|^2,
+fixed vs line-search step) is that of [1]_ as summarised in the project's issue 6; the
+paper's own text was not available here, so its equation numbers are not cited and the
+formulas above are written from [2]_ and [3]_.
 
 Roll, pitch and yaw follow :func:`sensor.compound_eye.attitude_angles`.
 
@@ -35,11 +40,13 @@ References
 ----------
 .. [1] H. Jin, X. Xie, J. Chu, W. Wei, Z. Wei, "Optimization method of navigation attitude
    based on skylight polarization pattern", Aero Weaponry 27(1):39 (2020).
-.. [2] S. O. H. Madgwick, A. J. L. Harrison, R. Vaidyanathan, "Estimation of IMU and MARG
-   orientation using a gradient descent algorithm", IEEE ICORR (2011),
-   doi:10.1109/ICORR.2011.5975346; and Madgwick's report (2010) for eqs. 42-50.
+.. [2] S. O. H. Madgwick, "An efficient orientation filter for inertial and inertial/magnetic
+   sensor arrays", report, University of Bristol (2010), eqs. 42-43 (filter), 50 (beta);
+   published as Madgwick, Harrison & Vaidyanathan, IEEE ICORR (2011),
+   doi:10.1109/ICORR.2011.5975346.
 .. [3] J. Nocedal, S. J. Wright, *Numerical Optimization*, 2nd ed., Springer (2006),
-   eq. (3.55) (exact step length for a quadratic), doi:10.1007/978-0-387-40065-5.
+   sect. 3.3, eq. (3.25) (exact step of steepest descent on a quadratic),
+   doi:10.1007/978-0-387-40065-5.
 """
 
 from __future__ import annotations
@@ -189,7 +196,7 @@ def tangent_gradient(q, e, J) -> np.ndarray:
 
 
 def dynamic_step(g, J) -> np.ndarray:
-    """Exact line-search step length ``mu = |g|^2 / |J g|^2`` (0 where g = 0) ([3]_ eq. 3.55)."""
+    """Exact line-search step ``mu = |g|^2 / |J g|^2`` (0 where g = 0) ([3]_ eq. 3.25)."""
     Jg = np.einsum("...ki,...i->...k", J, g)
     num = np.sum(g * g, axis=-1)
     den = np.sum(Jg * Jg, axis=-1)
