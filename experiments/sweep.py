@@ -735,9 +735,11 @@ def _sweep_command(args) -> int:
                     figures=not args.no_figures)
     pd.set_option("display.width", 200)
     print(res["summary"].to_string(index=False, float_format=lambda x: f"{x:.4g}"))
-    for d in res["info"]["dominant_factors"]:
-        print(f"dominant at sun elevation {d['sun_elevation_deg']:g} deg for {d['output']}: "
-              f"{d['factor']}")
+    if res["info"]["dominant_factors"]:
+        dom = pd.DataFrame(res["info"]["dominant_factors"])
+        print("\ndominant factor (largest total index) per sun elevation [deg] and output:")
+        print(dom.pivot(index="sun_elevation_deg", columns="output", values="factor")
+              .to_string())
     for s in res["info"]["indices_skipped"]:
         print(f"indices skipped: {s}")
     info = res["info"]
