@@ -1,0 +1,360 @@
+"""Multiple-scattering polarized sky: a Rayleigh slab over a Lambertian ground.
+
+The model is the plane-parallel problem of the Coulson-Dave-Sekera tables [1]_ [2]_: a
+homogeneous, conservative Rayleigh atmosphere of optical thickness ``tau`` (given, or derived
+from wavelength and surface pressure after Bodhaine et al. 1999 [3]_) over a Lambertian ground
+of albedo ``A``. The radiative transfer is solved by sasktran2 (:mod:`skysim.rt_sasktran`,
+optional extra ``pip install 'skysim[rt]'``).
+
+Speed by physics
+----------------
+For Rayleigh scattering of unpolarized sunlight the diffuse Stokes vector depends on the
+relative azimuth ``phi`` only through ``cos(m phi)`` (I, Q) and ``sin(m phi)`` (U) with
+``m <= 2`` (Chandrasekhar 1950, ch. X, eqs. (64)-(66) [4]_; the Lambertian ground adds to
+``m = 0`` only). :func:`fourier_modes` therefore calls the engine once per
+(tau, albedo, sun zenith) on ``n_zenith`` view zenith angles x 5 azimuths, fits the five mode
+functions ``I_m, Q_m (m = 0, 1, 2)`` and ``U_m (m = 1, 2)`` per zenith angle (the residual of
+that fit measures how well the engine obeys ``m <= 2``), and interpolates them in view zenith
+angle with a cubic spline. The spline is made smooth through the zenith by the parity of the
+modes: a path through the zenith continues at ``phi + 180 deg`` with the meridian basis turned
+by 180 deg (which leaves Q and U unchanged), so ``f_m(-theta) = (-1)^m f_m(theta)``.
+The interpolation error (tested in ``tests/test_multiple.py`` against direct engine calls) is
+below 1e-3 in DoLP and in I/I for the default 25 nodes.
+
+Units: ``I`` (and Q, U) are normalised to an incident solar flux of ``pi`` per unit area normal
+to the beam, as in the tables; the direct solar beam is not included.
+
+References
+----------
+.. [1] K. L. Coulson, J. V. Dave, Z. Sekera, *Tables Related to Radiation Emerging from a
+   Planetary Atmosphere with Rayleigh Scattering*, Univ. California Press (1960).
+.. [2] V. Natraj, K.-F. Li, Y. L. Yung, ApJ 691:1909 (2009), doi:10.1088/0004-637X/691/2/1909.
+.. [3] B. A. Bodhaine, N. B. Wood, E. G. Dutton, J. R. Slusser, "On Rayleigh optical depth
+   calculations", J. Atmos. Oceanic Technol. 16:1854-1861 (1999),
+   doi:10.1175/1520-0426(1999)016<1854:ORODC>2.0.CO;2.
+.. [4] S. Chandrasekhar, *Radiative Transfer*, Oxford (1950; Dover 1960), ch. X.
+.. [5] P. J. Mohr et al., CODATA 2018 (Avogadro constant).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .exceptions import InvalidParameterError
+from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, transmitted_stokes
+from .sky import Sky
+from .validation import check_in_range
+
+__all__ = [
+    "WAVELENGTH_RANGE_NM",
+    "bodhaine_optical_thickness",
+    "bodhaine_optical_thickness_fit",
+    "bodhaine_depolarization_ratio",
+    "FourierModes",
+    "fourier_modes",
+    "zenith_nodes_deg",
+    "FIT_AZIMUTHS_DEG",
+    "MultipleScatteringSky",
+]
+
+WAVELENGTH_RANGE_NM = (250.0, 1000.0)
+"""Supported wavelengths [nm]: the range of Bodhaine et al.'s tables and fit (eq. 30)."""
+
+FIT_AZIMUTHS_DEG = np.array([0.0, 45.0, 90.0, 135.0, 180.0])
+"""Relative azimuths [deg] at which the engine is called per zenith node (5 > 3 unknowns)."""
+
+_AVOGADRO = 6.02214076e23  # [1/mol], CODATA 2018 [5]_
+_NS_288 = 2.546899e19      # molecules per cm^3 at 288.15 K, 1013.25 hPa ([3]_, eq. (3))
+
+
+# --------------------------------------------------------------------------------------------
+# Rayleigh optical thickness (Bodhaine et al. 1999)
+# --------------------------------------------------------------------------------------------
+
+def _check_wavelength(wavelength_nm) -> np.ndarray:
+    lo, hi = WAVELENGTH_RANGE_NM
+    return check_in_range("wavelength_nm", wavelength_nm, lo, hi,
+                          hint="Bodhaine et al. (1999) cover 250-1000 nm; give tau directly "
+                               "for other wavelengths")
+
+
+def _king_factor_air(lam_um, co2_ppm):
+    """King correction factor of air, [3]_ eqs. (5), (6) and (23), lam in [um]."""
+    f_n2 = 1.034 + 3.17e-4 / lam_um**2
+    f_o2 = 1.096 + 1.385e-3 / lam_um**2 + 1.448e-4 / lam_um**4
+    c = co2_ppm * 1e-4  # percent by volume
+    return ((78.084 * f_n2 + 20.946 * f_o2 + 0.934 * 1.00 + c * 1.15)
+            / (78.084 + 20.946 + 0.934 + c))
+
+
+def bodhaine_depolarization_ratio(wavelength_nm, co2_ppm: float = 360.0) -> np.ndarray:
+    """Depolarization ratio of air ``rho`` from the King factor ``F = (6 + 3 rho)/(6 - 7 rho)``.
+
+    [3]_, eqs. (5), (6), (23); about 0.028 in the visible.
+    """
+    lam = _check_wavelength(wavelength_nm) * 1e-3
+    f = _king_factor_air(lam, co2_ppm)
+    return 6.0 * (f - 1.0) / (3.0 + 7.0 * f)
+
+
+def bodhaine_optical_thickness(wavelength_nm, pressure_hPa=1013.25, latitude_deg=45.0,
+                               altitude_m=0.0, co2_ppm: float = 360.0) -> np.ndarray:
+    """Rayleigh optical thickness of the whole atmosphere above a site.
+
+    ``tau = sigma P A / (m_a g)`` ([3]_, eq. (29)) with the cross-section per molecule
+    ``sigma = 24 pi^3 (n^2 - 1)^2 / (lam^4 Ns^2 (n^2 + 2)^2) F_air`` (eq. (2)), the refractive
+    index of air from Peck & Reeder (eq. (4)) corrected for CO2 (eq. (19)), the King factor
+    (eqs. (5), (6), (23)), the mean molecular weight of dry air (eq. (17)) and gravity at the
+    mass-weighted column altitude ``0.73737 z + 5517.56`` m (eqs. (10)-(11)).
+
+    Parameters
+    ----------
+    wavelength_nm : array-like
+        Wavelength [nm] in :data:`WAVELENGTH_RANGE_NM`.
+    pressure_hPa : array-like
+        Surface pressure [hPa], in (0, 1100].
+    latitude_deg : array-like
+        Site latitude [deg] (gravity).
+    altitude_m : array-like
+        Site altitude [m] (gravity).
+    co2_ppm : float
+        CO2 volume mixing ratio [ppm].
+
+    Returns
+    -------
+    ndarray
+        Optical thickness [1] (0.36 at 400 nm, 0.097 at 550 nm at sea level).
+    """
+    lam_um = _check_wavelength(wavelength_nm) * 1e-3
+    p = check_in_range("pressure_hPa", pressure_hPa, 0.0, 1100.0, low_open=True,
+                       hint="surface pressure in hPa (sea level: 1013.25)")
+    lat = np.radians(check_in_range("latitude_deg", latitude_deg, -90.0, 90.0))
+    z = check_in_range("altitude_m", altitude_m, -500.0, 9000.0)
+    inv2 = 1.0 / lam_um**2
+    n300 = 1.0 + 1e-8 * (8060.51 + 2480990.0 / (132.274 - inv2) + 17455.7 / (39.32957 - inv2))
+    n = 1.0 + (n300 - 1.0) * (1.0 + 0.54 * (co2_ppm * 1e-6 - 0.0003))
+    lam_cm = lam_um * 1e-4
+    sigma = (24.0 * np.pi**3 * (n * n - 1.0) ** 2 / (lam_cm**4 * _NS_288**2 * (n * n + 2.0) ** 2)
+             * _king_factor_air(lam_um, co2_ppm))                       # [cm^2]
+    m_air = 15.0556 * co2_ppm * 1e-6 + 28.9595                           # [g/mol]
+    c2 = np.cos(2.0 * lat)
+    g0 = 980.6160 * (1.0 - 0.0026373 * c2 + 0.0000059 * c2 * c2)         # [cm/s^2]
+    zc = 0.73737 * z + 5517.56                                           # [m]
+    g = (g0 - (3.085462e-4 + 2.27e-7 * c2) * zc + (7.254e-11 + 1.0e-13 * c2) * zc**2
+         - (1.517e-17 + 6.0e-20 * c2) * zc**3)
+    return sigma * (p * 1000.0) * _AVOGADRO / (m_air * g)                # P in dyn/cm^2
+
+
+def bodhaine_optical_thickness_fit(wavelength_nm) -> np.ndarray:
+    """Bodhaine et al.'s closed-form fit ([3]_, eq. (30)): sea level, 45 deg, 1013.25 hPa, 360 ppm.
+
+    Used as an independent check of :func:`bodhaine_optical_thickness`.
+    """
+    lam = _check_wavelength(wavelength_nm) * 1e-3
+    return (0.0021520 * (1.0455996 - 341.29061 / lam**2 - 0.90230850 * lam**2)
+            / (1.0 + 0.0027059889 / lam**2 - 85.968563 * lam**2))
+
+
+# --------------------------------------------------------------------------------------------
+# Fourier modes of the transmitted field
+# --------------------------------------------------------------------------------------------
+
+def zenith_nodes_deg(n_zenith: int) -> np.ndarray:
+    """View zenith nodes [deg] in [0, 90], denser towards the horizon.
+
+    ``theta_k = 90 sin(pi k / (2 (n - 1)))``: the transmitted field changes fastest near the
+    horizon (the slant optical path ``tau / mu`` saturates there).
+    """
+    if int(n_zenith) < 8:
+        raise InvalidParameterError(f"n_zenith must be >= 8; got {n_zenith}. Default: 25.")
+    k = np.arange(int(n_zenith))
+    return 90.0 * np.sin(0.5 * np.pi * k / (int(n_zenith) - 1))
+
+
+@dataclass(frozen=True)
+class FourierModes:
+    """Azimuthal Fourier modes of the diffuse Stokes field for one (tau, albedo, mu0).
+
+    ``I = sum_m I_m(theta) cos(m phi)``, ``Q = sum_m Q_m(theta) cos(m phi)`` (m = 0, 1, 2),
+    ``U = sum_m U_m(theta) sin(m phi)`` (m = 1, 2), with ``theta`` the view zenith angle and
+    ``phi`` the relative azimuth (view minus sun, clockwise), in the skysim Stokes basis.
+
+    Attributes
+    ----------
+    theta_deg : ndarray (n,)
+        View zenith angles of the engine rays [deg].
+    coefficients : ndarray (8, n)
+        Rows ``I_0, I_1, I_2, Q_0, Q_1, Q_2, U_1, U_2`` at ``theta_deg``.
+    fit_residual : float
+        Largest residual of the ``m <= 2`` least-squares fit over all nodes, relative to I.
+    """
+
+    theta_deg: np.ndarray
+    coefficients: np.ndarray
+    fit_residual: float
+
+    @functools.cached_property
+    def _spline(self):
+        from scipy.interpolate import CubicSpline
+        parity = np.array([1, -1, 1, 1, -1, 1, -1, 1], dtype=float)[:, None]
+        th = self.theta_deg
+        keep = th > 0
+        theta = np.concatenate([-th[keep][::-1], th])
+        values = np.concatenate([parity * self.coefficients[:, keep][:, ::-1],
+                                 self.coefficients], axis=1)
+        return CubicSpline(theta, values, axis=1)
+
+    def evaluate(self, theta_deg, phi_deg):
+        """Return ``(I, Q, U)`` at view zenith ``theta_deg`` [deg] and azimuth ``phi_deg`` [deg]."""
+        theta, phi = np.broadcast_arrays(np.asarray(theta_deg, float), np.asarray(phi_deg, float))
+        c = self._spline(theta.ravel()).reshape((8,) + theta.shape)
+        p = np.radians(phi)
+        c1, c2, s1, s2 = np.cos(p), np.cos(2 * p), np.sin(p), np.sin(2 * p)
+        return (c[0] + c[1] * c1 + c[2] * c2, c[3] + c[4] * c1 + c[5] * c2,
+                c[6] * s1 + c[7] * s2)
+
+
+def fourier_modes(tau: float, albedo: float, mu0: float, *, n_zenith: int = 25,
+                  depolarization_ratio: float = 0.0,
+                  settings: EngineSettings = DEFAULT_SETTINGS) -> FourierModes:
+    """Fourier modes of the diffuse field from one engine call (cached per arguments).
+
+    Parameters
+    ----------
+    tau, albedo : float
+        Optical thickness (> 0) and Lambertian ground albedo in [0, 1].
+    mu0 : float
+        Cosine of the solar zenith angle, in (0, 1].
+    n_zenith : int
+        Number of view zenith nodes (:func:`zenith_nodes_deg`); the engine traces
+        ``5 n_zenith`` rays.
+    depolarization_ratio : float
+        Molecular depolarization ratio (0 in the tables).
+    settings : EngineSettings
+    """
+    return _fourier_modes_cached(float(tau), float(albedo), float(mu0), int(n_zenith),
+                                 float(depolarization_ratio), settings)
+
+
+@functools.lru_cache(maxsize=512)
+def _fourier_modes_cached(tau, albedo, mu0, n_zenith, depolarization_ratio, settings):
+    from .rt_sasktran import MU_MAX, MU_MIN
+    nodes = zenith_nodes_deg(n_zenith)
+    mu = np.clip(np.cos(np.radians(nodes)), MU_MIN, MU_MAX)
+    theta = np.degrees(np.arccos(mu))  # the angles the engine actually traces
+    M, P = np.meshgrid(mu, FIT_AZIMUTHS_DEG, indexing="ij")
+    I, Q, U = transmitted_stokes(tau, albedo, mu0, M, P, depolarization_ratio=depolarization_ratio,
+                                 settings=settings)
+    p = np.radians(FIT_AZIMUTHS_DEG)
+    cos_basis = np.stack([np.ones_like(p), np.cos(p), np.cos(2 * p)], axis=1)  # (5, 3)
+    sin_basis = np.stack([np.sin(p), np.sin(2 * p)], axis=1)                   # (5, 2)
+    ci, *_ = np.linalg.lstsq(cos_basis, I.T, rcond=None)
+    cq, *_ = np.linalg.lstsq(cos_basis, Q.T, rcond=None)
+    cu, *_ = np.linalg.lstsq(sin_basis, U.T, rcond=None)
+    resid = max(np.max(np.abs(cos_basis @ ci - I.T) / I.T),
+                np.max(np.abs(cos_basis @ cq - Q.T) / I.T),
+                np.max(np.abs(sin_basis @ cu - U.T) / I.T))
+    coeffs = np.concatenate([ci, cq, cu], axis=0)
+    return FourierModes(theta, coeffs, float(resid))
+
+
+# --------------------------------------------------------------------------------------------
+# The Sky object
+# --------------------------------------------------------------------------------------------
+
+class MultipleScatteringSky(Sky):
+    """Multiple-scattering Rayleigh sky over a Lambertian ground (sasktran2 engine).
+
+    Parameters
+    ----------
+    tau : float, optional
+        Rayleigh optical thickness (> 0). Give either ``tau`` or ``wavelength_nm``.
+    albedo : float
+        Lambertian ground albedo in [0, 1].
+    wavelength_nm : float, optional
+        Wavelength [nm] in :data:`WAVELENGTH_RANGE_NM`: ``tau`` then follows from
+        :func:`bodhaine_optical_thickness` at ``pressure_hPa``, ``latitude_deg``, ``altitude_m``.
+    pressure_hPa : float
+        Surface pressure [hPa] (only with ``wavelength_nm``).
+    latitude_deg, altitude_m : float
+        Site latitude [deg] and altitude [m] for gravity (only with ``wavelength_nm``).
+    depolarization_ratio : float or "bodhaine"
+        Molecular depolarization ratio; 0 (default) as in the Coulson/Natraj tables; "bodhaine"
+        uses :func:`bodhaine_depolarization_ratio` at ``wavelength_nm``.
+    n_zenith : int
+        Zenith nodes of the Fourier-mode interpolation (default 25).
+    settings : EngineSettings
+        Numerical set-up of sasktran2 (defaults validated against the tables).
+
+    Notes
+    -----
+    ``I`` is normalised to an incident solar flux ``pi`` per unit area normal to the beam
+    (the tables' normalisation), the direct beam excluded. Stokes basis and AoP follow
+    ``docs/conventions.md``. One engine call (about 1 s) per distinct sun elevation; the
+    modes are cached per (tau, albedo, sun zenith), so later maps for the same sun are
+    interpolations only.
+    """
+
+    name = "multiple"
+
+    def __init__(self, tau=None, albedo=0.0, wavelength_nm=None, pressure_hPa=1013.25, *,
+                 latitude_deg=45.0, altitude_m=0.0, depolarization_ratio=0.0,
+                 n_zenith: int = 25, settings: EngineSettings = DEFAULT_SETTINGS):
+        if (tau is None) == (wavelength_nm is None):
+            raise InvalidParameterError(
+                "give exactly one of tau (optical thickness) or wavelength_nm (tau then "
+                f"follows from Bodhaine et al. 1999); got tau={tau!r}, "
+                f"wavelength_nm={wavelength_nm!r}")
+        if tau is None:
+            tau = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa, latitude_deg,
+                                                   altitude_m))
+        self.tau = float(check_in_range("tau", tau, 0.0, np.inf, low_open=True,
+                                        hint="optical thickness must be > 0 (tau = 0 has no "
+                                             "diffuse sky); Rayleigh at 550 nm: ~0.097"))
+        self.albedo = float(check_in_range("albedo", albedo, 0.0, 1.0,
+                                           hint="Lambertian ground albedo is a fraction"))
+        self.wavelength_nm = None if wavelength_nm is None else float(wavelength_nm)
+        self.pressure_hPa = float(pressure_hPa)
+        if isinstance(depolarization_ratio, str):
+            if depolarization_ratio != "bodhaine" or wavelength_nm is None:
+                raise InvalidParameterError(
+                    f"depolarization_ratio={depolarization_ratio!r}: give a number, or "
+                    "'bodhaine' together with wavelength_nm")
+            depolarization_ratio = float(bodhaine_depolarization_ratio(wavelength_nm))
+        self.depolarization_ratio = float(depolarization_ratio)
+        zenith_nodes_deg(n_zenith)  # validates
+        self.n_zenith = int(n_zenith)
+        self.settings = settings
+
+    def modes(self, sun_elevation_deg: float) -> FourierModes:
+        """Fourier modes for one sun elevation [deg] (cached)."""
+        mu0 = float(np.sin(np.radians(sun_elevation_deg)))
+        return fourier_modes(self.tau, self.albedo, mu0, n_zenith=self.n_zenith,
+                             depolarization_ratio=self.depolarization_ratio,
+                             settings=self.settings)
+
+    def _stokes(self, vel, vaz, sel, saz):
+        I = np.empty(vel.shape)
+        Q = np.empty(vel.shape)
+        U = np.empty(vel.shape)
+        theta = 90.0 - vel
+        phi = vaz - saz
+        suns, inverse = np.unique(sel, return_inverse=True)
+        inverse = inverse.reshape(sel.shape)
+        for k, s in enumerate(suns):  # one engine call per distinct sun elevation (cached)
+            sel_k = inverse == k
+            I[sel_k], Q[sel_k], U[sel_k] = self.modes(s).evaluate(theta[sel_k], phi[sel_k])
+        return I, Q, U
+
+    def describe(self) -> dict:
+        return {"model": self.name, "tau": self.tau, "albedo": self.albedo,
+                "wavelength_nm": self.wavelength_nm,
+                "pressure_hPa": self.pressure_hPa if self.wavelength_nm else None,
+                "depolarization_ratio": self.depolarization_ratio,
+                "n_zenith": self.n_zenith, "engine": "sasktran2",
+                "engine_settings": self.settings.to_dict(),
+                "I_normalisation": "incident solar flux pi per unit area normal to the beam "
+                                   "(F = 1); diffuse sky only, direct beam excluded"}
