@@ -162,25 +162,28 @@ def tilted_axes(heading_deg, tilt_deg, tilt_azimuth_deg):
     The level axes at heading ``h`` are ``f0 = (sin h, cos h, 0)`` and ``r0 = (cos h, -sin h,
     0)``; the tilt rotates them by ``tau`` about the horizontal axis ``k = (-cos a, sin a, 0)``
     that takes the zenith to the boresight (elevation ``90 - tau``, azimuth ``a``), by
-    Rodrigues' formula ``v' = v cos tau + (k x v) sin tau + k (k.v)(1 - cos tau)`` [3]_.
+    Rodrigues' formula ``v' = v cos tau + (k x v) sin tau + k (k.v)(1 - cos tau)`` [3]_, as a
+    matrix ``R = I cos tau + [k]_x sin tau + k k^T (1 - cos tau)`` per trial.
 
     Parameters
     ----------
     heading_deg : (n,) [deg]
     tilt_deg, tilt_azimuth_deg : (T,) [deg]
     """
-    h = np.radians(np.asarray(heading_deg, float))[None, :, None]
+    h = np.radians(np.asarray(heading_deg, float))
     tau = np.radians(np.asarray(tilt_deg, float))[:, None, None]
-    a = np.radians(np.asarray(tilt_azimuth_deg, float))[:, None, None]
+    a = np.radians(np.asarray(tilt_azimuth_deg, float))
     zero = np.zeros_like(h)
-    f0 = np.concatenate([np.sin(h), np.cos(h), zero], axis=-1)
-    r0 = np.concatenate([np.cos(h), -np.sin(h), zero], axis=-1)
-    k = np.concatenate([-np.cos(a), np.sin(a), np.zeros_like(a)], axis=-1)
-
-    def rotate(v):
-        return (v * np.cos(tau) + np.cross(k, v) * np.sin(tau)
-                + k * np.sum(k * v, axis=-1, keepdims=True) * (1.0 - np.cos(tau)))
-    return rotate(f0), rotate(r0)
+    f0 = np.stack([np.sin(h), np.cos(h), zero], axis=-1)                  # (n, 3)
+    r0 = np.stack([np.cos(h), -np.sin(h), zero], axis=-1)
+    k = np.stack([-np.cos(a), np.sin(a), np.zeros_like(a)], axis=-1)      # (T, 3)
+    k_cross = np.zeros(k.shape + (3,))                                    # [k]_x v = k x v
+    k_cross[:, 0, 1], k_cross[:, 0, 2] = -k[:, 2], k[:, 1]
+    k_cross[:, 1, 0], k_cross[:, 1, 2] = k[:, 2], -k[:, 0]
+    k_cross[:, 2, 0], k_cross[:, 2, 1] = -k[:, 1], k[:, 0]
+    R = (np.eye(3) * np.cos(tau) + k_cross * np.sin(tau)
+         + k[:, :, None] * k[:, None, :] * (1.0 - np.cos(tau)))          # (T, 3, 3)
+    return np.einsum("tij,nj->tni", R, f0), np.einsum("tij,nj->tni", R, r0)
 
 
 def opponent_outputs(phi_deg, dop, dtheta_deg, f, dark_rel, gain: float):
