@@ -611,11 +611,17 @@ def plot_error_vs_elevation(summary, path) -> None:
             "heading error 3σ [deg] (median, 5–95 %)", fontsize=7, ncol=2)
 
 
+PLOT_MAX_POINTS = 20_000
+"""Scatter plots show the first trials only (Monte-Carlo trials are exchangeable)."""
+
+
 def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
-    """Heading error 3 sigma of every trial against its channel noise, first pair."""
+    """Heading error 3 sigma against channel noise (first :data:`PLOT_MAX_POINTS` trials),
+    first pair."""
     plt = _pyplot()
     tag = _pair_tags(cfg)[0]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
+    trials = trials.iloc[:PLOT_MAX_POINTS]
     noise_mV = trials.noise_V * 1e3
     for kind, colour in (("raw", "tab:orange"), ("compensated", "tab:blue")):
         col = f"{kind}_3sigma_deg_{tag}"
@@ -638,6 +644,33 @@ def markdown_table(frame) -> str:
     lines += ["| " + " | ".join(cell(v) for v in row) + " |"
               for row in frame.itertuples(index=False)]
     return "\n".join(lines)
+
+
+def concatenate_chunks(tasks, path) -> None:
+    """Stream the chunk files into one Parquet file, one chunk in memory at a time."""
+    import pyarrow.parquet as pq
+    writer = None
+    try:
+        for t in tasks:
+            table = pq.read_table(t.path)
+            meta = {k: v for k, v in (table.schema.metadata or {}).items() if k != _META_KEY}
+            table = table.replace_schema_metadata(meta)
+            if writer is None:
+                writer = pq.ParquetWriter(path, table.schema)
+            writer.write_table(table)
+    finally:
+        if writer is not None:
+            writer.close()
+
+
+def analysis_columns(cfg: SweepConfig) -> list[str]:
+    """Columns the summary, indices and figures need (a sweep larger than memory keeps only
+    these in memory, about a third of ``trials.parquet``)."""
+    tags = _pair_tags(cfg)
+    extra = [f"converged_{t}" for t in tags] if cfg.calibrate else []
+    factors = [m for m, _ in _members(cfg)]
+    return list(dict.fromkeys(["trial", "condition_sun_elevation_deg", "sun_elevation_deg",
+                               "noise_V", *factors, *output_columns(cfg), *extra]))
 
 
 def _check_state(out: Path, cfg: SweepConfig, digest: str) -> None:
@@ -703,8 +736,8 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
             "command to resume")
         raise
     compute_s = time.perf_counter() - t_run
-    trials = pd.concat([pd.read_parquet(t.path) for t in tasks], ignore_index=True)
-    atomic_write(out / "trials.parquet", lambda p: trials.to_parquet(p, index=False))
+    atomic_write(out / "trials.parquet", lambda p: concatenate_chunks(tasks, p))
+    trials = pd.read_parquet(out / "trials.parquet", columns=analysis_columns(cfg))
     summary = summary_table(trials, cfg)
     atomic_write(out / "summary.csv", lambda p: summary.to_csv(p, index=False,
                                                                float_format="%.5g"))
