@@ -101,6 +101,9 @@ def _sky(entry: dict, where: str):
     model = spec.pop("model", "rayleigh")
     try:
         return make_sky(model, **spec)
+    except ImportError as exc:
+        raise GenerateConfigError(f"{where}: sky model {model!r} is not available here "
+                                  f"({exc}); install its extra or choose another") from exc
     except TypeError as exc:
         raise GenerateConfigError(f"{where}: sky parameters {spec} do not fit model "
                                   f"{model!r} ({exc})") from exc
