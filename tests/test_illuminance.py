@@ -1,0 +1,173 @@
+"""Incident light in lux and under water (sensor/illuminance.py) against closed forms and pvlib."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from sensor.illuminance import (WATER_TYPES, OutsideSnellWindowError, WaterType,
+                                air_zenith_deg, beer_lambert, clear_sky_illuminance_lx,
+                                depolarization_factor, fresnel_transmit_stokes,
+                                fresnel_transmittance, hemispheric_integral, sky_light,
+                                snell_window_half_angle_deg, underwater_light)
+from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
+from skysim.sky import RayleighSky, Sky
+
+N = 1.34
+
+
+class UniformSky(Sky):
+    """Unpolarized sky of constant radiance 2.5 (model unit): H = 2.5 pi exactly."""
+
+    name = "uniform"
+
+    def _stokes(self, vel, vaz, sel, saz):
+        one = np.ones(np.broadcast_shapes(vel.shape, sel.shape))
+        return 2.5 * one, 0.0 * one, 0.0 * one
+
+
+def test_ies_clear_sky_closed_form():
+    """The IES 1984 equations written out by hand at h = 30 deg, J = 2 (eccentricity max)."""
+    cs = clear_sky_illuminance_lx(30.0, day_of_year=2)
+    dn = 127_500.0 * 1.034 * np.exp(-0.21 / 0.5)
+    kh = 800.0 + 15_500.0 * np.sqrt(0.5)
+    np.testing.assert_allclose(cs.direct_normal_lx, dn, rtol=1e-14)
+    np.testing.assert_allclose(cs.diffuse_horizontal_lx, kh, rtol=1e-14)
+    np.testing.assert_allclose(cs.global_horizontal_lx, dn * 0.5 + kh, rtol=1e-14)
+    with pytest.raises(SunBelowHorizonError, match="-2"):
+        clear_sky_illuminance_lx(-2.0)
+    with pytest.raises(InvalidParameterError, match="day_of_year"):
+        clear_sky_illuminance_lx(30.0, day_of_year=400)
+
+
+def test_clear_sky_global_illuminance_against_pvlib_ineichen():
+    """Independent cross-check: IES global illuminance / pvlib Ineichen-Perez GHI (Linke
+    turbidity 3, a clear mid-latitude sky) is the luminous efficacy of clear-sky global
+    radiation, 105-125 lm/W for solar altitudes above 15 deg (Littlefair, Lighting Res.
+    Technol. 17(4):162 (1985), review of measured efficacies; Ineichen's TL = 3 versus the
+    IES single extinction coefficient explain the spread)."""
+    pvlib = pytest.importorskip("pvlib")
+    el = np.array([15.0, 20.0, 30.0, 45.0, 60.0, 75.0, 89.0])
+    zen = pd.Series(90.0 - el)
+    am = pvlib.atmosphere.get_absolute_airmass(pvlib.atmosphere.get_relative_airmass(zen))
+    ghi = pvlib.clearsky.ineichen(zen, am, linke_turbidity=3.0, dni_extra=1361.0)["ghi"]
+    efficacy = clear_sky_illuminance_lx(el).global_horizontal_lx / ghi.to_numpy()
+    assert np.all((efficacy > 105.0) & (efficacy < 125.0)), efficacy
+
+
+def test_hemispheric_integral_closed_forms():
+    """Uniform sky: H = pi I (exact for Gauss-Legendre); Rayleigh (3/4)(1 + cos^2 g):
+    H = (3 pi / 16)(5 + sin^2 h) (mean of cos^2 g over azimuth, integrated in mu), 1e-12."""
+    el = np.array([1.0, 20.0, 45.0, 70.0, 90.0])
+    np.testing.assert_allclose(hemispheric_integral(UniformSky(), el, 10.0), 2.5 * np.pi,
+                               rtol=1e-13)
+    ref = 3 * np.pi / 16 * (5 + np.sin(np.radians(el)) ** 2)
+    np.testing.assert_allclose(hemispheric_integral(RayleighSky(0.8), el, 123.0), ref,
+                               rtol=1e-12)
+
+
+def test_sky_light_scaling():
+    """A uniform sky gives E_kh in every direction; the Rayleigh zenith gives
+    pi I_zen E_kh / H by hand; AoP/DoP are the sky model's."""
+    e_kh = clear_sky_illuminance_lx(40.0).diffuse_horizontal_lx
+    u = sky_light(UniformSky(), np.array([10.0, 50.0, 90.0]), 30.0, 40.0, 200.0)
+    np.testing.assert_allclose(u.illuminance_lx, e_kh, rtol=1e-13)
+    r = sky_light(RayleighSky(), 90.0, 0.0, np.array([40.0, 40.0, 60.0]), 0.0)
+    g = np.radians(90.0 - np.array([40.0, 40.0, 60.0]))
+    h = 3 * np.pi / 16 * (5 + np.cos(g) ** 2)
+    e = clear_sky_illuminance_lx([40.0, 40.0, 60.0]).diffuse_horizontal_lx
+    np.testing.assert_allclose(r.illuminance_lx, np.pi * 0.75 * (1 + np.cos(g) ** 2) * e / h,
+                               rtol=1e-12)
+    np.testing.assert_allclose(r.dop, np.sin(g) ** 2 / (1 + np.cos(g) ** 2), rtol=1e-12)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0.0, 48.0), st.floats(1.30, 1.36))
+def test_snell_law(theta_w, n):
+    ta = air_zenith_deg(theta_w, n)
+    np.testing.assert_allclose(np.sin(np.radians(ta)), n * np.sin(np.radians(theta_w)),
+                               rtol=1e-12, atol=1e-15)
+
+
+def test_snell_window():
+    np.testing.assert_allclose(snell_window_half_angle_deg(N), np.degrees(np.arcsin(1 / N)))
+    assert 48.2 < snell_window_half_angle_deg(N) < 48.3
+    assert air_zenith_deg(0.0) == 0.0                    # the zenith view is not deflected
+    with pytest.raises(OutsideSnellWindowError, match="50.0"):
+        air_zenith_deg(np.array([10.0, 50.0]), N)
+
+
+@settings(max_examples=50, deadline=None)
+@given(st.floats(0.0, 89.0), st.floats(1.30, 1.36))
+def test_fresnel_energy_conservation(i_deg, n):
+    """T = 1 - R with R from the Fresnel reflection amplitudes written independently:
+    r_s = -sin(i - t)/sin(i + t), r_p = tan(i - t)/tan(i + t) (Born & Wolf eq. 1.5.21)."""
+    ts, tp = fresnel_transmittance(i_deg, n)
+    i = np.radians(i_deg)
+    t = np.arcsin(np.sin(i) / n)
+    if i_deg < 1e-6:
+        rs2 = rp2 = ((n - 1) / (n + 1)) ** 2
+    else:
+        rs2 = (np.sin(i - t) / np.sin(i + t)) ** 2
+        rp2 = (np.tan(i - t) / np.tan(i + t)) ** 2
+    np.testing.assert_allclose([ts, tp], [1 - rs2, 1 - rp2], rtol=1e-12, atol=1e-14)
+
+
+def test_fresnel_special_angles_and_stokes():
+    ts, tp = fresnel_transmittance(0.0, N)
+    np.testing.assert_allclose([ts, tp], 4 * N / (N + 1) ** 2, rtol=1e-14)
+    _, tp_b = fresnel_transmittance(np.degrees(np.arctan(N)), N)   # Brewster: R_p = 0
+    np.testing.assert_allclose(tp_b, 1.0, rtol=1e-14)
+    # unpolarized light becomes p-polarized (Q > 0) with DoP (T_p - T_s)/(T_p + T_s)
+    ts, tp = fresnel_transmittance(40.0, N)
+    I, Q, U = fresnel_transmit_stokes(1.0, 0.0, 0.0, 40.0, N)
+    np.testing.assert_allclose(Q / I, (tp - ts) / (tp + ts), rtol=1e-14)
+    assert Q > 0 and U == 0
+
+
+def test_beer_lambert_and_depolarization():
+    kd = WATER_TYPES["coastal"].diffuse_attenuation_per_m
+    np.testing.assert_allclose(beer_lambert(1000.0, np.log(2) / kd, kd), 500.0, rtol=1e-14)
+    w = WaterType("t", 0.1, 0.4)
+    np.testing.assert_allclose(depolarization_factor(10.0, w), np.exp(-3.0), rtol=1e-14)
+    with pytest.raises(InvalidParameterError, match="depth_m"):
+        beer_lambert(1.0, -1.0, 0.1)
+    with pytest.raises(InvalidParameterError, match="beam_attenuation"):
+        WaterType("bad", 0.5, 0.1)
+
+
+def test_underwater_zenith_view():
+    """Zenith view, normal incidence: I = T0 E_air exp(-K_d z), AoP unchanged,
+    DoP = d_air exp(-(c - K_d) z) (closed forms of the module's model)."""
+    z = np.array([0.0, 5.0, 40.0])
+    air = sky_light(RayleighSky(0.7), 90.0, 15.0, 35.0, 100.0)
+    w = WATER_TYPES["clear_ocean"]
+    uw = underwater_light(RayleighSky(0.7), 0.0, 15.0, 35.0, 100.0, z, "clear_ocean")
+    t0 = 4 * N / (N + 1) ** 2
+    np.testing.assert_allclose(uw.illuminance_lx,
+                               t0 * air.illuminance_lx * np.exp(-w.diffuse_attenuation_per_m
+                                                                * z), rtol=1e-12)
+    np.testing.assert_allclose(uw.aop_deg, air.aop_deg, atol=1e-9)
+    np.testing.assert_allclose(uw.dop, air.dop * np.exp(-(w.beam_attenuation_per_m
+                                                          - w.diffuse_attenuation_per_m) * z),
+                               rtol=1e-12)
+    with pytest.raises(InvalidParameterError, match="unknown water type 'lake'"):
+        underwater_light(RayleighSky(), 0.0, 0.0, 30.0, 0.0, 1.0, "lake")
+    with pytest.raises(OutsideSnellWindowError):
+        underwater_light(RayleighSky(), 60.0, 0.0, 30.0, 0.0, 1.0)
+
+
+def test_underwater_oblique_view_uses_refracted_sky():
+    """An oblique view at theta_w sees the sky at asin(n sin theta_w), Fresnel-transmitted."""
+    sky = RayleighSky()
+    tw = 30.0
+    ta = np.degrees(np.arcsin(N * np.sin(np.radians(tw))))
+    air = sky_light(sky, 90.0 - ta, 70.0, 50.0, 10.0)
+    two = np.radians(2 * air.aop_deg)
+    I, Q, U = fresnel_transmit_stokes(air.illuminance_lx, air.illuminance_lx * air.dop
+                                      * np.cos(two), air.illuminance_lx * air.dop
+                                      * np.sin(two), ta, N)
+    uw = underwater_light(sky, tw, 70.0, 50.0, 10.0, 0.0, "turbid")
+    np.testing.assert_allclose(uw.illuminance_lx, I, rtol=1e-12)
+    np.testing.assert_allclose(uw.dop, np.hypot(Q, U) / I, rtol=1e-12)
