@@ -33,6 +33,26 @@ stays well determined but its length (``I``) does not; the calibration below the
 weights the ``I`` residuals by their predicted uncertainty and drops them where ``I`` is
 not identifiable.
 
+**Bright light: the combined solve** (:func:`solve_combined`). Dividing ``A x = b`` by
+``I`` gives a system linear in ``y = (p, q, u) = (d cos 2phi, d sin 2phi, 1/I)``::
+
+    A_k1 p + A_k2 q - b_k u = -A_k0
+
+For three channels its solution is ``x = A^-1 b`` reparametrised, but it stays finite as
+``I -> inf`` (``u -> 0``): the instability of ``x = A^-1 b`` in bright light is ``x_1``
+passing through infinity and changing sign, which the ``I > 0`` rule turns into a 90-deg
+flip. ``u`` itself is then pure noise, and estimating it costs heading precision: fixing
+``u = 0`` (dark current negligible; weighted least squares for ``(p, q)`` over the three
+channels) is better there. The restricted estimate (``u = 0``) has the smaller mean squared
+error iff ``u^2 < var(u_hat)`` (Toro-Vizcarrondo & Wallace [4]_; ``u`` enters linearly, so
+the criterion is the same for phi and d); ``u_hat^2 - var(u_hat)`` estimates ``u^2``, so
+the dark-current model is used where ``u_hat > sqrt(2) sd(u_hat)``, i.e. where the
+estimated dark-to-signal ratio ``rho = delta_mean / I`` exceeds ``sqrt(2)`` times its
+standard error (propagated from the output noise). ``u`` may be pooled over samples taken
+under the same illuminance (a turntable sweep, a short time window: illuminance changes over
+minutes, the sensor samples at >= 10 Hz), which makes both the decision and the dark
+correction nearly noise-free.
+
 **Calibration** (:func:`calibrate_dark_current`): reference sequences of integrating-sphere
 intensity ``I_ref``, reference polarization angle ``phi_ref`` and DoP ``d_ref`` at several
 intensity levels; residuals of the solved ``(phi, d, I)`` against the references, each
@@ -56,6 +76,10 @@ References
    doi:10.3788/OPE.20142206.1424, eqs. (2)-(9) (the model without an intensity term).
 .. [3] H. White, "A heteroskedasticity-consistent covariance matrix estimator",
    Econometrica 48(4):817-838 (1980), doi:10.2307/1912934 (sandwich covariance).
+.. [4] T. Toro-Vizcarrondo, T. D. Wallace, "A test of the mean square error criterion for
+   restrictions in linear regression", J. Am. Stat. Assoc. 63(322):558-572 (1968),
+   doi:10.1080/01621459.1968.11009275 (restricted least squares has the smaller MSE iff the
+   noncentrality ``beta^2 / var(beta_hat) <= 1``).
 """
 
 from __future__ import annotations
@@ -69,6 +93,7 @@ from sensor.daq import Daq
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiode import (InvalidIntensityError, PhotodiodeChannels, check_above_dark,
                                check_not_saturated)
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
 from skysim.validation import check_finite, check_in_range
 
@@ -78,7 +103,8 @@ __all__ = ["TooFewChannelsError", "DarkCurrentNotIdentifiableError",
            "IntensityNotIdentifiableError", "ChannelModel", "PolarizationSolution",
            "solve_opponent", "solve_photodiodes", "DarkCurrentCalibration",
            "calibrate_dark_current", "output_model", "PARAMETER_NAMES",
-           "MAX_SD_PHI_DEG", "MAX_SD_DOP"]
+           "MAX_SD_PHI_DEG", "MAX_SD_DOP", "CombinedSolution", "solve_combined",
+           "MSE_FACTOR"]
 
 PARAMETER_NAMES = ("alpha_n_deg", "alpha_m_deg", "eta_n", "eta_m", "dark_n_lx", "dark_m_lx",
                    "gain_V", "offset_V")
@@ -89,6 +115,11 @@ MAX_SD_PHI_DEG = 2.0
 ``residuals="solution"`` calibration (unstable solve, linearisation invalid)."""
 MAX_SD_DOP = 0.05
 """Same for the solved DoP."""
+
+MSE_FACTOR = 2.0
+"""The dark-current model is used where ``u_hat^2 > MSE_FACTOR var(u_hat)`` (and ``u_hat > 0``):
+``u_hat^2 - var(u_hat)`` is the unbiased estimate of ``u^2``, compared with ``var(u_hat)``
+(Toro-Vizcarrondo & Wallace [4]_)."""
 
 _DEG = np.pi / 180.0
 _LN10 = np.log(10.0)
@@ -316,6 +347,121 @@ def solve_photodiodes(signals, polarizer_deg, *, responsivity=1.0, dark=0.0,
     return PolarizationSolution(*_from_x(x))
 
 
+@dataclass(frozen=True)
+class CombinedSolution(PolarizationSolution):
+    """:class:`PolarizationSolution` of :func:`solve_combined`; ``intensity_lx`` is ``inf``
+    where the dark-current model was not used (intensity not resolvable from the noise).
+
+    Attributes
+    ----------
+    dark_to_signal : ndarray
+        Estimated dark-to-signal ratio ``delta_mean u_hat`` (pooled if asked); may be < 0.
+    dark_to_signal_sd : ndarray
+        Its standard deviation propagated from the output noise.
+    dark_model : ndarray of bool
+        Where the dark-current model was used (criterion of :data:`MSE_FACTOR`).
+    """
+
+    dark_to_signal: np.ndarray = None
+    dark_to_signal_sd: np.ndarray = None
+    dark_model: np.ndarray = None
+
+
+def _inverse_intensity_system(U, model: ChannelModel, noise):
+    """``y = (p, q, u)`` least squares of ``A_k1 p + A_k2 q - b_k u = -A_k0``, sd of ``u``
+    from the output noise, and the residual derivatives ``dres_k/dU_k`` (N, n)."""
+    r, _, hm, A, b = _system(U, model)
+    M = np.stack([A[..., 1], A[..., 2], -b], axis=-1)
+    At = np.swapaxes(M, -1, -2)
+    P = np.linalg.solve(At @ M, At)                       # (M^T M)^-1 M^T, (..., 3, n)
+    y = -np.einsum("...ik,...k->...i", P, A[..., 0])
+    g = (hm[..., 0] + hm[..., 1] * y[..., 0, None] + hm[..., 2] * y[..., 1, None]
+         + model.dark_lx[:, 1] * y[..., 2, None])
+    dres = g * r * _LN10 / model.gain_V                   # d res_k / d U_k
+    sd_u = np.sqrt(np.sum((P[..., 2, :] * dres * noise) ** 2, axis=-1))
+    return A, b, y, sd_u, dres
+
+
+def solve_combined(U, model: ChannelModel, noise_V, *, pool_axis: int | None = None,
+                   mse_factor: float = MSE_FACTOR, daq: Daq | None = None
+                   ) -> CombinedSolution:
+    """Polarization azimuth, DoP and (where resolvable) intensity, stable from dark to
+    daylight: the dark-current model where dark current matters, the same calibrated model
+    with ``1/I = 0`` in bright light (module docstring, *Bright light*).
+
+    Parameters
+    ----------
+    U : array (..., n)
+        Channel outputs [V], ``n >= 3``.
+    model : ChannelModel
+        Calibrated channel parameters (at least one dark level > 0).
+    noise_V : float or (n,)
+        Output noise per channel [V] (noise and quantisation), > 0.
+    pool_axis : int, optional
+        Axis of ``U[..., 0]`` along which the samples share one illuminance: ``u = 1/I`` is
+        pooled (inverse-variance mean) along it before the decision and the correction.
+    mse_factor : float
+        Use the dark-current model where ``u_hat > sqrt(mse_factor) sd(u_hat)``
+        (default :data:`MSE_FACTOR`; ``inf``: never, i.e. the bright-light arm ``1/I = 0``;
+        ``0``: wherever ``u_hat > 0``).
+    daq : Daq, optional
+        If given, saturated readings raise :class:`SaturatedReadingError`.
+
+    Returns
+    -------
+    CombinedSolution
+
+    Raises
+    ------
+    TooFewChannelsError, SaturatedReadingError
+        As :func:`solve_opponent`.
+    IntensityNotIdentifiableError
+        If the dark levels of ``model`` are equal within every channel (zero included).
+    InvalidParameterError
+        If ``noise_V`` is not positive or ``mse_factor`` negative.
+    """
+    U = _check_outputs(U, 3, daq)
+    n = U.shape[-1]
+    if n != model.n_channels:
+        raise ValueError(f"U has {n} channels but the model {model.n_channels}")
+    if np.allclose(model.dark_lx[:, 0], model.dark_lx[:, 1], rtol=1e-12, atol=0.0):
+        raise IntensityNotIdentifiableError(
+            f"dark-equivalent illuminances {model.dark_lx.tolist()} lx are equal within every "
+            "channel: a common dark level acts as extra unpolarized light and 1/I has no "
+            "equation of its own (only the mismatch identifies I); calibrate the dark levels "
+            "(calibrate_dark_current) or use calibration.solve.solve_pair for phi and d")
+    noise = np.broadcast_to(check_in_range("noise_V", noise_V, 0.0, np.inf, low_open=True),
+                            (n,))
+    c = float(mse_factor)
+    if not c >= 0.0:
+        raise InvalidParameterError(
+            f"mse_factor must be >= 0 (inf: never use the dark-current model); got {mse_factor!r}")
+    A, b, y, sd_u, dres = _inverse_intensity_system(U, model, noise)
+    u, sd = y[..., 2], sd_u
+    if pool_axis is not None:
+        w = 1.0 / sd ** 2
+        u = np.sum(w * u, axis=pool_axis, keepdims=True) / np.sum(w, axis=pool_axis,
+                                                                   keepdims=True)
+        sd = 1.0 / np.sqrt(np.sum(w, axis=pool_axis, keepdims=True))
+        u, sd = np.broadcast_to(u, sd_u.shape), np.broadcast_to(sd, sd_u.shape)
+    dark = u > np.sqrt(c) * sd
+    u_fix = np.where(dark, u, 0.0)
+    # weighted least squares for (p, q) with u fixed (exactly the (p, q, u) solution for
+    # three channels where the dark model is used per sample)
+    w = 1.0 / (np.abs(dres) * noise)
+    Mw = A[..., 1:] * w[..., None]
+    rhs = (b * u_fix[..., None] - A[..., 0]) * w
+    Mt = np.swapaxes(Mw, -1, -2)
+    pq = np.linalg.solve(Mt @ Mw, (Mt @ rhs[..., None]))[..., 0]
+    phi = wrap_axial_deg(0.5 * np.degrees(np.arctan2(pq[..., 1], pq[..., 0])))
+    with np.errstate(divide="ignore"):
+        intensity = np.where(dark, 1.0 / np.where(dark, u_fix, 1.0), np.inf)
+    delta = float(np.mean(model.dark_lx))
+    return CombinedSolution(intensity, phi, np.hypot(pq[..., 0], pq[..., 1]),
+                            dark_to_signal=delta * u, dark_to_signal_sd=delta * sd,
+                            dark_model=dark)
+
+
 # --------------------------------------------------------------------------------------------
 # Calibration
 
@@ -326,7 +472,7 @@ def _row_derivatives(U, model: ChannelModel, r, hm):
     N, n = U.shape
     an, am = np.radians(2.0 * model.alpha_deg[:, 0]), np.radians(2.0 * model.alpha_deg[:, 1])
     en, em = model.eta[:, 0], model.eta[:, 1]
-    dn, dm = model.dark_lx[:, 0], model.dark_lx[:, 1]
+    dm = model.dark_lx[:, 1]
     ka, c = model.gain_V, model.offset_V
     dA = np.zeros((N, n, 9, 3))
     db = np.zeros((N, n, 9))
@@ -350,7 +496,7 @@ def _row_derivatives(U, model: ChannelModel, r, hm):
 def _solution_jacobian(U, model: ChannelModel):
     """Solution (I, phi_deg, d) and its derivatives (N, 3, n, 9): quantity, channel,
     parameter (8 model parameters of that channel, then U_k)."""
-    r, hn, hm, A, b = _system(U, model)
+    r, _, hm, A, b = _system(U, model)
     x, Ninv = _least_squares(A, b)
     e = b - np.einsum("Nkj,Nj->Nk", A, x)
     dA, db = _row_derivatives(U, model, r, hm)

@@ -84,7 +84,7 @@ import numpy as np
 from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
 from skysim.sky import Sky
-from skysim.validation import check_finite, check_in_range, check_sun_above_horizon
+from skysim.validation import check_in_range, check_sun_above_horizon
 
 __all__ = ["OutsideSnellWindowError", "SOLAR_ILLUMINANCE_CONSTANT_LX",
            "CLEAR_SKY_EXTINCTION", "CLEAR_SKY_DIFFUSE_LX", "REFRACTIVE_INDEX_SEAWATER",

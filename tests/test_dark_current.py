@@ -3,10 +3,13 @@
 import numpy as np
 import pytest
 
-from calibration.dark_current import (ChannelModel, DarkCurrentNotIdentifiableError,
+from calibration.dark_current import (MSE_FACTOR, ChannelModel,
+                                      DarkCurrentNotIdentifiableError,
                                       IntensityNotIdentifiableError, TooFewChannelsError,
                                       _solution_jacobian, calibrate_dark_current, output_model,
-                                      solve_opponent, solve_photodiodes)
+                                      solve_combined, solve_opponent, solve_photodiodes)
+from calibration.solve import heading_error_deg
+from skysim.exceptions import InvalidParameterError
 from sensor.daq import Daq
 from sensor.photodiode import (BelowDarkLevelError, PhotodiodeChannels, SaturatedReadingError,
                                photodiode_signal)
@@ -117,11 +120,120 @@ def test_bad_input():
         calibrate_dark_current(np.zeros((I.size, 3)), -I, phi, d)
 
 
+def test_combined_solve_noise_free_equals_dark_model():
+    """Noise-free outputs: 1/I is resolved everywhere, and the combined solve inverts the
+    channel model like x = A^-1 b (same equations, reparametrised in u = 1/I; tolerances of
+    test_noise_free_solve_inverts_the_channel_model: conditioning at 1000 lx)."""
+    p = PhotodiodeChannels.draw(np.random.default_rng(2))
+    model = ChannelModel.from_photodiodes(p)
+    I, phi, d = _grid()
+    U = p.outputs(I, phi, d)
+    comb = solve_combined(U, model, 1e-9)
+    assert comb.dark_model.all()
+    np.testing.assert_allclose(comb.intensity_lx, I, rtol=1e-6)
+    np.testing.assert_allclose(heading_error_deg(comb.phi_deg, phi), 0, atol=1e-7)
+    np.testing.assert_allclose(comb.dop, d, atol=1e-9)
+    np.testing.assert_allclose(comb.dark_to_signal, np.mean(model.dark_lx) / I, rtol=1e-6)
+
+
+def test_bright_arm_ignores_dark_levels_exactly():
+    """With 1/I = 0 the dark levels drop out of A (p, q) = -A_0: a sensor without dark
+    current is solved exactly whatever dark levels the model carries (round trip)."""
+    drawn = PhotodiodeChannels.draw(np.random.default_rng(4))
+    p = drawn.with_(dark_A=(0.0,) * 6)
+    model = ChannelModel.from_photodiodes(p)
+    model = ChannelModel(model.alpha_deg, model.eta, ChannelModel.from_photodiodes(drawn).dark_lx,
+                         model.gain_V, model.offset_V)
+    I, phi, d = _grid()
+    sol = solve_combined(p.outputs(I, phi, d), model, 4e-4, mse_factor=np.inf)
+    assert not sol.dark_model.any() and np.isinf(sol.intensity_lx).all()
+    np.testing.assert_allclose(heading_error_deg(sol.phi_deg, phi), 0, atol=1e-9)
+    np.testing.assert_allclose(sol.dop, d, atol=1e-11)
+
+
+def _noisy(lux, n, seed=8):
+    rng = np.random.default_rng(seed)
+    p = PhotodiodeChannels.draw(rng)
+    noise = np.array([3e-4, 4e-4, 5e-4])
+    phi = rng.uniform(-90, 90, n)
+    U = p.outputs(np.full(n, lux), phi, 0.6) + noise * rng.standard_normal((n, 3))
+    return U, phi, ChannelModel.from_photodiodes(p), noise
+
+
+def test_inverse_intensity_sd_matches_monte_carlo():
+    """The sd of u = 1/I propagated from the output noise matches the scatter of u_hat over
+    4000 noisy repeats of one direction at 10 lx (sd estimate: 1.1 % relative sampling error;
+    linearisation error at 10 lx < 1 %; 5 % tolerance = 3 x sampling + linearisation)."""
+    rng = np.random.default_rng(3)
+    p = PhotodiodeChannels.draw(rng)
+    model = ChannelModel.from_photodiodes(p)
+    noise = np.array([3e-4, 4e-4, 5e-4])
+    U = p.outputs(np.full(4000, 10.0), 20.0, 0.6) + noise * rng.standard_normal((4000, 3))
+    sol = solve_combined(U, model, noise, mse_factor=0.0)
+    delta = np.mean(model.dark_lx)
+    np.testing.assert_allclose(np.std(sol.dark_to_signal), np.median(sol.dark_to_signal_sd),
+                               rtol=0.05)
+    np.testing.assert_allclose(np.mean(sol.dark_to_signal), delta / 10.0, rtol=0.01)
+
+
+@pytest.mark.parametrize("lux", [1e4, 3.0])
+def test_pooled_combined_is_never_worse_than_either_arm(lux):
+    """Heading RMS of the pooled combined solve <= 1.03 x the better arm (dark model, or
+    1/I = 0) on the same 3000 samples: paired RMS ratios of one data set, sampling error
+    ~1/sqrt(2 x 3000) = 1.3 %, so 3 % is ~2.3 sigma above the no-loss value 1."""
+    U, phi, model, noise = _noisy(lux, 3000)
+
+    def rms(sol):
+        return np.sqrt(np.mean(heading_error_deg(sol.phi_deg, phi) ** 2))
+
+    b = rms(solve_combined(U, model, noise, mse_factor=0.0))
+    b0 = rms(solve_combined(U, model, noise, mse_factor=np.inf))
+    cw = solve_combined(U, model, noise, pool_axis=0)
+    assert rms(cw) <= 1.03 * min(b, b0), (rms(cw), b, b0)
+    assert cw.dark_model.all() == (lux < 100)       # pooled decision: dark model in dim light
+    assert cw.dark_to_signal.shape == (3000,)
+
+
+def test_per_sample_decision_rate_in_bright_light():
+    """At 1e4 lx u = 1/I is ~0.05 of its sd: u_hat ~ N(u, sd) and the dark model is chosen
+    where u_hat > sqrt(2) sd, i.e. with probability 1 - Phi(sqrt(2) - u/sd) ~ 0.08; the
+    observed share over 3000 samples must lie within 3 binomial sigma (0.015)."""
+    from scipy.stats import norm
+    U, _, model, noise = _noisy(1e4, 3000)
+    sol = solve_combined(U, model, noise)
+    nc = np.median(np.mean(model.dark_lx) / 1e4 / sol.dark_to_signal_sd)
+    p = 1 - norm.cdf(np.sqrt(MSE_FACTOR) - nc)
+    assert abs(sol.dark_model.mean() - p) < 3 * np.sqrt(p * (1 - p) / 3000), (
+        sol.dark_model.mean(), p)
+
+
+def test_combined_bad_input():
+    U = np.zeros((4, 3))
+    m = ChannelModel.nominal()
+    m = ChannelModel(m.alpha_deg, m.eta, [[1.0, 2.0]] * 3, m.gain_V, m.offset_V)
+    with pytest.raises(InvalidParameterError, match="noise_V"):
+        solve_combined(U, m, 0.0)
+    with pytest.raises(InvalidParameterError, match="mse_factor"):
+        solve_combined(U, m, 1e-3, mse_factor=-1.0)
+    with pytest.raises(IntensityNotIdentifiableError, match="equal within every channel"):
+        solve_combined(U, ChannelModel.nominal(dark_lx=1.0), 1e-3)
+    with pytest.raises(TooFewChannelsError):
+        solve_combined(np.zeros((4, 2)), m, 1e-3)
+
+
 def test_cli_quick(tmp_path):
-    from experiments.dark_current import run
+    from experiments.dark_current import DEFAULT_SEED, run
+    assert DEFAULT_SEED == 20210401
     r = run(trials=2, out=tmp_path, progress=False, figures=True)
-    assert (tmp_path / "by_level.csv").exists() and (tmp_path / "summary.json").exists()
-    assert (tmp_path / "error_vs_illuminance.png").exists()
+    for name in ("by_level.csv", "summary.json", "error_vs_illuminance.png", "by_depth.csv",
+                 "underwater.csv", "underwater_heading_vs_depth.png"):
+        assert (tmp_path / name).exists(), name
+    w = r["by_depth"]
+    # surface: the polarized skylight gives a sub-degree heading; at the deepest level of
+    # every water type (DoP ~0.01) the heading error is at least ten times larger
+    for _, g in w.groupby("water"):
+        assert g.heading_3sigma_cw_deg.iloc[0] < 1.0
+        assert g.heading_3sigma_cw_deg.iloc[-1] > 10 * g.heading_3sigma_cw_deg.iloc[0]
     t = r["by_level"]
     low = t[t.illuminance_lx <= 2.2]
     # at ~1-2 lx the dark current dominates: the 2014 model's heading error is many times
