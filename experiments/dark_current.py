@@ -14,9 +14,24 @@ extinction ratios, log-amplifier gain and offset errors; channel noise U(0.25, 0
 - evaluation sweep: illuminance from 1e4 lx down to 1 lx, 90 held-out polarization azimuths
   (offset by 1 deg from the calibration angles), sky DoP :attr:`Config.dop`.
 
+- (b0) the calibrated dark-current model with ``1/I = 0`` (dark current neglected, three
+  channels, weighted least squares: the bright-light arm);
+- (c) the combined solve :func:`calibration.dark_current.solve_combined`, per sample: (b) where
+  the estimated dark-to-signal ratio exceeds sqrt(2) times its standard error, else (b0);
+  (cw) the same with ``1/I`` pooled over the 90 samples of one illuminance level (one
+  turntable sweep under a constant sky);
+- underwater scenario: a clear Rayleigh sky (:attr:`Config.sky_dmax`, sun at
+  :attr:`Config.sun_elevation_deg`) seen at the zenith from depths where the Beer-Lambert
+  illuminance falls from the surface value to ~1 lx, in the water types of
+  :data:`sensor.illuminance.WATER_TYPES` (:func:`sensor.illuminance.underwater_light`:
+  Fresnel transmission, ``K_d`` attenuation, DoP loss ``exp(-(c - K_d) z)``).
+
 Reported: heading-error 3 sigma (3 x RMS about zero) and DoP RMS error vs illuminance for (a)
-(pair 1-2 and the best pair per trial and level) and (b); recovered vs injected parameters
-with z-scores; the illuminance below which (a) fails and the factor by which (b) recovers.
+(pair 1-2 and the best pair per trial and level), (b), (b0), (c), (cw); per level the median
+over trials of the paired ratio (c)/(b), (c)/(b0), (cw)/(b), (cw)/(b0) with a bootstrap 95 %
+interval (the combined solve is "worse than an arm beyond noise" where the interval lies
+above 1); recovered vs injected parameters with z-scores; the illuminance below which (a)
+fails and the factor by which (b) recovers; heading error vs depth under water.
 
 References
 ----------
@@ -29,6 +44,7 @@ References
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import asdict, dataclass
 from pathlib import Path
@@ -36,17 +52,24 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calibration.dark_current import ChannelModel, calibrate_dark_current, solve_opponent
+from calibration.dark_current import (ChannelModel, calibrate_dark_current, solve_combined,
+                                      solve_opponent)
 from calibration.lsq import fit_pair
 from calibration.solve import PAIRS, heading_error_deg
 from sensor.daq import Daq
+from sensor.illuminance import WATER_TYPES, underwater_light
 from sensor.photodiode import PhotodiodeChannels
+from skysim.sky import RayleighSky
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
 from .yang2014 import ERROR_MODEL
 
-__all__ = ["Config", "run", "register_reproduce", "format_summary"]
+__all__ = ["Config", "DEFAULT_SEED", "run", "register_reproduce", "format_summary",
+           "underwater_conditions"]
+
+DEFAULT_SEED = 20210401
+"""Master seed of ``skysim reproduce dark-current`` (the patent's year and month)."""
 
 
 @dataclass(frozen=True)
@@ -61,6 +84,14 @@ class Config:
     dop : zenith DoP of the evaluated sky (a clear dusk sky; 0.3-0.5 under water).
     noise_range_V : channel output noise, as in experiments.yang2014.ERROR_MODEL.
     bandwidth_Hz : readout bandwidth for the shot noise.
+    sun_elevation_deg, sky_dmax : the underwater scenario's clear sky (Rayleigh, d_max 0.8:
+        zenith DoP 0.48 at 30 deg sun elevation).
+    water_types : names in sensor.illuminance.WATER_TYPES.
+    depth_illuminance_lx : zenith lux equivalents under water that fix depths
+        ``z = ln(E(0-)/E) / K_d`` of each water type (surface down to 1 lx) ...
+    depth_dop_factors : ... and the DoP factors ``exp(-(c - K_d) z)`` that fix more depths;
+        depths beyond either the last illuminance or the last DoP factor are dropped (no
+        heading left to measure).
     """
 
     cal_levels_lx: tuple = (1.0, 2.0, 5.0, 10.0, 30.0, 100.0, 1000.0)
@@ -73,6 +104,11 @@ class Config:
     bandwidth_Hz: float = 10.0
     daq_bits: int = ERROR_MODEL.daq_bits
     daq_range_V: float = ERROR_MODEL.daq_range_V
+    sun_elevation_deg: float = 30.0
+    sky_dmax: float = 0.8
+    water_types: tuple = ("clear_ocean", "coastal", "turbid")
+    depth_illuminance_lx: tuple = (1e4, 1e3, 1e2, 30.0, 10.0, 3.0, 1.0)
+    depth_dop_factors: tuple = (0.5, 0.2, 0.1, 0.05, 0.02)
 
 
 def _three_sigma(err, axis=-1):
@@ -86,8 +122,54 @@ def _calibration_grid(cfg: Config):
     return I.ravel(), phi.ravel(), d.ravel()
 
 
-def _trial(k: int, seed_seq, cfg: Config, daq: Daq):
-    """One simulated sensor: calibrate (a) and (b), evaluate the sweep. Returns rows."""
+def underwater_conditions(cfg: Config) -> pd.DataFrame:
+    """Depth, zenith lux equivalent and DoP of the underwater scenario (one row per water type
+    and depth; :func:`sensor.illuminance.underwater_light`)."""
+    sky = RayleighSky(cfg.sky_dmax)
+    rows = []
+    for name in cfg.water_types:
+        w = WATER_TYPES[name]
+        kd = w.diffuse_attenuation_per_m
+        kp = w.beam_attenuation_per_m - kd
+        e0 = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, 0.0, name)
+        target = np.asarray(cfg.depth_illuminance_lx)
+        z_e = np.log(e0.illuminance_lx / target[target < e0.illuminance_lx]) / kd
+        z_d = -np.log(np.asarray(cfg.depth_dop_factors)) / kp
+        z = np.unique(np.concatenate([[0.0], z_e, z_d]))
+        z = z[z <= min(z_e.max(), z_d.max()) * (1 + 1e-9)]
+        light = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, z, name)
+        rows += [{"water": name, "depth_m": zi, "illuminance_lx": ei, "dop": di}
+                 for zi, ei, di in zip(z, light.illuminance_lx, light.dop)]
+    return pd.DataFrame(rows)
+
+
+def _solve_all(U, phi_true, dop_true, cal_a, cal_b, noise_total):
+    """Heading 3 sigma and DoP RMS over the last axis for every arm; dict of arrays."""
+    sol = solve_opponent(U, cal_b.model)
+    comb = solve_combined(U, cal_b.model, noise_total)
+    pooled = solve_combined(U, cal_b.model, noise_total, pool_axis=-1)
+    bright = solve_combined(U, cal_b.model, noise_total, mse_factor=np.inf)
+    out = {}
+    for name, s in (("b", sol), ("c", comb), ("cw", pooled), ("b0", bright)):
+        out[f"heading_3sigma_{name}_deg"] = _three_sigma(heading_error_deg(s.phi_deg, phi_true))
+        out[f"dop_rms_{name}"] = np.sqrt(np.mean((s.dop - dop_true) ** 2, axis=-1))
+    out["dark_model_fraction_c"] = np.mean(comb.dark_model, axis=-1)
+    out["dark_model_fraction_cw"] = np.mean(pooled.dark_model, axis=-1)
+    heading_a = {}
+    for pair, cal in cal_a.items():
+        phi_a, d_a = cal.solve(U)
+        name = f"a{pair[0]}{pair[1]}"
+        heading_a[name] = _three_sigma(heading_error_deg(phi_a, phi_true))
+        out[f"dop_rms_{name}"] = np.sqrt(np.mean((d_a / cal.dop_scale - dop_true) ** 2,
+                                                 axis=-1))
+    out["heading_3sigma_a12_deg"] = heading_a["a12"]
+    out["heading_3sigma_a_best_deg"] = np.min(np.stack(list(heading_a.values())), axis=0)
+    return out, sol, heading_a
+
+
+def _trial(k: int, seed_seq, cfg: Config, daq: Daq, water: pd.DataFrame):
+    """One simulated sensor: calibrate (a) and (b), evaluate the sweep and the underwater
+    scenario. Returns rows."""
     rng = np.random.default_rng(seed_seq)
     params = PhotodiodeChannels.draw(rng)
     noise = rng.uniform(*cfg.noise_range_V, 3)
@@ -105,64 +187,107 @@ def _trial(k: int, seed_seq, cfg: Config, daq: Daq):
     phi_e = np.broadcast_to(phi_e, (E.size, phi_e.size))
     U_e, _ = params.sample(np.broadcast_to(E, phi_e.shape), phi_e, cfg.dop, rng, noise_V=noise,
                            bandwidth_Hz=cfg.bandwidth_Hz, daq=daq)
-    sol = solve_opponent(U_e, cal_b.model)
-    heading = {"b": _three_sigma(heading_error_deg(sol.phi_deg, phi_e))}
-    dop_err = {"b": np.sqrt(np.mean((sol.dop - cfg.dop) ** 2, axis=-1))}
-    int_err = np.median(np.abs(sol.intensity_lx / E - 1.0), axis=-1)
-    for pair, cal in cal_a.items():
-        phi_a, d_a = cal.solve(U_e)
-        name = f"a{pair[0]}{pair[1]}"
-        heading[name] = _three_sigma(heading_error_deg(phi_a, phi_e))
-        dop_err[name] = np.sqrt(np.mean((d_a / cal.dop_scale - cfg.dop) ** 2, axis=-1))
-    best = min((n for n in heading if n != "b"), key=lambda n: heading[n][0])
+    res, sol, heading_a = _solve_all(U_e, phi_e, cfg.dop, cal_a, cal_b, noise_total)
+    res["intensity_rel_err_b_median"] = np.median(np.abs(sol.intensity_lx / E - 1.0), axis=-1)
+    best = min(heading_a, key=lambda n: heading_a[n][0])
+    res["dop_rms_a_daylight_best_pair"] = res[f"dop_rms_{best}"]
+    cols = [c for c in res if not c.startswith("dop_rms_a") or c in ("dop_rms_a12",
+                                                                   "dop_rms_a_daylight_best_pair")]
     sweep_rows = [{"trial": k, "illuminance_lx": float(E[i, 0]),
-                   "heading_3sigma_b_deg": heading["b"][i],
-                   "heading_3sigma_a12_deg": heading["a12"][i],
-                   "heading_3sigma_a_best_deg": min(heading[n][i] for n in heading if n != "b"),
-                   "dop_rms_b": dop_err["b"][i], "dop_rms_a12": dop_err["a12"][i],
-                   "dop_rms_a_daylight_best_pair": dop_err[best][i],
-                   "intensity_rel_err_b_median": int_err[i]} for i in range(E.shape[0])]
+                   **{c: float(res[c][i]) for c in cols}} for i in range(E.shape[0])]
+    # underwater: zenith view at the depths of `water`, same sensor and calibrations
+    phi_w = np.broadcast_to(phi_e[:1], (len(water), phi_e.shape[1]))
+    E_w = water.illuminance_lx.to_numpy()[:, None]
+    d_w = water.dop.to_numpy()[:, None]
+    U_w, _ = params.sample(np.broadcast_to(E_w, phi_w.shape), phi_w,
+                           np.broadcast_to(d_w, phi_w.shape), rng, noise_V=noise,
+                           bandwidth_Hz=cfg.bandwidth_Hz, daq=daq)
+    res_w, _, _ = _solve_all(U_w, phi_w, d_w, cal_a, cal_b, noise_total)
+    water_rows = [{"trial": k, "water": water.water.iloc[i], "depth_m": water.depth_m.iloc[i],
+                   "illuminance_lx": water.illuminance_lx.iloc[i], "dop": water.dop.iloc[i],
+                   **{c: float(res_w[c][i]) for c in res_w if c.startswith("heading")}}
+                  for i in range(len(water))]
     truth = ChannelModel.from_photodiodes(params).to_vector()
     est, se = cal_b.model.to_vector(), cal_b.standard_errors
     param_rows = [{"trial": k, "parameter": name, "injected": truth[j], "recovered": est[j],
                    "standard_error": se[j], "z": (est[j] - truth[j]) / se[j]}
                   for j, name in enumerate(cal_b.parameter_names)]
-    return sweep_rows, param_rows
+    return sweep_rows, param_rows, water_rows
 
 
-def run(trials: int = 100, seed: int = 20210401, out=None, cfg: Config = Config(),
+def run(trials: int = 100, seed: int = DEFAULT_SEED, out=None, cfg: Config = Config(),
         progress: bool = True, figures: bool = True) -> dict:
     """Run the Monte-Carlo; write tables and figures to ``out`` if given."""
-    from tqdm import tqdm
-
     t0 = time.perf_counter()
-    daq = Daq(cfg.daq_bits, cfg.daq_range_V)
-    seeds = np.random.SeedSequence(seed).spawn(trials)
-    sweep, params = [], []
-    for k in tqdm(range(trials), desc="dark-current trials", disable=not progress,
-                  unit="trial"):
-        s, p = _trial(k, seeds[k], cfg, daq)
-        sweep += s
-        params += p
-    sweep = pd.DataFrame(sweep)
-    params = pd.DataFrame(params)
-    by_level = _by_level(sweep)
-    param_table = _parameter_table(params)
-    summary = _summary(by_level, param_table, params, trials, seed, cfg,
-                       time.perf_counter() - t0)
-    result = {"sweep": sweep, "parameters": params, "by_level": by_level,
-              "parameter_table": param_table, "summary": summary}
+    with _single_threaded_blas():
+        result = _run(trials, seed, cfg, progress, t0)
     if out is not None:
         _write(Path(out), result, figures)
     return result
 
 
-def _by_level(sweep: pd.DataFrame) -> pd.DataFrame:
+def _single_threaded_blas():
+    """One BLAS thread during the Monte-Carlo, if threadpoolctl is installed: the calibration
+    is many small SVDs, which multithreaded OpenBLAS slows down by ~100x on a loaded machine
+    (measured: 1512 x 24 SVD 0.57 s vs 1.1 ms single-threaded on the 2-core CI machine)."""
+    try:
+        from threadpoolctl import threadpool_limits
+    except ImportError:
+        return contextlib.nullcontext()
+    return threadpool_limits(limits=1, user_api="blas")
+
+
+def _run(trials, seed, cfg, progress, t0) -> dict:
+    from tqdm import tqdm
+
+    daq = Daq(cfg.daq_bits, cfg.daq_range_V)
+    seeds = np.random.SeedSequence(seed).spawn(trials)
+    water = underwater_conditions(cfg)
+    sweep, params, under = [], [], []
+    for k in tqdm(range(trials), desc="dark-current trials", disable=not progress,
+                  unit="trial"):
+        s, p, w = _trial(k, seeds[k], cfg, daq, water)
+        sweep += s
+        params += p
+        under += w
+    sweep = pd.DataFrame(sweep)
+    params = pd.DataFrame(params)
+    under = pd.DataFrame(under)
+    by_level = _by_level(sweep, np.random.default_rng(seeds[0].spawn(1)[0]))
+    by_depth = (under.groupby(["water", "depth_m"], sort=False).median(numeric_only=True)
+                .drop(columns="trial").reset_index())
+    param_table = _parameter_table(params)
+    summary = _summary(by_level, param_table, params, trials, seed, cfg,
+                       time.perf_counter() - t0)
+    result = {"sweep": sweep, "parameters": params, "by_level": by_level,
+              "parameter_table": param_table, "underwater": under, "by_depth": by_depth,
+              "summary": summary}
+    return result
+
+
+COMBINED_VS_ARMS = (("c", "b"), ("c", "b0"), ("cw", "b"), ("cw", "b0"))
+"""Paired ratios (combined / arm) of the heading 3 sigma reported per level."""
+
+
+def _by_level(sweep: pd.DataFrame, rng: np.random.Generator, n_boot: int = 2000
+              ) -> pd.DataFrame:
+    """Medians over trials per level; paired ratios combined/arm with bootstrap 95 % CI."""
     g = sweep.groupby("illuminance_lx", sort=False)
     t = g.median(numeric_only=True).drop(columns="trial")
     t.columns = [f"{c}_median" for c in t.columns]
     t["reduction_b_vs_a_best"] = (t["heading_3sigma_a_best_deg_median"]
                                   / t["heading_3sigma_b_deg_median"])
+    levels = t.index.to_numpy()
+    n_trials = sweep.trial.nunique()
+    idx = rng.integers(0, n_trials, (n_boot, n_trials))       # trials resampled, all levels
+    for comb, arm in COMBINED_VS_ARMS:
+        wide = sweep.pivot(index="trial", columns="illuminance_lx")
+        ratio = (wide[f"heading_3sigma_{comb}_deg"] / wide[f"heading_3sigma_{arm}_deg"]
+                 )[levels].to_numpy()                          # (trials, levels)
+        boot = np.median(ratio[idx], axis=1)                   # (n_boot, levels)
+        t[f"ratio_{comb}_{arm}_median"] = np.median(ratio, axis=0)
+        t[f"ratio_{comb}_{arm}_lo95"] = np.quantile(boot, 0.025, axis=0)
+        t[f"ratio_{comb}_{arm}_hi95"] = np.quantile(boot, 0.975, axis=0)
     return t.reset_index()
 
 
@@ -190,6 +315,13 @@ def _summary(by_level, param_table, params, trials, seed, cfg, elapsed) -> dict:
     dark = params[params.parameter.str.contains("dark_")]
     low = by_level[by_level.illuminance_lx < 100.0]
     red = low["reduction_b_vs_a_best"]
+    combined = {}
+    for comb, arm in COMBINED_VS_ARMS:
+        lo = by_level[f"ratio_{comb}_{arm}_lo95"].to_numpy()
+        worse = lo > 1.0
+        combined[f"{comb}_vs_{arm}"] = {
+            "max_median_ratio": float(by_level[f"ratio_{comb}_{arm}_median"].max()),
+            "worse_beyond_noise_at_lx": E[worse].astype(float).tolist()}
     return {
         "issue": 4, "trials": trials, "seed": seed, "config": asdict(cfg),
         "package_version": __version__,
@@ -203,10 +335,16 @@ def _summary(by_level, param_table, params, trials, seed, cfg, elapsed) -> dict:
         "dark_current_fraction_within_3sigma": float(np.mean(np.abs(dark.z) < 3.0)),
         "dark_current_z_mean": float(dark.z.mean()), "dark_current_z_sd": float(dark.z.std()),
         "all_parameters_fraction_within_3sigma": float(np.mean(np.abs(params.z) < 3.0)),
+        "combined_vs_arms": combined,
+        "combined_criterion": "dark-current model where 1/I_hat > sqrt(2) sd(1/I_hat) "
+                              "(Toro-Vizcarrondo & Wallace MSE criterion), else 1/I = 0",
         "acceptance": {
             "dark_currents_within_3sigma (>= 99 % of |z| < 3 expected ~99.7 %)":
                 bool(np.mean(np.abs(dark.z) < 3.0) >= 0.99),
-            "heading_3sigma_halved_below_100lx": bool(red.min() >= 2.0)},
+            "heading_3sigma_halved_below_100lx": bool(red.min() >= 2.0),
+            "windowed_combined_never_worse_than_b_or_b0_beyond_noise":
+                not (combined["cw_vs_b"]["worse_beyond_noise_at_lx"]
+                     or combined["cw_vs_b0"]["worse_beyond_noise_at_lx"])},
         "elapsed_s": elapsed,
     }
 
@@ -216,14 +354,26 @@ def format_summary(result: dict) -> str:
     t = result["by_level"]
     s = result["summary"]
     lines = ["| illuminance [lx] | (a) 3σ pair 1-2 [deg] | (a) 3σ best pair [deg] | "
-             "(b) 3σ [deg] | (a)/(b) | (a) DoP rms | (b) DoP rms | (b) |I/E-1| |",
-             "|---|---|---|---|---|---|---|---|"]
+             "(b) 3σ [deg] | (a)/(b) | (b0) 3σ [deg] | (c) 3σ [deg] | (cw) 3σ [deg] "
+             "| (c)/(b) | (c)/(b0) | (cw)/(b) | (cw)/(b0) | (c) dark-model share "
+             "| (a) DoP rms | (b) DoP rms | (cw) DoP rms | (b) |I/E-1| |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+
+    def ratio(r, c, a):
+        d = r._asdict()
+        return (f"{d[f'ratio_{c}_{a}_median']:.2f} [{d[f'ratio_{c}_{a}_lo95']:.2f}, "
+                f"{d[f'ratio_{c}_{a}_hi95']:.2f}]")
+
     for r in t.itertuples():
         lines.append(
             f"| {r.illuminance_lx:g} | {r.heading_3sigma_a12_deg_median:.3f} "
             f"| {r.heading_3sigma_a_best_deg_median:.3f} | {r.heading_3sigma_b_deg_median:.3f} "
-            f"| {r.reduction_b_vs_a_best:.1f} | {r.dop_rms_a12_median:.4f} "
-            f"| {r.dop_rms_b_median:.4f} | {r.intensity_rel_err_b_median_median:.3f} |")
+            f"| {r.reduction_b_vs_a_best:.1f} | {r.heading_3sigma_b0_deg_median:.3f} "
+            f"| {r.heading_3sigma_c_deg_median:.3f} | {r.heading_3sigma_cw_deg_median:.3f} "
+            + "".join(f"| {ratio(r, c, a)} " for c, a in COMBINED_VS_ARMS)
+            + f"| {r.dark_model_fraction_c_median:.2f} | {r.dop_rms_a12_median:.4f} "
+            f"| {r.dop_rms_b_median:.4f} | {r.dop_rms_cw_median:.4f} "
+            f"| {r.intensity_rel_err_b_median_median:.3f} |")
     fb = s["a_fails_below_lx"]
     lines += ["", f"(a) fails below {fb:g} lx ({s['a_fail_criterion']})" if fb is not None
               else "(a) does not fail in the swept range",
@@ -233,13 +383,29 @@ def format_summary(result: dict) -> str:
               f"dark-equivalent illuminances within 3σ of injected: "
               f"{100 * s['dark_current_fraction_within_3sigma']:.1f} % of "
               f"{s['trials'] * 6} (z mean {s['dark_current_z_mean']:+.2f}, "
-              f"sd {s['dark_current_z_sd']:.2f})"]
+              f"sd {s['dark_current_z_sd']:.2f})",
+              "combined solve (c per sample, cw pooled per level) worse than an arm beyond "
+              "noise (bootstrap 95 % interval of the median paired ratio above 1) at: "
+              + "; ".join(f"{k}: {v['worse_beyond_noise_at_lx'] or 'nowhere'}"
+                          for k, v in s["combined_vs_arms"].items())]
+    if "by_depth" in result:
+        lines += ["", "Under water (zenith view, sun elevation "
+                  f"{s['config']['sun_elevation_deg']:g} deg; medians over trials):", "",
+                  "| water | depth [m] | lux equivalent [lx] | DoP | (a) best pair 3σ [deg] "
+                  "| (b) 3σ [deg] | (c) 3σ [deg] | (cw) 3σ [deg] |",
+                  "|---|---|---|---|---|---|---|---|"]
+        for r in result["by_depth"].itertuples():
+            lines.append(f"| {r.water} | {r.depth_m:.1f} | {r.illuminance_lx:.3g} "
+                         f"| {r.dop:.3g} | {r.heading_3sigma_a_best_deg:.3g} "
+                         f"| {r.heading_3sigma_b_deg:.3g} | {r.heading_3sigma_c_deg:.3g} "
+                         f"| {r.heading_3sigma_cw_deg:.3g} |")
     return "\n".join(lines)
 
 
 def _write(out: Path, result: dict, figures: bool):
     out.mkdir(parents=True, exist_ok=True)
-    for name in ("sweep", "parameters", "by_level", "parameter_table"):
+    for name in ("sweep", "parameters", "by_level", "parameter_table", "underwater",
+                 "by_depth"):
         df = result[name]
         atomic_write(out / f"{name}.csv", lambda p, df=df: df.to_csv(p, index=False,
                                                                      float_format="%.6g"))
@@ -262,6 +428,9 @@ def _plot(result: dict, out: Path):
     ax1.loglog(E, t.heading_3sigma_a12_deg_median, "s--", label="(a) 2014 model, pair 1-2")
     ax1.loglog(E, t.heading_3sigma_a_best_deg_median, "o-", label="(a) 2014 model, best pair")
     ax1.loglog(E, t.heading_3sigma_b_deg_median, "^-", label="(b) dark-current model")
+    ax1.loglog(E, t.heading_3sigma_b0_deg_median, "x:", label="(b0) same, 1/I = 0")
+    ax1.loglog(E, t.heading_3sigma_c_deg_median, "v-", label="(c) combined, per sample")
+    ax1.loglog(E, t.heading_3sigma_cw_deg_median, "D-", label="(cw) combined, pooled 1/I")
     ax1.set(xlabel="illuminance [lx]", ylabel="heading error 3σ [deg] (median of trials)")
     ax2.loglog(E, t.dop_rms_a12_median, "s--", label="(a) pair 1-2")
     ax2.loglog(E, t.dop_rms_b_median, "^-", label="(b)")
@@ -290,15 +459,34 @@ def _plot(result: dict, out: Path):
                                                                           format="png"))
     plt.close(fig)
 
+    w = result["by_depth"]
+    fig, axes = plt.subplots(1, len(w.water.unique()), figsize=(12, 4), constrained_layout=True,
+                             squeeze=False)
+    for ax, (name, g) in zip(axes[0], w.groupby("water", sort=False)):
+        for col, style, label in (("a_best", "o-", "(a) best pair"), ("b", "^-", "(b)"),
+                                  ("cw", "D-", "(cw) combined")):
+            ax.semilogy(g.depth_m, g[f"heading_3sigma_{col}_deg"], style, label=label)
+        ax2 = ax.twinx()
+        ax2.semilogy(g.depth_m, g.illuminance_lx, "k:", lw=0.8)
+        ax2.set_ylabel("lux equivalent [lx] (dotted)")
+        ax.set(title=name, xlabel="depth [m]", ylabel="heading error 3σ [deg]")
+        ax.grid(True, which="both", alpha=0.3)
+        ax.legend(fontsize=8)
+    atomic_write(out / "underwater_heading_vs_depth.png", lambda q: fig.savefig(q, dpi=120,
+                                                                                format="png"))
+    plt.close(fig)
+
 
 def _reproduce(args) -> int:
     trials = args.trials or (20 if getattr(args, "quick", False) else 100)
     out = Path(args.out or "results/dark_current")
-    result = run(trials=trials, seed=args.seed if args.seed is not None else 20210401, out=out)
+    result = run(trials=trials, seed=args.seed if args.seed is not None else DEFAULT_SEED,
+                 out=out)
     print(f"Dark current and weak light — {trials} Monte-Carlo trials")
     print(format_summary(result))
     print(f"{result['summary']['elapsed_s']:.1f} s; wrote {out}/by_level.csv, "
-          "parameter_table.csv, sweep.csv, parameters.csv, summary.json, summary.md, figures")
+          "parameter_table.csv, sweep.csv, parameters.csv, underwater.csv, by_depth.csv, "
+          "summary.json, summary.md, figures")
     return 0
 
 
