@@ -43,3 +43,32 @@ def test_one_calibration(benchmark):
     cal = benchmark.pedantic(calibrate_dark_current, args=(U, I, phi, d), rounds=3,
                              iterations=1)
     assert cal.n_levels == 7
+
+
+def _outputs_1e5():
+    from calibration.dark_current import ChannelModel
+    rng = np.random.default_rng(2)
+    p = PhotodiodeChannels.draw(rng)
+    n = 100_000
+    I = 10.0 ** rng.uniform(0, 4, n)
+    U, _ = p.sample(I, rng.uniform(-90, 90, n), 0.6, rng)
+    return U, ChannelModel.from_photodiodes(p)
+
+
+@pytest.mark.benchmark(group="dark-current solve")
+def test_solve_opponent_1e5_baseline(benchmark):
+    """Baseline: the patent's x = A^-1 b on 1e5 samples."""
+    from calibration.dark_current import solve_opponent
+    U, model = _outputs_1e5()
+    benchmark.extra_info.update(items=U.shape[0], baseline=True)
+    benchmark.pedantic(solve_opponent, args=(U, model), rounds=3, iterations=1)
+
+
+@pytest.mark.benchmark(group="dark-current solve")
+def test_solve_combined_1e5(benchmark):
+    """The combined solve on the same 1e5 samples (baseline: x = A^-1 b above)."""
+    from calibration.dark_current import solve_combined
+    U, model = _outputs_1e5()
+    benchmark.extra_info.update(items=U.shape[0], baseline="test_solve_opponent_1e5_baseline")
+    sol = benchmark.pedantic(solve_combined, args=(U, model, 4e-4), rounds=3, iterations=1)
+    assert sol.phi_deg.shape == (U.shape[0],)
