@@ -8,10 +8,19 @@ inside their command functions so that ``skysim --help`` stays fast.
 
 from __future__ import annotations
 
-import argparse
-import importlib
-import pkgutil
-import sys
+import os
+
+# The estimators solve many small (batched 6x6 .. 30x30) systems: a multithreaded BLAS only
+# adds thread hand-offs (5-100x slower on a busy 2-core machine, measured in the dark-current
+# calibration). One BLAS thread per process; sweeps parallelise over processes instead.
+# Set before numpy is first imported; a user's own setting wins.
+for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
+
+import argparse  # noqa: E402
+import importlib  # noqa: E402
+import pkgutil  # noqa: E402
+import sys  # noqa: E402
 
 import experiments
 
