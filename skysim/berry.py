@@ -1,0 +1,148 @@
+"""Berry, Dennis & Lee (2004): the clear-sky polarization pattern from its four singularities.
+
+Single Rayleigh scattering has two unstable index +1 singularities (zero polarization) at the
+sun and the anti-sun. Multiple scattering splits each into two index +1/2 singularities on the
+solar meridian: Babinet (above the sun) and Brewster (below it), Arago (above the anti-sun) and
+the fourth point (below the anti-sun, under the horizon for a ground observer). Berry et al.
+[1]_ describe the whole pattern by one complex function of the stereographic projection of
+the sky,
+
+``zeta = tan(theta / 2) exp(i beta)``     (theta: zenith angle; beta: plane angle of the
+direction, here ``beta = 90 deg - azimuth``, so the plane is the sky seen from above with
+x east and y north),
+
+``w(zeta) = -4 (zeta - zeta_Bab)(zeta - zeta_Bre)(zeta - zeta_Ara)(zeta - zeta_4)
+/ ((1 + |zeta|^2)^2 |zeta_Bab - zeta_4| |zeta_Bre - zeta_Ara|)``       ([1]_, eqs. (3.1)-(3.3))
+
+with the singularities a distance ``delta / 2`` either side of the sun along its vertical and
+the anti-sun pair antipodal to them (``zeta_Ara = -1 / conj(zeta_Bre)``,
+``zeta_4 = -1 / conj(zeta_Bab)``). The polarization direction makes the plane angle
+``alpha = arg(w exp(-2 i beta_sun)) / 2`` (the factor makes the pattern turn with the sun);
+the degree of polarization is ``d_max |w| / (2 - |w|)``, which for ``delta = 0`` is exactly the
+Rayleigh ``d_max sin^2 g / (1 + cos^2 g)`` since then ``|w| = sin^2 g``.
+
+Left out: the horizon depolarization factor of [1]_, sect. 4 (the model's DoP is Rayleigh-like
+away from the singularities); the radiance ``I`` is the single-scattering relative radiance
+``(3/4)(1 + cos^2 g)`` of :mod:`skysim.rayleigh` (the model describes polarization only).
+
+References
+----------
+.. [1] M. V. Berry, M. R. Dennis, R. L. Lee Jr, "Polarization singularities in the clear sky",
+   New J. Phys. 6:162 (2004), doi:10.1088/1367-2630/6/1/162.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from . import rayleigh
+from .geometry import wrap_axial_deg
+from .sky import Sky
+from .validation import check_dop, check_in_range
+
+__all__ = ["stereographic", "singularities", "berry_w", "berry_polarization", "BerrySky"]
+
+
+def stereographic(elevation_deg, azimuth_deg) -> np.ndarray:
+    """``zeta = tan(theta/2) exp(i (90 deg - azimuth))`` for directions (upper hemisphere in the
+    unit disc, zenith at 0; directions below the horizon map outside it)."""
+    theta = np.radians(90.0 - np.asarray(elevation_deg, dtype=float))
+    beta = np.radians(90.0 - np.asarray(azimuth_deg, dtype=float))
+    return np.tan(theta / 2.0) * np.exp(1j * beta)
+
+
+def singularities(sun_elevation_deg, sun_azimuth_deg, delta_deg) -> dict:
+    """Stereographic positions of the Babinet, Brewster, Arago and fourth points ([1]_, sect. 3).
+
+    Babinet and Brewster lie ``delta/2`` above and below the sun on its vertical; Arago and the
+    fourth point are the antipodes of Brewster and Babinet.
+    """
+    sun_theta = 90.0 - np.asarray(sun_elevation_deg, dtype=float)
+    beta = np.exp(1j * np.radians(90.0 - np.asarray(sun_azimuth_deg, dtype=float)))
+    half = 0.5 * np.asarray(delta_deg, dtype=float)
+    bab = np.tan(np.radians(sun_theta - half) / 2.0) * beta
+    bre = np.tan(np.radians(sun_theta + half) / 2.0) * beta
+    return {"babinet": bab, "brewster": bre, "arago": -1.0 / np.conj(bre),
+            "fourth": -1.0 / np.conj(bab)}
+
+
+def berry_w(zeta, sun_elevation_deg, sun_azimuth_deg, delta_deg) -> np.ndarray:
+    """Berry et al.'s complex polarization function ``w(zeta)`` ([1]_, eqs. (3.1)-(3.3))."""
+    s = singularities(sun_elevation_deg, sun_azimuth_deg, delta_deg)
+    num = -4.0 * ((zeta - s["babinet"]) * (zeta - s["brewster"]) * (zeta - s["arago"])
+                  * (zeta - s["fourth"]))
+    den = ((1.0 + np.abs(zeta) ** 2) ** 2 * np.abs(s["babinet"] - s["fourth"])
+           * np.abs(s["brewster"] - s["arago"]))
+    return num / den
+
+
+def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                       sun_azimuth_deg, delta_deg, dmax=1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Degree of polarization and AoP [deg] of the Berry-Dennis-Lee sky.
+
+    Parameters
+    ----------
+    view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg : array-like
+        Directions [deg] (azimuth clockwise from north); broadcast.
+    delta_deg : float or array-like
+        Angular separation [deg] of the two singularities near the sun (and of the two near
+        the anti-sun); 0 gives the Rayleigh sky.
+    dmax : float
+        Maximum degree of polarization.
+
+    Returns
+    -------
+    dop : ndarray, in [0, dmax]
+    aop_deg : ndarray, in [-90, 90)
+        From the local meridian (towards the zenith) positive towards increasing azimuth
+        (``docs/conventions.md``). The meridian is at plane angle ``270 deg - azimuth`` in the
+        stereographic plane (pointing to the zenith) and ``e_az`` 90 deg counter-clockwise
+        from it (the map is conformal and keeps the orientation seen from above).
+    """
+    zeta = stereographic(view_elevation_deg, view_azimuth_deg)
+    w = berry_w(zeta, sun_elevation_deg, sun_azimuth_deg, delta_deg)
+    beta_sun = np.radians(90.0 - np.asarray(sun_azimuth_deg, dtype=float))
+    alpha = 0.5 * np.degrees(np.angle(w * np.exp(-2j * beta_sun)))
+    meridian = 270.0 - np.asarray(view_azimuth_deg, dtype=float)
+    # at the zenith the "meridian" is that of the stated view azimuth, as everywhere in skysim
+    aop = wrap_axial_deg(alpha - meridian)
+    m = np.clip(np.abs(w), 0.0, 1.0)
+    return dmax * m / (2.0 - m), aop
+
+
+class BerrySky(Sky):
+    """The Berry, Dennis & Lee (2004) singularity model as a :class:`~skysim.sky.Sky`.
+
+    Parameters
+    ----------
+    delta_deg : float
+        Separation [deg] of the singularity pairs, in [0, 90); the default 40 deg puts each
+        neutral point 20 deg from the sun or anti-sun, typical of observed clear skies
+        (Babinet and Arago ~15-25 deg; [1]_, sect. 5). :func:`skysim.neutral_points.neutral_points`
+        gives the multiple-scattering values for a given sun and optical thickness.
+    dmax : float
+        Maximum degree of polarization, in (0, 1].
+
+    Notes
+    -----
+    ``I`` is the relative single-scattering radiance ``(3/4)(1 + cos^2 g)``.
+    """
+
+    name = "berry"
+
+    def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0):
+        self.delta_deg = float(check_in_range("delta_deg", delta_deg, 0.0, 90.0, high_open=True,
+                                              hint="neutral points lie 0-45 deg from the sun"))
+        if dmax != 1.0:
+            check_dop("dmax", dmax)
+        self.dmax = float(dmax)
+
+    def _stokes(self, vel, vaz, sel, saz):
+        dop, aop = berry_polarization(vel, vaz, sel, saz, self.delta_deg, self.dmax)
+        intensity = rayleigh.relative_radiance(rayleigh.scattering_angle_deg(vel, vaz, sel, saz))
+        chi = np.radians(aop)
+        return intensity, intensity * dop * np.cos(2 * chi), intensity * dop * np.sin(2 * chi)
+
+    def describe(self) -> dict:
+        return {"model": self.name, "delta_deg": self.delta_deg, "dmax": self.dmax,
+                "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}

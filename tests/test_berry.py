@@ -1,0 +1,78 @@
+"""Berry, Dennis & Lee (2004) singularity sky: Rayleigh limit, singularities, index 1/2."""
+
+import numpy as np
+import pytest
+from hypothesis import given, settings
+from hypothesis import strategies as st
+
+from skysim import rayleigh
+from skysim.berry import BerrySky, berry_polarization, singularities, stereographic
+from skysim.exceptions import InvalidParameterError
+from skysim.geometry import wrap_axial_deg
+from skysim.sky import make_sky
+
+
+@settings(max_examples=60, deadline=None)
+@given(el=st.floats(0, 90), az=st.floats(0, 360), sel=st.floats(0.5, 89.5),
+       saz=st.floats(0, 360), dmax=st.floats(0.1, 1.0))
+def test_delta_zero_is_the_rayleigh_sky(el, az, sel, saz, dmax):
+    """[1] sect. 3: with coincident singularities w reduces to the Rayleigh pattern,
+    |w| = sin^2 g, so DoP = dmax sin^2 g/(1 + cos^2 g) and the AoP is the closed form of
+    skysim.rayleigh (checks the stereographic frame and the AoP reference/sense)."""
+    g = rayleigh.scattering_angle_deg(el, az, sel, saz)
+    dop, aop = berry_polarization(el, az, sel, saz, 0.0, dmax)
+    assert dop == pytest.approx(float(rayleigh.degree_of_polarization(g, dmax)), abs=1e-9)
+    if 1.0 < g < 179.0:  # the AoP is undefined at the sun and anti-sun
+        ref = rayleigh.angle_of_polarization_deg(el, az, sel, saz)
+        assert abs(float(wrap_axial_deg(aop - ref))) < 1e-6
+
+
+def test_neutral_points_where_placed():
+    """DoP = 0 at Babinet and Brewster (delta/2 above and below the sun) and at Arago (the
+    antipode of Brewster), not at the sun any more."""
+    sel, saz, delta = 10.0, 120.0, 40.0
+    # Babinet, Brewster (below the horizon here), Arago: antisun at -10 deg, Arago 20 above
+    pts = [(30.0, saz), (-10.0, saz), (10.0, saz + 180.0)]
+    dop, _ = berry_polarization(*np.array(pts).T, sel, saz, delta)
+    np.testing.assert_allclose(dop, 0.0, atol=1e-12)
+    sun_dop, _ = berry_polarization(sel, saz, sel, saz, delta)
+    assert sun_dop > 0.05
+    s = singularities(sel, saz, delta)
+    assert np.isclose(s["arago"], stereographic(10.0, saz + 180.0))
+    assert np.isclose(s["brewster"], stereographic(-10.0, saz))
+
+
+def test_singularities_have_index_one_half():
+    """[1]: each neutral point is an index +1/2 singularity: the AoP turns by +-180 deg
+    (not 360 as around the Rayleigh sun) on a small loop around it."""
+    sel, saz, delta = 30.0, 0.0, 40.0
+    t = np.linspace(0, 2 * np.pi, 721)
+    el = 50.0 + 2.0 * np.sin(t)
+    az = np.degrees(2.0 * np.cos(t) / np.cos(np.radians(el)))
+    # AoP relative to a fixed (north-pointing) axis near the point: meridian basis rotates
+    # negligibly on this loop (az within a few degrees)
+    _, aop = berry_polarization(el, az, sel, saz, delta)
+    turn = np.sum(wrap_axial_deg(np.diff(aop)))
+    assert abs(abs(turn) - 180.0) < 5.0
+    _, aop0 = berry_polarization(el, az, 50.0, 0.0, 0.0)  # Rayleigh: sun inside the loop
+    assert abs(abs(np.sum(wrap_axial_deg(np.diff(aop0)))) - 360.0) < 5.0
+
+
+def test_berry_sky_interface_and_bad_input():
+    sky = make_sky("berry", delta_deg=30.0, dmax=0.7)
+    assert isinstance(sky, BerrySky)
+    f = sky.field(np.array([30.0, 60.0]), np.array([0.0, 200.0]), 20.0, 90.0)
+    assert np.all((f.dop >= 0) & (f.dop <= 0.7))
+    assert sky.describe() == {"model": "berry", "delta_deg": 30.0, "dmax": 0.7,
+                              "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}
+    with pytest.raises(InvalidParameterError, match="delta_deg"):
+        BerrySky(delta_deg=-1.0)
+    with pytest.raises(InvalidParameterError, match="dmax"):
+        BerrySky(dmax=1.5)
+
+
+def test_zenith_e_vector_perpendicular_to_solar_meridian():
+    sky = BerrySky(40.0)
+    f = sky.field(90.0, np.array([0.0, 45.0, 300.0]), 25.0, 70.0)
+    sun_h = np.array([np.sin(np.radians(70.0)), np.cos(np.radians(70.0)), 0.0])
+    np.testing.assert_allclose(f.e_vector @ sun_h, 0.0, atol=1e-9)

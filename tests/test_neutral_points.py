@@ -1,0 +1,71 @@
+"""Neutral points of the multiple-scattering sky against the Natraj et al. (2009) tables.
+
+Independent reference: the zero of the tabulated Q/I along the solar meridian (phi = 0 towards
+the sun, 180 away), located by a cubic spline in elevation through the table's 16 view cosines.
+The table grid is 3-12 deg apart in elevation; the spline zero moves by < 0.05 deg when the
+spline is replaced by a quadratic one, so 0.1 deg is the tolerance. The cases share the engine
+runs of tests/test_multiple.py (cached per process).
+"""
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.interpolate import CubicSpline
+from scipy.optimize import brentq
+
+from skysim.exceptions import InvalidParameterError
+from skysim.neutral_points import NeutralPoints, neutral_points
+
+
+def table_zeros(reference_dir, tau, albedo, mu0, phi):
+    d = pd.read_csv(reference_dir / "natraj2009" / "natraj2009_subset.csv.gz")
+    s = d[(d.field == "transmitted") & (d.tau == tau) & (d.albedo == albedo) & (d.mu0 == mu0)
+          & (d.phi == phi)].sort_values("mu")
+    el = np.degrees(np.arcsin(s.mu.to_numpy()))
+    spline = CubicSpline(el, s.Q.to_numpy() / s.I.to_numpy())
+    x = np.linspace(el[0], el[-1], 4001)
+    v = spline(x)
+    idx = np.flatnonzero(np.sign(v[:-1]) * np.sign(v[1:]) < 0)
+    return [brentq(spline, x[i], x[i + 1]) for i in idx]
+
+
+@pytest.mark.parametrize("tau, albedo, mu0", [(0.25, 0.0, 0.4), (1.0, 0.25, 0.1),
+                                              (0.02, 0.0, 0.4)])
+def test_neutral_points_match_the_tables(reference_dir, tau, albedo, mu0):
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    sun = float(np.degrees(np.arcsin(mu0)))
+    n = neutral_points(sun, tau, albedo)
+    toward = table_zeros(reference_dir, tau, albedo, mu0, 0.0)
+    away = table_zeros(reference_dir, tau, albedo, mu0, 180.0)
+    ours_toward = [e for e in (n.babinet_elevation_deg, n.brewster_elevation_deg)
+                   if np.isfinite(e) and e >= 1.15]  # the table starts at mu = 0.02 (1.15 deg)
+    np.testing.assert_allclose(sorted(ours_toward), sorted(toward), atol=0.1)
+    ours_away = [n.arago_elevation_deg] if n.arago_visible else []
+    np.testing.assert_allclose(ours_away, away, atol=0.1)
+    assert n.babinet_visible  # always above the sun for a sun below the zenith
+
+
+def test_neutral_points_move_away_from_the_sun_with_optical_thickness():
+    """More multiple scattering -> more negative polarization -> neutral points farther from
+    the sun (Coulson 1988, ch. 5): Babinet 8.8 deg at tau = 0.02, 19.5 deg at tau = 0.25 for
+    mu0 = 0.4 (table zeros: 32.35 and 43.11 deg elevation)."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    sun = float(np.degrees(np.arcsin(0.4)))
+    thin, thick = neutral_points(sun, 0.02), neutral_points(sun, 0.25)
+    assert 0 < thin.babinet_distance_deg < thick.babinet_distance_deg
+    assert 0 < thin.brewster_distance_deg < thick.brewster_distance_deg
+    assert not thick.arago_visible and thick.marks(100.0).keys() == {"Babinet", "Brewster"}
+    d = thick.to_dict()
+    assert d["babinet_distance_deg"] == pytest.approx(d["babinet_elevation_deg"] - sun)
+
+
+@pytest.mark.parametrize("sun", [0.0, -5.0, 90.0, float("nan")])
+def test_bad_sun_elevation(sun):
+    with pytest.raises(InvalidParameterError):
+        neutral_points(sun, 0.25)
+
+
+def test_invisible_points_are_flagged_not_guessed():
+    n = NeutralPoints(5.0, 0.25, 0.0, 28.0, float("nan"), 20.0)
+    assert n.babinet_visible and n.arago_visible and not n.brewster_visible
+    assert set(n.marks(0.0)) == {"Babinet", "Arago"} and n.marks(0.0)["Arago"] == (20.0, 180.0)
