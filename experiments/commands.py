@@ -56,8 +56,9 @@ def _sky(args) -> int:
         el, az = d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
     else:
         el, az = sky_grid(args.grid_step)
-    params = {k: getattr(args, k) for k in ("dmax", "tau", "albedo", "wavelength_nm")
-              if getattr(args, k) is not None}
+    params = {k: getattr(args, k) for k in ("dmax", "tau", "albedo", "wavelength_nm",
+                                              "delta_deg", "pressure_hPa")
+              if getattr(args, k, None) is not None}
     sky = make_sky(args.model, **params)
     chunk = 100_000
     parts = []
@@ -81,9 +82,15 @@ def _sky(args) -> int:
         print(f"wrote {len(table)} directions to {out}")
     if args.plot:
         from .polar_maps import plot_polar_maps
-        plot_polar_maps(el, az, {"DoP": (table.dop.to_numpy(), "viridis", (0, 1)),
-                                 "AoP [deg]": (table.aop_deg.to_numpy(), "twilight", (-90, 90))},
-                        args.plot, sun=(sun_el, sun_az), title=f"{args.model} sky")
+        maps = {"DoP": (table.dop.to_numpy(), "viridis", (0, 1)),
+                "AoP [deg]": (table.aop_deg.to_numpy(), "twilight", (-90, 90))}
+        marks = None
+        if args.model == "multiple":  # radiance (flux pi) and the neutral points
+            from skysim.neutral_points import neutral_points_from_modes
+            maps["I (flux pi)"] = (table.I.to_numpy(), "magma", None)
+            marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
+        plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
+                        title=f"{args.model} sky")
         print(f"wrote {args.plot}")
     if not args.out and not args.plot:
         print(table.describe().to_string())
@@ -166,8 +173,13 @@ def register(sub) -> None:
     p.add_argument("--tau", type=float, help="multiple: Rayleigh optical thickness")
     p.add_argument("--albedo", type=float, help="multiple: Lambertian ground albedo")
     p.add_argument("--wavelength-nm", type=float, help="multiple: wavelength (derives tau)")
+    p.add_argument("--pressure-hPa", type=float, dest="pressure_hPa",
+                   help="multiple: surface pressure with --wavelength-nm (default 1013.25)")
+    p.add_argument("--delta-deg", type=float,
+                   help="berry: separation of the neutral-point pairs (default 40)")
     p.add_argument("--out", help="output table (.csv or .parquet) with a JSON sidecar")
-    p.add_argument("--plot", help="PNG with polar maps of DoP and AoP")
+    p.add_argument("--plot", help="PNG with polar maps of DoP and AoP (multiple: also I and "
+                   "the neutral points)")
     p.set_defaults(func=_sky)
 
     s = sub.add_parser("sample", help="simulate a three-pair sensor sweep (measurement table)",
