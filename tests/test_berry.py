@@ -76,3 +76,14 @@ def test_zenith_e_vector_perpendicular_to_solar_meridian():
     f = sky.field(90.0, np.array([0.0, 45.0, 300.0]), 25.0, 70.0)
     sun_h = np.array([np.sin(np.radians(70.0)), np.cos(np.radians(70.0)), 0.0])
     np.testing.assert_allclose(f.e_vector @ sun_h, 0.0, atol=1e-9)
+
+
+def test_cli_sky_berry(tmp_path):
+    from experiments.cli import main
+    out, png = tmp_path / "berry.parquet", tmp_path / "berry.png"
+    assert main(["sky", "--model", "berry", "--delta-deg", "30", "--dmax", "0.8",
+                 "--sun-elevation", "20", "--sun-azimuth", "90", "--grid-step", "10",
+                 "--out", str(out), "--plot", str(png)]) == 0
+    import pandas as pd
+    t = pd.read_parquet(out)
+    assert len(t) == 10 * 36 and t.dop.max() <= 0.8 + 1e-12 and png.stat().st_size > 10_000

@@ -242,3 +242,30 @@ def test_issue_zenith_dop_numbers(reference_dir):
                     .field(90.0, 0.0, MU0_04_ELEVATION, 0.0).dop)
         assert dop == pytest.approx(quoted, abs=5e-3)          # the issue's two decimals
         assert dop == pytest.approx(np.hypot(row.Q, row.U) / row.I, abs=2e-3)  # the table
+
+
+def test_cli_sky_multiple_writes_table_normalised_stokes(tmp_path, reference_dir):
+    """`skysim sky --model multiple`: same columns as the foundation's; the zenith row equals
+    the table's (tau 0.25, albedo 0.25, mu0 0.4) within 2e-3, with the Q sign converted."""
+    needs_engine()
+    import json
+
+    from experiments.cli import main
+    dirs = tmp_path / "dirs.csv"
+    dirs.write_text("elevation_deg,azimuth_deg\n90,0\n30,120\n0,250\n")
+    out = tmp_path / "sky.csv"
+    assert main(["sky", "--model", "multiple", "--tau", "0.25", "--albedo", "0.25",
+                 "--sun-elevation", repr(MU0_04_ELEVATION), "--sun-azimuth", "0",
+                 "--directions", str(dirs), "--out", str(out)]) == 0
+    t = pd.read_csv(out)
+    assert list(t.columns) == ["elevation_deg", "azimuth_deg", "dop", "aop_deg", "I", "Q", "U"]
+    side = json.loads(out.with_suffix(".json").read_text())
+    assert side["sky"]["model"] == "multiple" and "flux pi" in side["sky"]["I_normalisation"]
+    d = natraj(reference_dir)
+    row = d[(d.tau == 0.25) & (d.albedo == 0.25) & (d.mu0 == 0.4) & (d.mu == 1.0)
+            & (d.phi == 0.0)].iloc[0]
+    assert t.I[0] == pytest.approx(row.I, rel=2e-3)
+    assert t.Q[0] == pytest.approx(-row.Q, abs=2e-3 * row.I)
+    assert t.aop_deg[0] == pytest.approx(-90.0)  # E perpendicular to the solar meridian
+    assert main(["sky", "--model", "multiple", "--tau", "-1", "--sun-elevation", "20",
+                 "--sun-azimuth", "0", "--directions", str(dirs)]) == 2
