@@ -46,8 +46,8 @@ from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData, photodiode
 from sensor.tables import read_table_and_sidecar
 
 from .effects.multiple_scattering import EffectUnavailableError
-from .effects import (BASE_NAMES, EFFECT_NAMES, Context, Effect, all_effects, base_jacobian,
-                      geometry, outputs)
+from .effects import (BASE_NAMES, EFFECT_NAMES, Context, Effect, all_effects, geometry,
+                      jacobians, outputs)
 from .exceptions import CalibrationError, RankDeficientError, TooFewSamplesError
 from .solve import solve_pair
 
@@ -364,8 +364,12 @@ def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=Non
         J = np.zeros((r0.size, theta.size))
         b, p = split(theta)
         m = int(valid.sum())
-        J[:m, :10] = base_jacobian(ctx, geo[0], geo[1], b, effect, p)[valid] / sigma_V
+        Jb, Je = jacobians(ctx, geo[0], geo[1], b, effect, p)
+        J[:m, :10] = Jb[valid] / sigma_V
         J[m:, :] = np.diag(1.0 / prior_sd)
+        if Je is not None:
+            J[:m, 10:] = Je[valid] / sigma_V
+            return J
         for j in range(10, theta.size):  # effect columns by forward differences
             t = theta.copy()
             t[j] += steps[j]
@@ -418,7 +422,7 @@ def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=Non
         np.r_[b0, effect.clip(s)] for s in ([effect0] if effect0 is not None
                                             else effect.starts())]
     if len(starts) > 1:  # a few iterations from each start, then continue the best
-        trials = [run(s, 4) for s in starts]
+        trials = [run(s, 2) for s in starts]
         best = min(trials, key=lambda t: t[1])[0]
     else:
         best = starts[0]
@@ -602,6 +606,13 @@ def decide(candidates, gap_before, noise_floor, thresholds: Thresholds = Thresho
                            f"{noise_floor:.3g})")
 
 
+def _fold_params(fits, effect) -> dict:
+    P = np.array([f.params for f in fits])
+    se = P.std(axis=0, ddof=1) / np.sqrt(len(P)) if len(P) > 1 else np.full(P.shape[1], np.nan)
+    return {n: {"value": float(v), "se": float(s), "unit": u}
+            for n, v, s, u in zip(effect.parameter_names, P.mean(axis=0), se, effect.units)}
+
+
 def _bootstrap_shrink(res0, res1, block, rng, n_boot=200):
     ids = np.unique(block)
     ss0 = np.array([np.nansum(res0[block == b] ** 2) for b in ids])
@@ -656,19 +667,24 @@ def diagnose(data: DiagnosisData, effects=EFFECT_NAMES, *, n_folds: int = 3, see
     rows = []
     for e in cands:
         Gc = _rms(res[e.name])
-        full = fit_model(ctx, data.U, data.valid, e, base0=full_base.base,
-                         effect0=np.mean([f.params for f in fold_fits[e.name]], axis=0),
-                         sigma_V=sigma)
         score = N * np.log(Gc ** 2 / G0 ** 2) + e.k * np.log(n_cal)
         excess0 = max(G0 ** 2 - floor ** 2, 0.0)
         explained = bool(Gc <= floor * (1 + thresholds.explained_margin)
                          or Gc ** 2 - floor ** 2 <= thresholds.residual_excess * excess0)
         rows.append({"effect": e.name, "gap_after": 1e3 * Gc, "shrink": 1 - Gc / G0,
                      "score": float(score), "k": e.k, "explained": explained,
-                     "converged": bool(full.converged and all(f.converged
-                                                              for f in fold_fits[e.name])),
-                     "params": full.effect_params(e)})
+                     "converged": bool(all(f.converged for f in fold_fits[e.name])),
+                     "params": _fold_params(fold_fits[e.name], e),
+                     "params_from": "mean over calibration folds (se: fold spread)"})
     rows.sort(key=lambda r: r["score"])
+    if rows:  # the best candidate's parameters from one fit on all data, with covariance
+        e = next(c for c in cands if c.name == rows[0]["effect"])
+        full = fit_model(ctx, data.U, data.valid, e, base0=full_base.base,
+                         effect0=np.mean([f.params for f in fold_fits[e.name]], axis=0),
+                         sigma_V=sigma)
+        rows[0].update(params=full.effect_params(e), converged=bool(full.converged
+                                                                     and rows[0]["converged"]),
+                       params_from="all data (se: Gauss-Newton covariance)")
     rows += [{"effect": name, "available": False, "error": msg}
              for name, msg in unavailable.items()]
     effect, reason = decide(rows, 1e3 * G0, 1e3 * floor, thresholds)

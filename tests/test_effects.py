@@ -194,3 +194,20 @@ def test_multiple_scattering_needs_the_multiple_sky_or_says_so(ctx):
         return
     out = E.forward(ctx, BASE, eff, [0.1, 0.0])
     assert out.shape == (ctx.n, 3) and np.isfinite(out).all()
+
+
+@pytest.mark.parametrize("name", OUTPUT_EFFECTS)
+def test_analytic_effect_jacobian_matches_finite_differences(ctx, name):
+    eff = E.get_effect(name)
+    p = eff.draw(np.random.default_rng(6))
+    phi, shape = E.geometry(ctx)
+    _, Je = E.jacobians(ctx, phi, shape, BASE, eff, p)
+    assert Je.shape == (ctx.n, 3, eff.k)
+    for j in range(eff.k):
+        h = eff.fd_step[j] * 1e-2
+        up, dn = p.copy(), p.copy()
+        up[j] += h
+        dn[j] -= h
+        fd = (E.forward(ctx, BASE, eff, up) - E.forward(ctx, BASE, eff, dn)) / (2 * h)
+        # central differences with steps 1e-2 of the fit's own: relative error ~1e-7
+        np.testing.assert_allclose(Je[:, :, j], fd, rtol=1e-5, atol=1e-9)

@@ -52,7 +52,8 @@ from skysim.geometry import direction_vector, elevation_azimuth, wrap_axial_deg
 from skysim.sun import Site, as_utc_index, sun_vector
 
 __all__ = ["EFFECT_NAMES", "BASE_NAMES", "UnknownEffectError", "Effect", "SunTrack", "Context",
-           "get_effect", "all_effects", "geometry", "outputs", "base_jacobian", "forward",
+           "get_effect", "all_effects", "geometry", "outputs", "jacobians", "base_jacobian",
+           "forward",
            "base_vector"]
 
 EFFECT_NAMES = ("dark_current", "sun_motion", "clock_offset", "tilt", "turntable_periodic",
@@ -242,6 +243,15 @@ class Effect:
         ratios, ``gain_factor`` (n, 1 or 3) and ``offset_V`` (n, 3) [V] of the amplifiers."""
         return {}
 
+    def output_jacobian(self, ctx: Context, p, parts: dict):
+        """Analytic ``dU/dp`` (n, 3, k) of an output-stage effect, or None (finite differences).
+
+        ``parts`` holds the per-sample quantities of :func:`jacobians`: ``A``, ``B`` (numerator
+        and denominator terms, (n, 3)), ``dc1``, ``dc2`` (``d cos 2x``), ``G_ln10`` (gain over
+        ln 10), ``gain`` (nominal) and ``log_ratio`` (the bracket of the module equation).
+        """
+        return None
+
     def describe(self, p) -> dict:
         return dict(zip(self.parameter_names, np.asarray(p, float).tolist()))
 
@@ -320,9 +330,9 @@ def outputs(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None
                               offset_V=terms.get("offset_V", 0.0))
 
 
-def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None,
-                  p=None, gain: float = GAIN) -> np.ndarray:
-    """Analytic derivatives of :func:`outputs` with respect to the base parameters, (n, 3, 10).
+def jacobians(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None,
+              p=None, gain: float = GAIN):
+    """Analytic derivatives of :func:`outputs`: base (n, 3, 10) and effect (n, 3, k) or None.
 
     With ``A = 1 + eta_1 d cos 2x_1 + delta_1``, ``B = 1 - eta_2 d cos 2x_2 + delta_2`` and
     ``G`` the gain (module docstring)::
@@ -334,6 +344,9 @@ def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None 
 
     (eq. 12 of Yang et al. 2014 generalised; reduces to :mod:`calibration.model` when
     ``eta = 1``, ``delta = 0``). Columns for the mounting errors of other channels are zero.
+    Output-stage effects supply their columns through :meth:`Effect.output_jacobian` from the
+    same intermediate quantities; the effect block is None when they do not (a fit then uses
+    finite differences).
     """
     base = np.asarray(base, float)
     terms = {} if effect is None else effect.channel_terms(ctx, p)
@@ -342,22 +355,36 @@ def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None 
     phi = np.asarray(phi_deg, float)[:, None]
     x1 = np.radians(2.0 * (phi + _A + base[0:6:2]))
     x2 = np.radians(2.0 * (phi + _A + base[1:6:2]))
-    _, eta = terms.get("extinction", (np.ones(6), np.ones(6)))
+    kfac, eta = terms.get("extinction", (np.ones(6), np.ones(6)))
     eta = np.broadcast_to(eta, (1, 6)) if np.ndim(eta) == 1 else eta
-    delta = np.broadcast_to(terms.get("dark_ratio", np.zeros((1, 6))), (len(phi), 6))
-    A = 1.0 + eta[:, 0::2] * d * np.cos(x1) + delta[:, 0::2]
-    B = 1.0 - eta[:, 1::2] * d * np.cos(x2) + delta[:, 1::2]
-    G = gain * np.broadcast_to(terms.get("gain_factor", 1.0), (len(phi), 3))
+    n = len(phi)
+    delta = np.broadcast_to(terms.get("dark_ratio", np.zeros((1, 6))), (n, 6))
+    dc1, dc2 = d * np.cos(x1), d * np.cos(x2)
+    A = 1.0 + eta[:, 0::2] * dc1 + delta[:, 0::2]
+    B = 1.0 - eta[:, 1::2] * dc2 + delta[:, 1::2]
+    G = gain * np.broadcast_to(terms.get("gain_factor", 1.0), (n, 3))
     k = G / np.log(10.0)
-    J = np.zeros((len(phi), 3, 10))
+    J = np.zeros((n, 3, 10))
     rad = np.pi / 180.0
-    for c in range(3):
-        J[:, c, 2 * c] = -k[:, c] * 2 * eta[:, 2 * c] * d[:, 0] * np.sin(x1[:, c]) / A[:, c] * rad
-        J[:, c, 2 * c + 1] = (-k[:, c] * 2 * eta[:, 2 * c + 1] * d[:, 0] * np.sin(x2[:, c])
-                              / B[:, c] * rad)
-        J[:, c, 6 + c] = G[:, c]
+    ch = np.arange(3)
+    J[:, ch, 2 * ch] = -k * 2 * eta[:, 0::2] * d * np.sin(x1) / A * rad
+    J[:, ch, 2 * ch + 1] = -k * 2 * eta[:, 1::2] * d * np.sin(x2) / B * rad
+    J[:, ch, 6 + ch] = G
     J[:, :, 9] = k * shape * (eta[:, 0::2] * np.cos(x1) / A + eta[:, 1::2] * np.cos(x2) / B)
-    return J
+    Je = None
+    if effect is not None:
+        kfac = np.reshape(kfac, (-1, 6))
+        log_ratio = (np.log10(kfac[:, 0::2] * A / (kfac[:, 1::2] * B)) + base[6:9])
+        parts = {"A": A, "B": B, "dc1": dc1, "dc2": dc2, "G_ln10": k, "gain": gain,
+                 "log_ratio": log_ratio}
+        Je = effect.output_jacobian(ctx, p, parts)
+    return J, Je
+
+
+def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None,
+                  p=None, gain: float = GAIN) -> np.ndarray:
+    """Base block (n, 3, 10) of :func:`jacobians`."""
+    return jacobians(ctx, phi_deg, dop_shape, base, effect, p, gain)[0]
 
 
 def forward(ctx: Context, base, effect: Effect | None = None, p=None,

@@ -33,7 +33,7 @@ class ClockOffset(Effect):
                                           "half a clock error of +-U(120, 1800) s"}
 
     def starts(self):
-        return [np.array([x]) for x in (-3600.0, -600.0, 600.0, 3600.0)]
+        return [np.array([x]) for x in (-3600.0, 0.0, 3600.0)]
 
     def draw(self, rng):
         sign = rng.choice([-1.0, 1.0])

@@ -85,4 +85,15 @@ class DarkCurrent(Effect):
         return {"dark_ratio": ratio * np.clip(np.asarray(p, float), 0.0, None)[None, :]}
 
 
+    def output_jacobian(self, ctx, p, parts):
+        # dU/d delta_num = (G/ln10) / A, dU/d delta_den = -(G/ln10) / B; delta = rho E_ref/E
+        ratio = (E_REF_LX / scene_illuminance_lx(ctx))[:, None]
+        J = np.empty(parts["A"].shape + (6,))
+        J[:] = 0.0
+        ch = np.arange(3)
+        J[:, ch, 2 * ch] = parts["G_ln10"] / parts["A"] * ratio
+        J[:, ch, 2 * ch + 1] = -parts["G_ln10"] / parts["B"] * ratio
+        return J
+
+
 EFFECT = DarkCurrent()

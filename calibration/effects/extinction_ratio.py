@@ -49,4 +49,18 @@ class ExtinctionRatio(Effect):
         return {"extinction": extinction_factors(np.clip(np.asarray(p, float), 0.0, 0.5))}
 
 
+    def output_jacobian(self, ctx, p, parts):
+        # U = G [log10(k_n A) - log10(k_m B) + f], k = 1 + eps, eta = (1 - eps)/(1 + eps):
+        # dk/deps = 1, deta/deps = -2 / (1 + eps)^2
+        e = np.clip(np.asarray(p, float), 0.0, 0.5)
+        deta = -2.0 / (1.0 + e) ** 2
+        kl = parts["G_ln10"]
+        J = np.zeros(parts["A"].shape + (6,))
+        ch = np.arange(3)
+        J[:, ch, 2 * ch] = kl * (1.0 / (1.0 + e[0::2]) + deta[0::2] * parts["dc1"] / parts["A"])
+        J[:, ch, 2 * ch + 1] = -kl * (1.0 / (1.0 + e[1::2])
+                                      - deta[1::2] * parts["dc2"] / parts["B"])
+        return J
+
+
 EFFECT = ExtinctionRatio()

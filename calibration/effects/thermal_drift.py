@@ -61,4 +61,14 @@ class ThermalDrift(Effect):
         return {"gain_factor": 1.0 + p[0] * x, "offset_V": 1e-3 * p[1:4] * x}
 
 
+    def output_jacobian(self, ctx, p, parts):
+        # dU/dk_g = g x log_ratio; dU/dk_v,i = 1e-3 x on channel i only
+        x = drift_variable(ctx)[:, None]
+        J = np.zeros(parts["A"].shape + (4,))
+        J[:, :, 0] = parts["gain"] * x * parts["log_ratio"]
+        ch = np.arange(3)
+        J[:, ch, 1 + ch] = 1e-3 * x
+        return J
+
+
 EFFECT = ThermalDrift()
