@@ -286,6 +286,12 @@ class MultipleScatteringSky(Sky):
         uses :func:`bodhaine_depolarization_ratio` at ``wavelength_nm``.
     n_zenith : int
         Zenith nodes of the Fourier-mode interpolation (default 25).
+    sun_step_deg : float, optional
+        For many sun positions (time series): compute the modes only at sun elevations that
+        are multiples of this step [deg] and interpolate the Stokes vector linearly between
+        the two neighbouring nodes (suns lower than one step are computed exactly). None
+        (default): one engine call per distinct sun elevation, no interpolation. The error of
+        a 1 deg step is stated and tested in ``tests/test_multiple.py``.
     settings : EngineSettings
         Numerical set-up of sasktran2 (defaults validated against the tables).
 
@@ -302,7 +308,8 @@ class MultipleScatteringSky(Sky):
 
     def __init__(self, tau=None, albedo=0.0, wavelength_nm=None, pressure_hPa=1013.25, *,
                  latitude_deg=45.0, altitude_m=0.0, depolarization_ratio=0.0,
-                 n_zenith: int = 25, settings: EngineSettings = DEFAULT_SETTINGS):
+                 n_zenith: int = 25, sun_step_deg: float | None = None,
+                 settings: EngineSettings = DEFAULT_SETTINGS):
         if (tau is None) == (wavelength_nm is None):
             raise InvalidParameterError(
                 "give exactly one of tau (optical thickness) or wavelength_nm (tau then "
@@ -327,6 +334,9 @@ class MultipleScatteringSky(Sky):
         self.depolarization_ratio = float(depolarization_ratio)
         zenith_nodes_deg(n_zenith)  # validates
         self.n_zenith = int(n_zenith)
+        self.sun_step_deg = None if sun_step_deg is None else float(
+            check_in_range("sun_step_deg", sun_step_deg, 0.0, 10.0, low_open=True,
+                           hint="a few degrees at most (None: exact per sun elevation)"))
         self.settings = settings
 
     def modes(self, sun_elevation_deg: float) -> FourierModes:
@@ -346,15 +356,27 @@ class MultipleScatteringSky(Sky):
         inverse = inverse.reshape(sel.shape)
         for k, s in enumerate(suns):  # one engine call per distinct sun elevation (cached)
             sel_k = inverse == k
-            I[sel_k], Q[sel_k], U[sel_k] = self.modes(s).evaluate(theta[sel_k], phi[sel_k])
+            I[sel_k], Q[sel_k], U[sel_k] = self._stokes_one_sun(s, theta[sel_k], phi[sel_k])
         return I, Q, U
+
+    def _stokes_one_sun(self, sun_elevation_deg, theta, phi):
+        step = self.sun_step_deg
+        lo = None if step is None else np.floor(sun_elevation_deg / step) * step
+        if lo is None or lo <= 0.0 or lo == sun_elevation_deg:
+            return self.modes(sun_elevation_deg).evaluate(theta, phi)
+        hi = min(lo + step, 90.0)
+        w = (sun_elevation_deg - lo) / (hi - lo)
+        a = self.modes(lo).evaluate(theta, phi)
+        b = self.modes(hi).evaluate(theta, phi)
+        return tuple((1.0 - w) * x + w * y for x, y in zip(a, b))
 
     def describe(self) -> dict:
         return {"model": self.name, "tau": self.tau, "albedo": self.albedo,
                 "wavelength_nm": self.wavelength_nm,
                 "pressure_hPa": self.pressure_hPa if self.wavelength_nm else None,
                 "depolarization_ratio": self.depolarization_ratio,
-                "n_zenith": self.n_zenith, "engine": "sasktran2",
+                "n_zenith": self.n_zenith, "sun_step_deg": self.sun_step_deg,
+                "engine": "sasktran2",
                 "engine_settings": self.settings.to_dict(),
                 "I_normalisation": "incident solar flux pi per unit area normal to the beam "
                                    "(F = 1); diffuse sky only, direct beam excluded"}
