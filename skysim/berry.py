@@ -51,29 +51,41 @@ def stereographic(elevation_deg, azimuth_deg) -> np.ndarray:
     return np.tan(theta / 2.0) * np.exp(1j * beta)
 
 
+def _pair_parameters(sun_elevation_deg, sun_azimuth_deg, delta_deg):
+    """Signed ``t = tan(theta / 2)`` of Babinet and Brewster and the unit vector ``u`` of the
+    sun's azimuth in the plane: ``zeta_Bab = t_bab u``, ``zeta_Bre = t_bre u``."""
+    sun_theta = 90.0 - np.asarray(sun_elevation_deg, dtype=float)
+    u = np.exp(1j * np.radians(90.0 - np.asarray(sun_azimuth_deg, dtype=float)))
+    half = 0.5 * np.asarray(delta_deg, dtype=float)
+    return (np.tan(np.radians(sun_theta - half) / 2.0), np.tan(np.radians(sun_theta + half) / 2.0),
+            u)
+
+
 def singularities(sun_elevation_deg, sun_azimuth_deg, delta_deg) -> dict:
     """Stereographic positions of the Babinet, Brewster, Arago and fourth points ([1]_, sect. 3).
 
     Babinet and Brewster lie ``delta/2`` above and below the sun on its vertical; Arago and the
-    fourth point are the antipodes of Brewster and Babinet.
+    fourth point are the antipodes of Brewster and Babinet (the fourth point is at infinity,
+    the nadir, when Babinet is at the zenith).
     """
-    sun_theta = 90.0 - np.asarray(sun_elevation_deg, dtype=float)
-    beta = np.exp(1j * np.radians(90.0 - np.asarray(sun_azimuth_deg, dtype=float)))
-    half = 0.5 * np.asarray(delta_deg, dtype=float)
-    bab = np.tan(np.radians(sun_theta - half) / 2.0) * beta
-    bre = np.tan(np.radians(sun_theta + half) / 2.0) * beta
-    return {"babinet": bab, "brewster": bre, "arago": -1.0 / np.conj(bre),
-            "fourth": -1.0 / np.conj(bab)}
+    t_bab, t_bre, u = _pair_parameters(sun_elevation_deg, sun_azimuth_deg, delta_deg)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        fourth = np.where(t_bab != 0, -u / np.where(t_bab != 0, t_bab, 1.0), np.inf)
+    return {"babinet": t_bab * u, "brewster": t_bre * u, "arago": -u / t_bre, "fourth": fourth}
 
 
 def berry_w(zeta, sun_elevation_deg, sun_azimuth_deg, delta_deg) -> np.ndarray:
-    """Berry et al.'s complex polarization function ``w(zeta)`` ([1]_, eqs. (3.1)-(3.3))."""
-    s = singularities(sun_elevation_deg, sun_azimuth_deg, delta_deg)
-    num = -4.0 * ((zeta - s["babinet"]) * (zeta - s["brewster"]) * (zeta - s["arago"])
-                  * (zeta - s["fourth"]))
-    den = ((1.0 + np.abs(zeta) ** 2) ** 2 * np.abs(s["babinet"] - s["fourth"])
-           * np.abs(s["brewster"] - s["arago"]))
-    return num / den
+    """Berry et al.'s complex polarization function ``w(zeta)`` ([1]_, eqs. (3.1)-(3.3)).
+
+    Each antipodal factor is written in a form that stays finite when the antipode goes to
+    infinity: with ``zeta_k = t u``, ``(zeta + u/t) / |t u + u/t| = (t zeta + u)/(1 + t^2)``
+    for ``t > 0`` (the published form), continued to ``t <= 0`` (Babinet at or beyond the
+    zenith, sun higher than 90 - delta/2) without the sign jump of the published form.
+    """
+    t_bab, t_bre, u = _pair_parameters(sun_elevation_deg, sun_azimuth_deg, delta_deg)
+    return (-4.0 * (zeta - t_bab * u) * (zeta - t_bre * u)
+            * (t_bab * zeta + u) / (1.0 + t_bab**2) * (t_bre * zeta + u) / (1.0 + t_bre**2)
+            / (1.0 + np.abs(zeta) ** 2) ** 2)
 
 
 def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,

@@ -40,6 +40,7 @@ def test_neutral_points_where_placed():
     s = singularities(sel, saz, delta)
     assert np.isclose(s["arago"], stereographic(10.0, saz + 180.0))
     assert np.isclose(s["brewster"], stereographic(-10.0, saz))
+    assert np.isclose(s["fourth"], stereographic(-30.0, saz + 180.0))
 
 
 def test_singularities_have_index_one_half():
@@ -87,3 +88,16 @@ def test_cli_sky_berry(tmp_path):
     import pandas as pd
     t = pd.read_parquet(out)
     assert len(t) == 10 * 36 and t.dop.max() <= 0.8 + 1e-12 and png.stat().st_size > 10_000
+
+
+def test_continuous_when_babinet_crosses_the_zenith():
+    """Sun higher than 90 - delta/2: the fourth point passes through the nadir (infinity);
+    the pattern must stay continuous (no 90 deg AoP jump, no NaN)."""
+    el, az = np.array([60.0, 30.0, 10.0]), np.array([10.0, 200.0, 100.0])
+    below = berry_polarization(el, az, 69.999, 0.0, 40.0)
+    at = berry_polarization(el, az, 70.0, 0.0, 40.0)
+    above = berry_polarization(el, az, 70.001, 0.0, 40.0)
+    for a, b in [(below, at), (at, above)]:
+        np.testing.assert_allclose(a[0], b[0], atol=1e-4)
+        np.testing.assert_allclose(wrap_axial_deg(a[1] - b[1]), 0.0, atol=0.01)
+    assert singularities(70.0, 0.0, 40.0)["fourth"] == np.inf
