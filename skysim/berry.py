@@ -129,9 +129,11 @@ class BerrySky(Sky):
     ----------
     delta_deg : float
         Separation [deg] of the singularity pairs, in [0, 90); the default 40 deg puts each
-        neutral point 20 deg from the sun or anti-sun, typical of observed clear skies
-        (Babinet and Arago ~15-25 deg; [1]_, sect. 5). :func:`skysim.neutral_points.neutral_points`
-        gives the multiple-scattering values for a given sun and optical thickness.
+        neutral point 20 deg from the sun or anti-sun, as in the multiple-scattering sky of
+        :mod:`skysim.multiple` at tau = 0.25 (Babinet 19.5 deg above and Brewster 22.7 deg
+        below a sun at 23.6 deg; Babinet 17.8 and Brewster 22.3 deg at 30 deg).
+        :func:`skysim.neutral_points.neutral_points` gives the values for any sun, tau and
+        albedo (``experiments.physical_sky.berry_delta_from`` turns them into delta).
     dmax : float
         Maximum degree of polarization, in (0, 1].
 
