@@ -161,38 +161,35 @@ def tilted_axes(heading_deg, tilt_deg, tilt_azimuth_deg):
 
     The level axes at heading ``h`` are ``f0 = (sin h, cos h, 0)`` and ``r0 = (cos h, -sin h,
     0)``; the tilt rotates them by ``tau`` about the horizontal axis ``k = (-cos a, sin a, 0)``
-    that takes the zenith to the boresight (elevation ``90 - tau``, azimuth ``a``), by
-    Rodrigues' formula ``v' = v cos tau + (k x v) sin tau + k (k.v)(1 - cos tau)`` [3]_, as a
-    matrix ``R = I cos tau + [k]_x sin tau + k k^T (1 - cos tau)`` per trial.
+    that takes the zenith to the boresight (elevation ``90 - tau``, azimuth ``a``): the
+    rotation vector ``tau k`` (scipy's ``Rotation.from_rotvec``).
 
     Parameters
     ----------
     heading_deg : (n,) [deg]
     tilt_deg, tilt_azimuth_deg : (T,) [deg]
     """
+    from scipy.spatial.transform import Rotation
     h = np.radians(np.asarray(heading_deg, float))
-    tau = np.radians(np.asarray(tilt_deg, float))[:, None, None]
-    a = np.radians(np.asarray(tilt_azimuth_deg, float))
+    tau = np.radians(np.atleast_1d(np.asarray(tilt_deg, float)))
+    a = np.radians(np.atleast_1d(np.asarray(tilt_azimuth_deg, float)))
     zero = np.zeros_like(h)
     f0 = np.stack([np.sin(h), np.cos(h), zero], axis=-1)                  # (n, 3)
     r0 = np.stack([np.cos(h), -np.sin(h), zero], axis=-1)
     k = np.stack([-np.cos(a), np.sin(a), np.zeros_like(a)], axis=-1)      # (T, 3)
-    k_cross = np.zeros(k.shape + (3,))                                    # [k]_x v = k x v
-    k_cross[:, 0, 1], k_cross[:, 0, 2] = -k[:, 2], k[:, 1]
-    k_cross[:, 1, 0], k_cross[:, 1, 2] = k[:, 2], -k[:, 0]
-    k_cross[:, 2, 0], k_cross[:, 2, 1] = -k[:, 1], k[:, 0]
-    R = (np.eye(3) * np.cos(tau) + k_cross * np.sin(tau)
-         + k[:, :, None] * k[:, None, :] * (1.0 - np.cos(tau)))          # (T, 3, 3)
+    R = Rotation.from_rotvec(tau[:, None] * k).as_matrix()                # (T, 3, 3)
     return np.einsum("tij,nj->tni", R, f0), np.einsum("tij,nj->tni", R, r0)
 
 
 def opponent_outputs(phi_deg, dop, dtheta_deg, f, dark_rel, gain: float):
-    """Channel outputs with dark current [V], shape (T, n, 3).
+    """Channel outputs with dark current [V], shape (T, n, 3): the photodiode model of
+    :func:`sensor.photodiode.three_pair_outputs` for one sensor per trial.
 
-    ``U_i = g (log10((1 + d cos 2(phi + a_i + dth_{2i-1}) + delta)
-    / (1 - d cos 2(phi + a_i + dth_{2i}) + delta)) + f_i)``: eqs. (2)-(3) of [1]_ with the
-    dark current ``delta`` of each photodiode relative to its mean photocurrent added to both
-    photocurrents; ``delta = 0`` gives the paper's equation.
+    Unit incident intensity, photodiode responsivities ``(10^f_i, 1)`` per channel (so the
+    transmittance term is ``f_i`` of eqs. (2)-(3) of [1]_) and a dark level ``delta`` on every
+    photodiode, relative to a photodiode's mean photocurrent: ``U_i = g log10((10^f_i (1 + d
+    cos 2(phi + a_i + dth_{2i-1})) + delta) / (1 - d cos 2(phi + a_i + dth_{2i}) + delta))``.
+    ``delta = 0`` gives the paper's equation.
 
     Parameters
     ----------
@@ -203,13 +200,13 @@ def opponent_outputs(phi_deg, dop, dtheta_deg, f, dark_rel, gain: float):
     dark_rel : (T,)
     gain : [V/decade]
     """
-    from sensor.opponent import CHANNEL_ANGLES_DEG
-    x1 = np.radians(phi_deg[..., None] + CHANNEL_ANGLES_DEG + dtheta_deg[:, None, 0::2])
-    x2 = np.radians(phi_deg[..., None] + CHANNEL_ANGLES_DEG + dtheta_deg[:, None, 1::2])
-    d = dop[..., None]
-    delta = dark_rel[:, None, None]
-    return gain * (np.log10((1.0 + d * np.cos(2 * x1) + delta) / (1.0 - d * np.cos(2 * x2)
-                                                                   + delta)) + f[:, None, :])
+    from sensor.photodiode import three_pair_outputs
+    T = np.shape(dtheta_deg)[0]
+    responsivity = np.stack([10.0 ** np.asarray(f), np.ones((T, 3))], axis=-1).reshape(T, 1, 6)
+    dark = np.broadcast_to(np.asarray(dark_rel, float)[:, None, None], (T, 1, 6))
+    return three_pair_outputs(1.0, phi_deg, dop, gain=gain,
+                              mounting_error_deg=np.asarray(dtheta_deg)[:, None, :],
+                              responsivity=responsivity, dark=dark)
 
 
 def simulate_trials(params: dict, stops: int, sky, daq, noise, table_noise, gain: float):

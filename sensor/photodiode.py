@@ -204,8 +204,12 @@ def opponent_log_ratio(signal_a, signal_b, *, gain=GAIN, offset_V=0.0) -> np.nda
 
 
 def _per_photodiode(name: str, values, default: float) -> np.ndarray:
+    """``(..., 6)`` per-photodiode values (a scalar, 6 floats, or one set per leading index,
+    e.g. ``(trials, 1, 6)``) as ``(..., 3, 2)``: channel k, numerator/denominator."""
     v = check_finite(name, default if values is None else values)
-    return np.broadcast_to(v, (6,)).reshape(3, 2)
+    if v.ndim == 0 or v.shape[-1] != 6:
+        v = np.broadcast_to(v, v.shape[:-1] + (6,) if v.ndim else (6,))
+    return v.reshape(v.shape[:-1] + (3, 2))
 
 
 def three_pair_signals(intensity, phi_deg, dop, *, mounting_error_deg=None, responsivity=None,
@@ -220,10 +224,12 @@ def three_pair_signals(intensity, phi_deg, dop, *, mounting_error_deg=None, resp
         Polarization azimuth of :mod:`sensor.opponent` [deg].
     dop : array-like
         Degree of polarization in [0, 1).
-    mounting_error_deg : 6 floats
+    mounting_error_deg : array (..., 6)
         ``dth_1..dth_6`` [deg] (paper order: numerator, denominator of U1, then U2, U3).
-    responsivity, dark, extinction_intensity, extinction_efficiency : 6 floats each
-        Per photodiode, same order (defaults 1, 0, 1, 1).
+        Leading axes broadcast against the samples' shape, e.g. ``(trials, 1, 6)`` for
+        ``phi_deg`` of shape ``(trials, n)``: one sensor per Monte-Carlo trial.
+    responsivity, dark, extinction_intensity, extinction_efficiency : array (..., 6) each
+        Per photodiode, same order and broadcasting (defaults 1, 0, 1, 1).
 
     Returns
     -------
