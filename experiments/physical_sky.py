@@ -31,8 +31,15 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-__all__ = ["validate_against_natraj", "neutral_point_curves", "zenith_dop_curves", "run",
-           "register", "register_reproduce", "NATRAJ_FILE"]
+__all__ = [
+    "NATRAJ_FILE",
+    "neutral_point_curves",
+    "register",
+    "register_reproduce",
+    "run",
+    "validate_against_natraj",
+    "zenith_dop_curves",
+]
 
 NATRAJ_FILE = (Path(__file__).resolve().parents[2] / "shared" / "reference" / "natraj2009"
                / "natraj2009_subset.csv.gz")
@@ -219,7 +226,7 @@ def run(out: Path, quick: bool = False) -> dict:
 
     row04 = zen[np.isclose(zen.sun_elevation_deg, MU0_04_ELEVATION_DEG)].iloc[0]
     summary = {
-        "cases": int(len(per_case)), "points": int(len(points)), "quick": quick,
+        "cases": len(per_case), "points": len(points), "quick": quick,
         "max_abs_dI_rel": float(np.abs(points.dI_rel).max()),
         "max_abs_dDoLP": float(np.abs(points.dDoLP).max()),
         "p50_abs_dI_rel": float(np.abs(points.dI_rel).median()),

@@ -40,7 +40,7 @@ from .geometry import wrap_axial_deg
 from .sky import Sky
 from .validation import check_dop, check_in_range
 
-__all__ = ["stereographic", "singularities", "berry_w", "berry_polarization", "BerrySky"]
+__all__ = ["BerrySky", "berry_polarization", "berry_w", "singularities", "stereographic"]
 
 
 def stereographic(elevation_deg, azimuth_deg) -> np.ndarray:

@@ -49,15 +49,15 @@ from .sky import Sky
 from .validation import check_in_range
 
 __all__ = [
+    "FIT_AZIMUTHS_DEG",
     "WAVELENGTH_RANGE_NM",
+    "FourierModes",
+    "MultipleScatteringSky",
+    "bodhaine_depolarization_ratio",
     "bodhaine_optical_thickness",
     "bodhaine_optical_thickness_fit",
-    "bodhaine_depolarization_ratio",
-    "FourierModes",
     "fourier_modes",
     "zenith_nodes_deg",
-    "FIT_AZIMUTHS_DEG",
-    "MultipleScatteringSky",
 ]
 
 WAVELENGTH_RANGE_NM = (250.0, 1000.0)

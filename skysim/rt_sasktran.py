@@ -55,8 +55,16 @@ import numpy as np
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
-__all__ = ["SasktranUnavailableError", "EngineSettings", "DEFAULT_SETTINGS", "require_sasktran2",
-           "rayleigh_depolarization_factor", "transmitted_stokes", "MU_MIN", "MU_MAX"]
+__all__ = [
+    "DEFAULT_SETTINGS",
+    "MU_MAX",
+    "MU_MIN",
+    "EngineSettings",
+    "SasktranUnavailableError",
+    "rayleigh_depolarization_factor",
+    "require_sasktran2",
+    "transmitted_stokes",
+]
 
 MU_MIN = 1.0e-4
 """Smallest view cosine passed to the engine (mu = 0 returns zeros): 0.006 deg above the horizon."""

@@ -16,9 +16,14 @@ from hypothesis import strategies as st
 
 from skysim import rayleigh
 from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
-from skysim.multiple import (MultipleScatteringSky, bodhaine_depolarization_ratio,
-                             bodhaine_optical_thickness, bodhaine_optical_thickness_fit,
-                             fourier_modes, zenith_nodes_deg)
+from skysim.multiple import (
+    MultipleScatteringSky,
+    bodhaine_depolarization_ratio,
+    bodhaine_optical_thickness,
+    bodhaine_optical_thickness_fit,
+    fourier_modes,
+    zenith_nodes_deg,
+)
 from skysim.rt_sasktran import EngineSettings, SasktranUnavailableError, require_sasktran2
 from skysim.sky import make_sky
 

@@ -13,8 +13,8 @@ import pytest
 
 pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
 
-import skysim.multiple as multiple  # noqa: E402
-from skysim.rt_sasktran import transmitted_stokes  # noqa: E402
+from skysim import multiple
+from skysim.rt_sasktran import transmitted_stokes
 
 TAU, ALBEDO, SUN_EL, SUN_AZ = 0.25, 0.1, 30.0, 200.0
 MU0 = float(np.sin(np.radians(SUN_EL)))
