@@ -243,6 +243,10 @@ def run(out: Path, quick: bool = False) -> dict:
                                "issue": [0.72, 0.63, 0.53]},
         "aop_rms_over_sky": aop_rms,
         "elapsed_s": time.perf_counter() - t0,
+        "config": {"reference": str(NATRAJ_FILE), "min_mu": 0.1,
+                   "cases": "quick subset " + repr(QUICK_CASES) if quick else "all shared",
+                   "sun_elevations_deg": suns, "neutral_point_configs": configs,
+                   "map_sun": sun, "sky": MultipleScatteringSky(tau=0.25).describe()},
     }
 
     def csv(df):
