@@ -45,18 +45,21 @@ from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData, photodiode_column
 from sensor.tables import read_table_and_sidecar
 
-from .effects.multiple_scattering import EffectUnavailableError
 from .effects import (BASE_NAMES, EFFECT_NAMES, Context, Effect, all_effects, geometry,
                       jacobians, outputs)
 from .exceptions import CalibrationError, RankDeficientError, TooFewSamplesError
 from .solve import solve_pair
 
-__all__ = ["DIAGNOSIS_SCHEMA", "DiagnosisError", "InsufficientDataError", "SingleHeadingError",
+__all__ = ["DIAGNOSIS_SCHEMA", "DEFAULT_CANDIDATES", "DiagnosisError", "InsufficientDataError", "SingleHeadingError",
            "AllNaNChannelError", "MissingSiteError", "UnsupportedInstrumentError", "DiagnosisData",
            "data_from_table", "data_from_photodiodes", "load_diagnosis_data", "FitResult", "fit_model", "noise_floor_V",
            "assign_folds", "cross_validate", "decompose", "Thresholds", "diagnose"]
 
 DIAGNOSIS_SCHEMA = "skysim.diagnosis/1"
+
+DEFAULT_CANDIDATES = tuple(n for n in EFFECT_NAMES if n != "multiple_scattering")
+"""Candidates tried unless others are named: every effect except ``multiple_scattering``,
+whose radiative-transfer engine costs ~1-30 s per sun-elevation node and (tau, albedo)."""
 
 _BASE_PRIOR_SD = np.r_[np.full(6, 5.0), np.full(3, 0.2), 1.0]
 _BASE_STEP_TOL = np.r_[np.full(6, 1e-5), np.full(3, 1e-7), 1e-7]
@@ -624,7 +627,7 @@ def _bootstrap_shrink(res0, res1, block, rng, n_boot=200):
     return float(np.std(g0)), float(np.std(g1)), float(np.std(1 - g1 / g0))
 
 
-def diagnose(data: DiagnosisData, effects=EFFECT_NAMES, *, n_folds: int = 3, seed: int = 0,
+def diagnose(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, n_folds: int = 3, seed: int = 0,
              thresholds: Thresholds = Thresholds()) -> dict:
     """Run the diagnosis; returns the "skysim.diagnosis/1" document (module docstring).
 
@@ -649,13 +652,8 @@ def diagnose(data: DiagnosisData, effects=EFFECT_NAMES, *, n_folds: int = 3, see
         raise InsufficientDataError(
             f"only {int(data.valid.sum(axis=0).min())} usable readings in one channel; "
             "at least 20 per channel are needed")
-    unavailable = {}
-    for e in list(cands):
-        try:  # effects whose physics lives in an optional module fail here, not mid-fit
-            geometry(ctx.subset(slice(0, 2)), e, e.starts()[0])
-        except EffectUnavailableError as exc:
-            unavailable[e.name] = str(exc)
-            cands.remove(e)
+    unavailable = {e.name: e.available() for e in cands if e.available()}
+    cands = [e for e in cands if e.name not in unavailable]
     full_base = fit_model(ctx, data.U, data.valid, sigma_V=5e-4)
     r_full = _predict(ctx, full_base, None) - data.U
     floor, floor_c = noise_floor_V(r_full, data.valid, ctx.block)

@@ -28,7 +28,8 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calibration.diagnosis import DiagnosisData, Thresholds, data_from_table, diagnose
+from calibration.diagnosis import (DEFAULT_CANDIDATES, DiagnosisData, Thresholds,
+                                   data_from_table, diagnose)
 from calibration.effects import EFFECT_NAMES, Context, base_vector, forward, get_effect
 from calibration.effects.dark_current import clear_sky_illuminance_lx
 from sensor.daq import Daq
@@ -170,7 +171,7 @@ def _one_case(i: int, label: str, seed_seq, effects, thresholds, n_folds) -> dic
             "fitted_params": json.dumps({k: p["value"] for k, p in v.get("params", {}).items()})}
 
 
-def run_benchmark(n: int = 200, seed: int = 7, effects=EFFECT_NAMES, n_folds: int = 3,
+def run_benchmark(n: int = 200, seed: int = 7, effects=DEFAULT_CANDIDATES, n_folds: int = 3,
                   thresholds: Thresholds = Thresholds(), progress: bool = True) -> pd.DataFrame:
     """Generate ``n`` data sets (labels cycling through none + the effects, magnitudes from the
     documented ranges), diagnose each blind, and return one row per case."""
@@ -185,14 +186,7 @@ def run_benchmark(n: int = 200, seed: int = 7, effects=EFFECT_NAMES, n_folds: in
 
 def _available(name: str) -> bool:
     """False when an effect's optional physics (e.g. the multiple-scattering sky) is missing."""
-    from calibration.effects.multiple_scattering import EffectUnavailableError, zenith_dop
-    if name != "multiple_scattering":
-        return True
-    try:
-        zenith_dop(30.0, *get_effect(name).starts()[0])
-        return True
-    except EffectUnavailableError:
-        return False
+    return get_effect(name).available() is None
 
 
 def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
@@ -424,7 +418,7 @@ def plot_benchmark(cases: pd.DataFrame, confusion: pd.DataFrame, out: Path) -> l
 # --------------------------------------------------------------------------- command line
 def _effects_arg(text: str | None):
     if not text:
-        return EFFECT_NAMES
+        return DEFAULT_CANDIDATES
     names = tuple(x.strip() for x in text.split(",") if x.strip())
     for name in names:
         get_effect(name)  # UnknownEffectError lists the valid names
@@ -490,7 +484,8 @@ def register(sub) -> None:
                                    "and give a verdict (schema skysim.diagnosis/1).",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     d.add_argument("data", help="measurement table or photodiode data (.csv/.parquet + sidecar)")
-    d.add_argument("--effects", help="comma-separated candidates (default: all): "
+    d.add_argument("--effects", help="comma-separated candidates (default: all but "
+                   "multiple_scattering, whose RT engine takes minutes): "
                    + ",".join(EFFECT_NAMES))
     d.add_argument("--out", help="output directory (default results/diagnose/<name>)")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
@@ -502,6 +497,7 @@ def register(sub) -> None:
     b.add_argument("--quick", action="store_true", help="27 data sets (3 per label)")
     b.add_argument("--seed", type=int, default=7)
     b.add_argument("--out", help="output directory (default results/gap_benchmark)")
-    b.add_argument("--effects", help="comma-separated effects to hide and to try (default all)")
+    b.add_argument("--effects", help="comma-separated effects to hide and to try (default: all "
+                   "but multiple_scattering)")
     b.add_argument("--folds", type=int, default=3)
     b.set_defaults(func=_benchmark_cmd)

@@ -7,13 +7,14 @@ solar meridian; direct re-evaluation with shifted times/headings for the time an
 effects.
 """
 
+from pathlib import Path
+
 import numpy as np
 import pandas as pd
 import pytest
 
 from calibration import effects as E
 from calibration.effects.dark_current import E_REF_LX, clear_sky_illuminance_lx
-from calibration.effects.multiple_scattering import EffectUnavailableError
 from calibration.effects.tilt import tilted_polarization
 from sensor.opponent import GAIN, channel_outputs, zenith_polarization
 from skysim import rayleigh
@@ -184,16 +185,26 @@ def test_analytic_base_jacobian_matches_finite_differences(ctx, name):
         np.testing.assert_allclose(J[:, :, j], fd, rtol=1e-5, atol=1e-9)
 
 
-def test_multiple_scattering_needs_the_multiple_sky_or_says_so(ctx):
+REFERENCE = Path(__file__).resolve().parents[2] / "shared" / "reference" / "natraj2009"
+
+
+def test_multiple_scattering_zenith_dop_against_natraj_2009():
     eff = E.get_effect("multiple_scattering")
-    try:
-        import skysim.multiple  # noqa: F401
-    except ImportError:
-        with pytest.raises(EffectUnavailableError, match="issue 3"):
-            E.forward(ctx, BASE, eff, [0.1, 0.0])
-        return
-    out = E.forward(ctx, BASE, eff, [0.1, 0.0])
-    assert out.shape == (ctx.n, 3) and np.isfinite(out).all()
+    if eff.available() is not None:
+        assert "skysim" in eff.available() or "sasktran2" in eff.available()
+        pytest.skip(eff.available())
+    table = REFERENCE / "natraj2009_subset.csv.gz"
+    if not table.exists():
+        pytest.skip(f"reference tables not present ({table})")
+    from calibration.effects.multiple_scattering import _zenith_dop_node
+    ref = pd.read_csv(table)
+    row = ref[(ref.tau == 0.1) & (ref.albedo == 0.0) & (ref.mu0 == 0.6) & (ref.mu == 1.0)
+              & (ref.field == "transmitted")].iloc[0]
+    dop_ref = np.hypot(row.Q, row.U) / row.I
+    # one engine run (zenith view, sun at mu0 = 0.6); 2e-3 in DoP: twice the engine set-up
+    # accuracy stated and tested by skysim.multiple against these tables
+    dop = _zenith_dop_node(0.1, 0.0, float(np.degrees(np.arcsin(0.6))))
+    assert abs(dop - dop_ref) < 2e-3
 
 
 @pytest.mark.parametrize("name", OUTPUT_EFFECTS)

@@ -213,6 +213,10 @@ class Effect:
     def k(self) -> int:
         return len(self.parameter_names)
 
+    def available(self) -> str | None:
+        """None when the effect can run here, else why not (a missing optional engine)."""
+        return None
+
     def starts(self) -> list[np.ndarray]:
         """Initial parameter vectors of a fit (several for multi-modal problems)."""
         return [np.clip(self.prior_mean, self.bounds[:, 0], self.bounds[:, 1])]

@@ -9,8 +9,13 @@ faster towards a low sun, and the neutral points (Arago, Babinet, Brewster) appe
 the zenith DoP of :func:`skysim.sky.make_sky` ``("multiple", tau=..., albedo=...)`` (issue 3,
 :mod:`skysim.multiple`), keeping the free scale ``s`` for aerosol depolarization. By the
 symmetry of a plane-parallel atmosphere the zenith E-vector stays perpendicular to the solar
-meridian, so ``phi`` is unchanged. The zenith DoP is evaluated on a grid of sun elevations
-(1 deg) and interpolated, cached per ``(tau, albedo)``.
+meridian, so ``phi`` is unchanged. The engine runs at sun-elevation nodes 5 deg apart over
+the data's range (cubic spline between, cached per ``(tau, albedo)``).
+
+Cost: each node is one radiative-transfer run (sasktran2: ~1 s on an idle core, 20-30 s on
+the loaded 2-core development machine), and a fit probes a few dozen ``(tau, albedo)``
+pairs, so this candidate is orders of magnitude slower than the others; the command line
+leaves it out unless asked for (``--effects``).
 
 References
 ----------
@@ -32,31 +37,45 @@ from . import Effect
 
 __all__ = ["EffectUnavailableError", "zenith_dop", "MultipleScattering", "EFFECT"]
 
-_GRID_EL = np.arange(1.0, 90.5, 1.0)
+NODE_STEP_DEG = 5.0
+"""Spacing [deg] of the sun-elevation nodes at which the engine is called (cubic spline
+between them: the zenith DoP is smooth in sun elevation, interpolation error ~h^4)."""
 
 
 class EffectUnavailableError(RuntimeError):
     """The physics an effect needs is not installed or not built yet (says what to add)."""
 
 
-@lru_cache(maxsize=512)
-def _zenith_dop_grid(tau: float, albedo: float) -> np.ndarray:
+@lru_cache(maxsize=4096)
+def _zenith_dop_node(tau: float, albedo: float, sun_elevation_deg: float) -> float:
     try:
         from skysim.sky import make_sky
         sky = make_sky("multiple", tau=tau, albedo=albedo)
+        return float(sky.field(90.0, 0.0, sun_elevation_deg, 180.0).dop)
     except (ImportError, AttributeError) as exc:
         raise EffectUnavailableError(
             "effect 'multiple_scattering' needs the multiple-scattering sky "
-            "make_sky('multiple', tau=..., albedo=...) of skysim.multiple (issue 3), which is "
-            f"not available here ({exc}); leave it out with --effects or install that sky"
-        ) from exc
-    return np.asarray(sky.field(90.0, 0.0, _GRID_EL, 180.0).dop, dtype=float)
+            "make_sky('multiple', tau=..., albedo=...) of skysim.multiple (issue 3) and its "
+            f"radiative-transfer engine, which are not available here ({exc}); leave it out "
+            "with --effects or install skysim[rt]") from exc
 
 
 def zenith_dop(sun_elevation_deg, tau: float, albedo: float) -> np.ndarray:
-    """Zenith DoP of the multiple-scattering sky at the given sun elevations [deg]."""
+    """Zenith DoP of the multiple-scattering sky at the given sun elevations [deg].
+
+    The engine runs at sun-elevation nodes every :data:`NODE_STEP_DEG` covering the requested
+    elevations (each node cached per ``(tau, albedo)``); a cubic spline interpolates between.
+    """
+    from scipy.interpolate import CubicSpline
+    el = np.asarray(sun_elevation_deg, dtype=float)
+    lo = max(NODE_STEP_DEG * (np.floor(el.min() / NODE_STEP_DEG) - 1), 1.0)
+    hi = min(NODE_STEP_DEG * (np.ceil(el.max() / NODE_STEP_DEG) + 1), 90.0)
+    nodes = np.unique(np.r_[np.arange(lo, hi, NODE_STEP_DEG), hi])
     key = (round(float(tau), 5), round(float(albedo), 5))
-    return np.interp(sun_elevation_deg, _GRID_EL, _zenith_dop_grid(*key))
+    values = np.array([_zenith_dop_node(*key, float(x)) for x in nodes])
+    if nodes.size < 2:
+        return np.full(el.shape, values[0])
+    return CubicSpline(nodes, values)(el)
 
 
 class MultipleScattering(Effect):
@@ -73,6 +92,15 @@ class MultipleScattering(Effect):
     null = np.array([np.nan, np.nan])  # no parameter value gives single scattering
     generation_range = {"tau": "U(0.05, 0.4) (Rayleigh optical thickness 700..400 nm)",
                         "albedo": "U(0, 0.4)"}
+
+    def available(self):
+        import importlib.util
+        for module in ("skysim.multiple", "sasktran2"):
+            if importlib.util.find_spec(module) is None:
+                return (f"effect 'multiple_scattering' needs {module} (the multiple-scattering "
+                        "sky of issue 3 and its engine, extra skysim[rt]); leave it out with "
+                        "--effects or install it")
+        return None
 
     def starts(self):
         return [np.array([0.1, 0.1]), np.array([0.3, 0.3])]
