@@ -39,21 +39,52 @@ from dataclasses import dataclass, field
 import numpy as np
 import pandas as pd
 
-from sensor.measurement import (CHANNEL_COLUMNS, MEASUREMENT_SCHEMA, MeasurementFormatError,
-                                parse_iso_times)
+from sensor.measurement import (
+    CHANNEL_COLUMNS,
+    MEASUREMENT_SCHEMA,
+    MeasurementFormatError,
+    parse_iso_times,
+)
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData, photodiode_column
 from sensor.tables import read_table_and_sidecar
 
-from .effects import (BASE_NAMES, EFFECT_NAMES, Context, Effect, all_effects, geometry,
-                      jacobians, outputs)
+from .effects import (
+    BASE_NAMES,
+    EFFECT_NAMES,
+    Context,
+    Effect,
+    all_effects,
+    geometry,
+    jacobians,
+    outputs,
+)
 from .exceptions import CalibrationError, RankDeficientError, TooFewSamplesError
 from .solve import solve_pair
 
-__all__ = ["DIAGNOSIS_SCHEMA", "DEFAULT_CANDIDATES", "DiagnosisError", "InsufficientDataError", "SingleHeadingError",
-           "AllNaNChannelError", "MissingSiteError", "UnsupportedInstrumentError", "DiagnosisData",
-           "data_from_table", "data_from_photodiodes", "load_diagnosis_data", "FitResult", "fit_model", "noise_floor_V",
-           "assign_folds", "cross_validate", "decompose", "Thresholds", "diagnose"]
+__all__ = [
+    "DEFAULT_CANDIDATES",
+    "DIAGNOSIS_SCHEMA",
+    "AllNaNChannelError",
+    "DiagnosisData",
+    "DiagnosisError",
+    "FitResult",
+    "InsufficientDataError",
+    "MissingSiteError",
+    "SingleHeadingError",
+    "Thresholds",
+    "UnsupportedInstrumentError",
+    "assign_folds",
+    "cross_validate",
+    "data_from_photodiodes",
+    "data_from_table",
+    "decide",
+    "decompose",
+    "diagnose",
+    "fit_model",
+    "load_diagnosis_data",
+    "noise_floor_V",
+]
 
 DIAGNOSIS_SCHEMA = "skysim.diagnosis/1"
 
@@ -229,7 +260,7 @@ def data_from_photodiodes(pd_data: PhotodiodeData, where: str = "photodiodes") -
     site = _site_of(pd_data.sidecar, where)
     need = [(a, (a + 90) % 180) for a in CHANNEL_ANGLES_DEG.astype(int)]
     unit = next((i for i, u in enumerate(pd_data.units)
-                 if {int(round(a)) for a in u["photodiodes"]} >= {x for p in need for x in p}),
+                 if {round(a) for a in u["photodiodes"]} >= {x for p in need for x in p}),
                 None)
     if unit is None:
         raise UnsupportedInstrumentError(
@@ -263,6 +294,7 @@ def data_from_photodiodes(pd_data: PhotodiodeData, where: str = "photodiodes") -
 def load_diagnosis_data(path) -> DiagnosisData:
     """Read a measurement table or photodiode data (schema from the sidecar)."""
     import json
+
     from skysim.io import sidecar_path
     side = sidecar_path(path)
     if not side.exists():
@@ -567,8 +599,8 @@ def decompose(data: DiagnosisData, residual, floor_V: float, phi_deg, sun_el_deg
                        (("channel", ch), ("time", by_time), ("illuminance", by_ill),
                         ("sun_elevation", by_el)) for s in tab if s["rms_mV"] > limit_mV],
                       key=lambda s: -s["rms_mV"])
-    carrying += sorted([dict(component=hh["component"], dimension="harmonic",
-                             fraction_of_variance=hh["fraction_of_variance"]) for hh in harm
+    carrying += sorted([{"component": hh["component"], "dimension": "harmonic",
+                         "fraction_of_variance": hh["fraction_of_variance"]} for hh in harm
                         if hh["fraction_of_variance"] > 0.1 and _rms(r) > floor_V * (1 + margin)],
                        key=lambda s: -s["fraction_of_variance"])
     return {"noise_floor_mV": 1e3 * floor_V, "slice_limit_mV": limit_mV,
@@ -691,7 +723,7 @@ def diagnose(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, n_folds: int = 
     after_name = best["effect"] if best is not None else "base"
     se0, se1, se_s = _bootstrap_shrink(res["base"], res[after_name], ctx.block, rng)
     G1 = _rms(res[after_name]) if effect not in ("none",) else G0
-    phi, shape = geometry(ctx)
+    phi, _ = geometry(ctx)
     sun_el, _ = ctx.sun(ctx.t_s)
     from .effects.dark_current import scene_illuminance_lx
     where = decompose(data, res["base"], floor, phi, sun_el, scene_illuminance_lx(ctx),

@@ -15,7 +15,8 @@ et al. (2014) on 2013-05-22, six turntable sweeps of 121 stops over 180 deg, 600
 starting every 30 min from 15:30 to 18:00 local time (sun elevation ~51 -> ~18 deg, so the
 illuminance falls ~2.5x and the sensor cools by a few kelvin: the slow effects have something
 to act on; the last sweep ends early enough that a one-hour clock error keeps the recorded
-sun above the horizon). Sensor errors, noise, DAQ and ``d_max`` follow :data:`experiments.yang2014.ERROR_MODEL`.
+sun above the horizon). Sensor errors, noise, DAQ and ``d_max`` follow
+:data:`experiments.yang2014.ERROR_MODEL`.
 """
 
 from __future__ import annotations
@@ -28,8 +29,13 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from calibration.diagnosis import (DEFAULT_CANDIDATES, DiagnosisData, Thresholds,
-                                   data_from_table, diagnose)
+from calibration.diagnosis import (
+    DEFAULT_CANDIDATES,
+    DiagnosisData,
+    Thresholds,
+    data_from_table,
+    diagnose,
+)
 from calibration.effects import EFFECT_NAMES, Context, base_vector, forward, get_effect
 from calibration.effects.dark_current import clear_sky_illuminance_lx
 from sensor.daq import Daq
@@ -41,8 +47,14 @@ from skysim.io import atomic_write, write_json_atomic
 
 from .yang2014 import ERROR_MODEL, SITE
 
-__all__ = ["Session", "SESSION", "simulate_session", "run_benchmark", "score_benchmark",
-           "register"]
+__all__ = [
+    "SESSION",
+    "Session",
+    "register",
+    "run_benchmark",
+    "score_benchmark",
+    "simulate_session",
+]
 
 
 @dataclass(frozen=True)
@@ -98,7 +110,7 @@ def simulate_session(effect: str | None, rng: np.random.Generator, *, params=Non
     duration = float(p[0]) if effect == "sun_motion" else session.sweep_duration_s
     t_true = t0[sweep] + frac * duration
     track = Context.from_arrays(SITE, _to_times(t_true, session.utc_offset), np.zeros(n)).sun
-    sun_el0, sun_az0 = track(t0)
+    _, sun_az0 = track(t0)
     heading = (sun_az0[sweep] - 90.0 + frac * 179.9) % 360.0
     sun_el, _ = track(t_true)
     temp = (rng.uniform(*session.temperature_start_C)
@@ -149,8 +161,10 @@ BENCHMARK_LABELS = ("none",) + EFFECT_NAMES
 
 def _one_case(i: int, label: str, seed_seq, effects, thresholds, n_folds) -> dict:
     rng = np.random.default_rng(seed_seq)
-    ds = simulate_session(None if label == "none" else label, rng, seed=int(seed_seq.entropy)
-                          if isinstance(seed_seq.entropy, int) else None)
+    # recorded seed: the benchmark seed and this case's spawn key (SeedSequence.spawn)
+    ds = simulate_session(None if label == "none" else label, rng,
+                          seed={"entropy": seed_seq.entropy,
+                                "spawn_key": list(seed_seq.spawn_key)})
     doc = diagnose(ds["data"], effects, n_folds=n_folds, seed=i, thresholds=thresholds)
     clean = diagnose(ds["clean_data"], [], n_folds=n_folds, seed=i, thresholds=thresholds)
     v = doc["verdict"]
@@ -172,12 +186,13 @@ def _one_case(i: int, label: str, seed_seq, effects, thresholds, n_folds) -> dic
 
 
 def run_benchmark(n: int = 200, seed: int = 7, effects=DEFAULT_CANDIDATES, n_folds: int = 3,
-                  thresholds: Thresholds = Thresholds(), progress: bool = True) -> pd.DataFrame:
+                  thresholds: Thresholds | None = None, progress: bool = True) -> pd.DataFrame:
     """Generate ``n`` data sets (labels cycling through none + the effects, magnitudes from the
     documented ranges), diagnose each blind, and return one row per case."""
     from tqdm import tqdm
     labels = [lab for lab in BENCHMARK_LABELS if lab == "none" or lab in effects]
     available = [lab for lab in labels if lab == "none" or _available(lab)]
+    thresholds = thresholds or Thresholds()
     seeds = np.random.SeedSequence(seed).spawn(n)
     rows = [_one_case(i, available[i % len(available)], seeds[i], effects, thresholds, n_folds)
             for i in tqdm(range(n), desc="gap-benchmark", disable=not progress, unit="set")]
@@ -218,8 +233,8 @@ def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
         return float(np.mean(x)) if len(x) else float("nan")
 
     summary = {
-        "cases": int(len(cases)), "effect_cases": int(len(eff)),
-        "strong_effect_cases": int(len(strong)), "none_cases": int(len(none)),
+        "cases": len(cases), "effect_cases": len(eff),
+        "strong_effect_cases": len(strong), "none_cases": len(none),
         "accuracy_strong": frac(strong.verdict == strong.truth),
         "accuracy_all": frac(cases.verdict == cases.truth),
         "loo_unexplained_strong": frac(strong.loo_verdict == "unexplained"),
@@ -253,9 +268,9 @@ def diagnosis_markdown(doc: dict) -> str:
              f"**Verdict: `{v['effect']}`** — {v['reason']}.", "",
              f"- metric: {v['metric']}",
              f"- noise floor: {v['noise_floor']:.3f} mV ({doc['noise_floor']['method']})",
-             f"- gap before: {v['gap_before']:.3f} ± {v['gap_before_se']:.3f} mV; after "
-             f"(`{v['best_candidate']}`): {v['gap_after']:.3f} ± {v['gap_after_se']:.3f} mV; "
-             f"shrink {100 * v['shrink']:.1f} ± {100 * v['shrink_se']:.1f} %", ""]
+             (f"- gap before: {v['gap_before']:.3f} ± {v['gap_before_se']:.3f} mV; after "
+              f"(`{v['best_candidate']}`): {v['gap_after']:.3f} ± {v['gap_after_se']:.3f} mV; "
+              f"shrink {100 * v['shrink']:.1f} ± {100 * v['shrink_se']:.1f} %"), ""]
     if v.get("params"):
         lines += ["| parameter | value | standard error | unit |", "|---|---|---|---|"]
         lines += [f"| {k} | {_fmt(p['value'], 4)} | {_fmt(p['se'], 2)} | {p['unit']} |"
@@ -284,12 +299,12 @@ def diagnosis_markdown(doc: dict) -> str:
         lines.append("- none: every slice is within the noise floor")
     d = doc["data"]
     lines += ["", "## Data and split", "",
-              f"- {d['samples']} samples, {d['readings_used']} readings used; split: "
-              f"{d['split']['method']}, {d['split']['folds']} folds over "
-              f"{d['split']['blocks']} blocks",
+              (f"- {d['samples']} samples, {d['readings_used']} readings used; split: "
+               f"{d['split']['method']}, {d['split']['folds']} folds over "
+               f"{d['split']['blocks']} blocks"),
               f"- cleaning: {json.dumps(d['cleaning'])}",
-              f"- nuisance: heading offset {d['nuisance']['heading_offset_deg']:.3f} deg "
-              f"({d['nuisance']['note']})", ""]
+              (f"- nuisance: heading offset {d['nuisance']['heading_offset_deg']:.3f} deg "
+               f"({d['nuisance']['note']})"), ""]
     return "\n".join(lines)
 
 
@@ -346,26 +361,26 @@ def benchmark_markdown(result: dict, n: int, seed: int, elapsed: float) -> str:
     conf = result["confusion"]
     acc = s["acceptance"]
     lines = [f"# Blind gap benchmark — {n} data sets, seed {seed}", "",
-             "Each data set hides one effect (or none) at a magnitude drawn from the effect's "
-             "documented range; the diagnosis sees only the table. Strong cases: held-out gap "
-             f">= {s['ratio_min']} x noise floor.", "",
+             ("Each data set hides one effect (or none) at a magnitude drawn from the effect's "
+              "documented range; the diagnosis sees only the table. Strong cases: held-out gap "
+              f">= {s['ratio_min']} x noise floor."), "",
              "| figure | value | acceptance |", "|---|---|---|",
-             f"| accuracy, strong effect cases ({s['strong_effect_cases']}) | "
-             f"{100 * s['accuracy_strong']:.1f} % | >= 90 %: "
-             f"{'pass' if acc['accuracy_strong>=0.90'] else 'FAIL'} |",
-             f"| leave-one-out `unexplained`, strong cases | "
-             f"{100 * s['loo_unexplained_strong']:.1f} % (wrong effect "
-             f"{100 * s['loo_wrong_effect_strong']:.1f} %) | >= 90 %: "
-             f"{'pass' if acc['loo_unexplained>=0.90'] else 'FAIL'} |",
-             f"| `none` on effect-free data ({s['none_cases']}) | "
-             f"{100 * s['none_on_effect_free']:.1f} % | >= 90 %: "
-             f"{'pass' if acc['none_on_effect_free>=0.90'] else 'FAIL'} |",
-             f"| shrink within ±{s['shrink_tol']:.2f} of truth (correct strong cases) | "
-             f"{100 * s['shrink_within_tol']:.1f} % (median abs error "
-             f"{s['shrink_error_median_abs']:.4f}, 90th pct {s['shrink_error_p90_abs']:.4f}) "
-             f"| >= 90 %: {'pass' if acc['shrink_within_20pct>=0.90'] else 'FAIL'} |",
-             f"| false-attribution rate (all cases) | {100 * s['false_attribution_rate']:.1f} % "
-             "| — |",
+             (f"| accuracy, strong effect cases ({s['strong_effect_cases']}) | "
+              f"{100 * s['accuracy_strong']:.1f} % | >= 90 %: "
+              f"{'pass' if acc['accuracy_strong>=0.90'] else 'FAIL'} |"),
+             (f"| leave-one-out `unexplained`, strong cases | "
+              f"{100 * s['loo_unexplained_strong']:.1f} % (wrong effect "
+              f"{100 * s['loo_wrong_effect_strong']:.1f} %) | >= 90 %: "
+              f"{'pass' if acc['loo_unexplained>=0.90'] else 'FAIL'} |"),
+             (f"| `none` on effect-free data ({s['none_cases']}) | "
+              f"{100 * s['none_on_effect_free']:.1f} % | >= 90 %: "
+              f"{'pass' if acc['none_on_effect_free>=0.90'] else 'FAIL'} |"),
+             (f"| shrink within ±{s['shrink_tol']:.2f} of truth (correct strong cases) | "
+              f"{100 * s['shrink_within_tol']:.1f} % (median abs error "
+              f"{s['shrink_error_median_abs']:.4f}, 90th pct {s['shrink_error_p90_abs']:.4f}) "
+              f"| >= 90 %: {'pass' if acc['shrink_within_20pct>=0.90'] else 'FAIL'} |"),
+             (f"| false-attribution rate (all cases) | {100 * s['false_attribution_rate']:.1f} % "
+              "| — |"),
              f"| accuracy, all cases | {100 * s['accuracy_all']:.1f} % | — |", "",
              "## Confusion matrix (rows: truth, columns: verdict)", "",
              "| truth \\ verdict | " + " | ".join(conf.columns) + " |",

@@ -11,10 +11,20 @@ import pandas as pd
 import pytest
 
 from calibration import effects as E
-from calibration.diagnosis import (DIAGNOSIS_SCHEMA, AllNaNChannelError, InsufficientDataError,
-                                   MissingSiteError, SingleHeadingError,
-                                   UnsupportedInstrumentError, data_from_photodiodes,
-                                   data_from_table, decide, diagnose, fit_model, noise_floor_V)
+from calibration.diagnosis import (
+    DIAGNOSIS_SCHEMA,
+    AllNaNChannelError,
+    InsufficientDataError,
+    MissingSiteError,
+    SingleHeadingError,
+    UnsupportedInstrumentError,
+    data_from_photodiodes,
+    data_from_table,
+    decide,
+    diagnose,
+    fit_model,
+    noise_floor_V,
+)
 from experiments.cli import main
 from experiments.diagnose import run_benchmark, score_benchmark, simulate_session
 from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData

@@ -16,10 +16,10 @@ import pytest
 from calibration import effects as E
 from calibration.effects.dark_current import E_REF_LX, clear_sky_illuminance_lx
 from calibration.effects.tilt import tilted_polarization
+from experiments.yang2014 import SITE
 from sensor.opponent import GAIN, channel_outputs, zenith_polarization
 from skysim import rayleigh
 from skysim.sky import RayleighSky
-from experiments.yang2014 import SITE
 
 TIMES = pd.date_range("2013-05-22T16:00+08:00", periods=240, freq="5s")
 HEADINGS = np.linspace(180.0, 360.0, 240)

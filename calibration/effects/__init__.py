@@ -41,6 +41,7 @@ from __future__ import annotations
 
 import importlib
 from dataclasses import dataclass, field
+from typing import ClassVar
 
 import numpy as np
 import pandas as pd
@@ -51,10 +52,22 @@ from skysim import rayleigh
 from skysim.geometry import direction_vector, elevation_azimuth, wrap_axial_deg
 from skysim.sun import Site, as_utc_index, sun_vector
 
-__all__ = ["EFFECT_NAMES", "BASE_NAMES", "UnknownEffectError", "Effect", "SunTrack", "Context",
-           "get_effect", "all_effects", "geometry", "outputs", "jacobians", "base_jacobian",
-           "forward",
-           "base_vector"]
+__all__ = [
+    "BASE_NAMES",
+    "EFFECT_NAMES",
+    "Context",
+    "Effect",
+    "SunTrack",
+    "UnknownEffectError",
+    "all_effects",
+    "base_jacobian",
+    "base_vector",
+    "forward",
+    "geometry",
+    "get_effect",
+    "jacobians",
+    "outputs",
+]
 
 EFFECT_NAMES = ("dark_current", "sun_motion", "clock_offset", "tilt", "turntable_periodic",
                 "extinction_ratio", "thermal_drift", "multiple_scattering")
@@ -90,7 +103,7 @@ class SunTrack:
 
     @classmethod
     def around(cls, site: Site, t_min_s: float, t_max_s: float, margin_s: float = 4 * 3600.0,
-               step_s: float = 60.0) -> "SunTrack":
+               step_s: float = 60.0) -> SunTrack:
         t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
         times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)
         vec, _ = sun_vector(times, site)
@@ -148,7 +161,7 @@ class Context:
 
     @classmethod
     def from_arrays(cls, site: Site, times, heading_deg, block=None, illuminance_lx=None,
-                    temperature_C=None) -> "Context":
+                    temperature_C=None) -> Context:
         """Build a context from timezone-aware times and per-sample arrays (row order kept)."""
         t_s = as_utc_index(times).as_unit("ns").asi8 / 1e9
         n = t_s.size
@@ -164,7 +177,7 @@ class Context:
     def n(self) -> int:
         return self.t_s.size
 
-    def subset(self, rows) -> "Context":
+    def subset(self, rows) -> Context:
         """The same data set restricted to ``rows`` (a boolean mask or indices)."""
         pick = (lambda a: None if a is None else a[rows])
         return Context(self.site, self.t_s[rows], self.heading_deg[rows], self.block[rows],
@@ -206,7 +219,7 @@ class Effect:
     fd_step = np.zeros(0)
     stage = "output"
     null = np.zeros(0)
-    generation_range: dict = {}
+    generation_range: ClassVar[dict] = {}
     reference = ""
 
     @property
@@ -239,7 +252,7 @@ class Effect:
 
     def polarization(self, ctx: Context, p, heading_deg, sun_el_deg, sun_az_deg):
         """``(phi_deg, dop_shape)`` seen by the sensor, or None for the base zenith model."""
-        return None
+        return
 
     def channel_terms(self, ctx: Context, p) -> dict:
         """Output-stage terms, any of: ``extinction`` = ``(k, eta)`` of the six polarizers
@@ -254,7 +267,7 @@ class Effect:
         and denominator terms, (n, 3)), ``dc1``, ``dc2`` (``d cos 2x``), ``G_ln10`` (gain over
         ln 10), ``gain`` (nominal) and ``log_ratio`` (the bracket of the module equation).
         """
-        return None
+        return
 
     def describe(self, p) -> dict:
         return dict(zip(self.parameter_names, np.asarray(p, float).tolist()))

@@ -10,11 +10,13 @@ day. ``dt = 0`` is the base model.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from . import Effect
 
-__all__ = ["ClockOffset", "EFFECT"]
+__all__ = ["EFFECT", "ClockOffset"]
 
 
 class ClockOffset(Effect):
@@ -29,7 +31,7 @@ class ClockOffset(Effect):
     fd_step = np.array([5.0])
     stage = "geometry"
     null = np.zeros(1)
-    generation_range = {"clock_offset_s": "half the draws a timezone error of +-3600 s, "
+    generation_range: ClassVar[dict] = {"clock_offset_s": "half the draws a timezone error of +-3600 s, "
                                           "half a clock error of +-U(120, 1800) s"}
 
     def starts(self):

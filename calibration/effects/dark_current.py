@@ -26,12 +26,19 @@ References
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from . import Context, Effect
 
-__all__ = ["E_REF_LX", "LUMINOUS_EFFICACY_LM_PER_W", "clear_sky_illuminance_lx",
-           "DarkCurrent", "EFFECT"]
+__all__ = [
+    "EFFECT",
+    "E_REF_LX",
+    "LUMINOUS_EFFICACY_LM_PER_W",
+    "DarkCurrent",
+    "clear_sky_illuminance_lx",
+]
 
 E_REF_LX = 1.0e4
 """Reference illuminance [lx] at which the dark-to-signal ratios ``rho_k`` are stated."""
@@ -73,7 +80,7 @@ class DarkCurrent(Effect):
     prior_sd = np.full(6, 0.05)
     fd_step = np.full(6, 1e-4)
     null = np.zeros(6)
-    generation_range = {"rho_level": "log-uniform [3e-4, 5e-2] at 10 klx",
+    generation_range: ClassVar[dict] = {"rho_level": "log-uniform [3e-4, 5e-2] at 10 klx",
                         "rho_k": "level x U(0.5, 1.5) per photodiode"}
 
     def draw(self, rng):

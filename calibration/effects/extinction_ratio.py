@@ -19,13 +19,15 @@ References
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from sensor.photodiode import extinction_factors
 
 from . import Effect
 
-__all__ = ["ExtinctionRatio", "EFFECT"]
+__all__ = ["EFFECT", "ExtinctionRatio"]
 
 
 class ExtinctionRatio(Effect):
@@ -39,7 +41,7 @@ class ExtinctionRatio(Effect):
     prior_sd = np.full(6, 0.05)
     fd_step = np.full(6, 1e-4)
     null = np.zeros(6)
-    generation_range = {"eps_k": "log-uniform [1e-3, 0.1] per polarizer (film polarizers "
+    generation_range: ClassVar[dict] = {"eps_k": "log-uniform [1e-3, 0.1] per polarizer (film polarizers "
                                  "1:1000 to 1:10 over the visible)"}
 
     def draw(self, rng):

@@ -28,6 +28,7 @@ References
 from __future__ import annotations
 
 from functools import lru_cache
+from typing import ClassVar
 
 import numpy as np
 
@@ -35,7 +36,7 @@ from skysim.geometry import wrap_axial_deg
 
 from . import Effect
 
-__all__ = ["EffectUnavailableError", "zenith_dop", "MultipleScattering", "EFFECT"]
+__all__ = ["EFFECT", "EffectUnavailableError", "MultipleScattering", "zenith_dop"]
 
 NODE_STEP_DEG = 5.0
 """Spacing [deg] of the sun-elevation nodes at which the engine is called (cubic spline
@@ -90,7 +91,7 @@ class MultipleScattering(Effect):
     fd_step = np.array([2e-3, 5e-3])
     stage = "geometry"
     null = np.array([np.nan, np.nan])  # no parameter value gives single scattering
-    generation_range = {"tau": "U(0.05, 0.4) (Rayleigh optical thickness 700..400 nm)",
+    generation_range: ClassVar[dict] = {"tau": "U(0.05, 0.4) (Rayleigh optical thickness 700..400 nm)",
                         "albedo": "U(0, 0.4)"}
 
     def available(self):

@@ -14,11 +14,13 @@ the ephemeris (pysolar, :mod:`skysim.sun`), so only ``T`` is fitted.
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from . import Effect
 
-__all__ = ["SunMotion", "EFFECT"]
+__all__ = ["EFFECT", "SunMotion"]
 
 
 class SunMotion(Effect):
@@ -33,7 +35,7 @@ class SunMotion(Effect):
     fd_step = np.array([2.0])
     stage = "geometry"
     null = np.zeros(1)
-    generation_range = {"sweep_duration_s": "U(300, 1200); every recorded time = sweep start"}
+    generation_range: ClassVar[dict] = {"sweep_duration_s": "U(300, 1200); every recorded time = sweep start"}
 
     def starts(self):
         return [np.array([60.0]), np.array([900.0])]

@@ -19,11 +19,13 @@ References
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from . import Context, Effect
 
-__all__ = ["T_REF_C", "drift_variable", "ThermalDrift", "EFFECT"]
+__all__ = ["EFFECT", "T_REF_C", "ThermalDrift", "drift_variable"]
 
 T_REF_C = 25.0
 """Reference temperature [degC] of the drift coefficients."""
@@ -48,7 +50,7 @@ class ThermalDrift(Effect):
     prior_sd = np.array([0.005, 1.0, 1.0, 1.0])
     fd_step = np.array([1e-5, 1e-3, 1e-3, 1e-3])
     null = np.zeros(4)
-    generation_range = {"k_gain_per_K": "+-U(3e-4, 3.3e-3)",
+    generation_range: ClassVar[dict] = {"k_gain_per_K": "+-U(3e-4, 3.3e-3)",
                         "k_offset_mV_per_K": "U(-0.2, 0.2) per channel"}
 
     def draw(self, rng):

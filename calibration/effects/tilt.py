@@ -15,6 +15,8 @@ gamma)`` [deg], smooth through zero tilt (the base model).
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from skysim.geometry import elevation_azimuth, wrap_axial_deg
@@ -22,13 +24,13 @@ from skysim.sky import RayleighSky
 
 from . import Effect, unit_vector_frame
 
-__all__ = ["tilted_frame", "tilted_polarization", "Tilt", "EFFECT"]
+__all__ = ["EFFECT", "Tilt", "tilted_frame", "tilted_polarization"]
 
 _SHAPE_SKY = RayleighSky(dmax=1.0)
 
 
 def tilted_frame(heading_deg, tilt_x_deg: float, tilt_y_deg: float):
-    """Sensor axes ``(x_s, y_s, z_s)`` in ENU, each (n, 3), for a tilt given in the sensor frame."""
+    """Sensor axes ``(x_s, y_s, z_s)`` in ENU, each (n, 3), for a tilt in the sensor frame."""
     x, y, z = unit_vector_frame(heading_deg)
     beta = np.radians(np.hypot(tilt_x_deg, tilt_y_deg))
     if beta == 0.0:
@@ -68,7 +70,7 @@ class Tilt(Effect):
     fd_step = np.full(2, 1e-3)
     stage = "geometry"
     null = np.zeros(2)
-    generation_range = {"beta_deg": "U(0.3, 3)", "gamma_deg": "U(0, 360)"}
+    generation_range: ClassVar[dict] = {"beta_deg": "U(0.3, 3)", "gamma_deg": "U(0, 360)"}
 
     def starts(self):
         return [np.array([0.3, 0.0]), np.array([0.0, 0.3])]

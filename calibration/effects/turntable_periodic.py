@@ -14,11 +14,13 @@ recorded heading serves as the turntable angle. All four coefficients zero is th
 
 from __future__ import annotations
 
+from typing import ClassVar
+
 import numpy as np
 
 from . import Effect
 
-__all__ = ["TurntablePeriodic", "EFFECT"]
+__all__ = ["EFFECT", "TurntablePeriodic"]
 
 
 class TurntablePeriodic(Effect):
@@ -33,7 +35,7 @@ class TurntablePeriodic(Effect):
     fd_step = np.full(4, 1e-3)
     stage = "geometry"
     null = np.zeros(4)
-    generation_range = {"A1_deg": "U(0.03, 0.3), phase U(0, 360)",
+    generation_range: ClassVar[dict] = {"A1_deg": "U(0.03, 0.3), phase U(0, 360)",
                         "A2_deg": "U(0.03, 0.3), phase U(0, 360)"}
 
     def draw(self, rng):
