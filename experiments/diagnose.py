@@ -210,7 +210,8 @@ def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
 
     - accuracy where the effect's gap is >= ``ratio_min`` x the noise floor (effect data);
     - leave-one-out: fraction ``unexplained`` with the true effect withheld (same strata),
-      and the fraction naming a wrong effect;
+      and the fraction naming a wrong effect; also over every effect case whose gap the
+      diagnosis detected (verdict other than ``none``);
     - ``none`` on effect-free data;
     - false attributions: verdicts naming an effect other than the truth, over all cases;
     - shrink error ``shrink_est - shrink_true`` on correctly attributed strong cases, where
@@ -223,6 +224,7 @@ def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
     named = cases.verdict.isin(EFFECT_NAMES)
     false_attr = named & (cases.verdict != cases.truth)
     loo_wrong = strong.loo_verdict.isin(EFFECT_NAMES)
+    detected = eff[eff.verdict != "none"]  # effect data whose gap exceeds the floor
     ok = strong[strong.verdict == strong.truth]
     err = ok.shrink_est - ok.shrink_true
     labels = list(dict.fromkeys(list(BENCHMARK_LABELS) + ["unexplained"]))
@@ -239,6 +241,8 @@ def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
         "accuracy_all": frac(cases.verdict == cases.truth),
         "loo_unexplained_strong": frac(strong.loo_verdict == "unexplained"),
         "loo_wrong_effect_strong": frac(loo_wrong),
+        "loo_unexplained_detected": frac(detected.loo_verdict == "unexplained"),
+        "detected_effect_cases": int(len(detected)),
         "none_on_effect_free": frac(none.verdict == "none"),
         "false_attribution_rate": frac(false_attr),
         "shrink_within_tol": frac(np.abs(err) <= shrink_tol),
@@ -372,6 +376,8 @@ def benchmark_markdown(result: dict, n: int, seed: int, elapsed: float) -> str:
               f"{100 * s['loo_unexplained_strong']:.1f} % (wrong effect "
               f"{100 * s['loo_wrong_effect_strong']:.1f} %) | >= 90 %: "
               f"{'pass' if acc['loo_unexplained>=0.90'] else 'FAIL'} |"),
+             (f"| leave-one-out `unexplained`, all detected effect cases "
+              f"({s['detected_effect_cases']}) | {100 * s['loo_unexplained_detected']:.1f} % | — |"),
              (f"| `none` on effect-free data ({s['none_cases']}) | "
               f"{100 * s['none_on_effect_free']:.1f} % | >= 90 %: "
               f"{'pass' if acc['none_on_effect_free>=0.90'] else 'FAIL'} |"),
