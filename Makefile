@@ -27,8 +27,10 @@ venv: $(VENV)/.installed-run
 run: $(VENV)/.installed-run
 	$(BIN)/skysim reproduce yang2014
 
+# benchmarks (tests/benchmarks) run under `make bench`: some call the radiative-transfer
+# engine dozens of times, which would triple the suite's time on 2 cores
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q
+	$(BIN)/python -m pytest -q --ignore=tests/benchmarks
 
 bench: $(VENV)/.installed-test
 	@mkdir -p .benchmarks
