@@ -24,7 +24,8 @@ cases (sun positions) under one atmosphere.
    (``tau`` and the Lambertian albedo ``A`` free, ``k = 2``), both solved by sasktran2 through
    :class:`skysim.multiple.MultipleScatteringSky`. Score ``N ln(G_c^2 / G_0^2) +
    (k_c - 1) ln n_cal`` (held-out gap reduction with the BIC complexity penalty of Schwarz
-   1978 [3]_); the verdict uses :func:`calibration.diagnosis.decide` and its vocabulary: the
+   1978 [3]_), gaps below the noise floor counted as the floor (the data cannot rank models
+   there, e.g. exact tables reproduced by the engine to 1e-4: the simpler one wins); the verdict uses :func:`calibration.diagnosis.decide` and its vocabulary: the
    effect's name, ``none`` (single scattering with a fitted ``d_max`` is within the noise
    floor) or ``unexplained``.
 4. **How far.** Held-out gap before and after, the shrink ``1 - G_after / G_before`` and the
@@ -392,7 +393,9 @@ def diagnose_sky(cases: SkyCases, calibration_cases, *, candidates=SKY_CANDIDATE
             q, u = predict_qu(c_held, name, params, settings)
             residuals[name] = (q - c_held.q, u - c_held.u)
         Gc = _rms_gap(*residuals[name])
-        score = N * np.log(Gc ** 2 / G0 ** 2) + (_K[name] - 1) * np.log(n_cal)
+        # gaps below the floor are not resolved by the data: they score as the floor
+        score = (N * np.log(max(Gc, noise_floor) ** 2 / max(G0, noise_floor) ** 2)
+                 + (_K[name] - 1) * np.log(n_cal))
         excess0 = max(G0 ** 2 - noise_floor ** 2, 0.0)
         explained = bool(Gc <= noise_floor * (1 + thresholds.explained_margin)
                          or Gc ** 2 - noise_floor ** 2 <= thresholds.residual_excess * excess0)
