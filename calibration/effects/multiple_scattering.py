@@ -6,16 +6,35 @@ The base model takes the zenith DoP as ``d_max`` times the single-scattering sha
 by the ground) is less polarized and depolarizes the sky unevenly: the DoP at the zenith falls
 faster towards a low sun, and the neutral points (Arago, Babinet, Brewster) appear
 (Coulson 1988 [1]_ ch. 6; tables of Natraj et al. 2009 [2]_). The effect replaces the shape by
-the zenith DoP of :func:`skysim.sky.make_sky` ``("multiple", tau=..., albedo=...)`` (issue 3,
-:mod:`skysim.multiple`), keeping the free scale ``s`` for aerosol depolarization. By the
-symmetry of a plane-parallel atmosphere the zenith E-vector stays perpendicular to the solar
-meridian, so ``phi`` is unchanged. The engine runs at sun-elevation nodes 5 deg apart over
-the data's range (cubic spline between, cached per ``(tau, albedo)``).
+the zenith DoP of the multiple-scattering sky of :mod:`skysim.multiple` (issue 3), keeping the
+free scale ``s`` for aerosol depolarization. By the symmetry of a plane-parallel atmosphere the
+zenith E-vector stays perpendicular to the solar meridian, so ``phi`` is unchanged.
 
-Cost: each node is one radiative-transfer run (sasktran2: ~1 s on an idle core, 20-30 s on
-the loaded 2-core development machine), and a fit probes a few dozen ``(tau, albedo)``
-pairs, so this candidate is orders of magnitude slower than the others; the command line
-leaves it out unless asked for (``--effects``).
+Speed: a precomputed zenith table
+---------------------------------
+The radiative-transfer engine costs ~1 s per run, and a fit probes dozens of ``(tau, A)``
+pairs, so the effect reads a table built once by
+:mod:`calibration.effects.build_multiple_scattering_table` (sasktran2, the set-up of
+:mod:`skysim.rt_sasktran`) and shipped next to this module (``multiple_scattering_table.npz``,
+loaded with :mod:`importlib.resources`; no engine is needed at run time). Two pieces of
+physics keep it small:
+
+- the albedo enters exactly through Chandrasekhar's reduction of the planetary problem
+  ([3]_ sec. 72; [2]_ eq. (10)): ``X(A) = X_0 + A / (1 - A s) X_1`` for ``X = I, Q`` with
+  ``s`` the spherical albedo of the atmosphere, so the table holds ``I_0, Q_0, I_1, Q_1``
+  per ``(tau, sun elevation)`` and ``s`` per ``tau`` (``s`` does not depend on the sun:
+  equal over sun elevations to 1e-10 in a trial build);
+- the zenith field is smooth in ``tau`` and sun elevation: the DoP at ``A = 0``,
+  ``q = Q_0 / I_0``, and the ground ratios ``I_1 / I_0``, ``Q_1 / I_0`` are interpolated by
+  bicubic splines in ``(ln tau, sun elevation)`` on a 9 x 10 grid (``tau`` 0.02..1, sun
+  1..90 deg), ``s`` by a cubic spline in ``ln tau``. The zenith DoP is then
+
+  ``|q + g Q_1/I_0| / (1 + g I_1/I_0)``, ``g = A / (1 - A s)``.
+
+The interpolation error against direct engine runs at off-grid points is stored in the table
+(``meta``) and tested (``tests/test_effects.py``). Sun elevations outside the table's range
+(below 1 deg: the diagnosis excludes those samples) are clamped to it; ``tau`` and ``A`` are
+held inside :attr:`MultipleScattering.bounds` by the fit.
 
 References
 ----------
@@ -23,11 +42,15 @@ References
    (1988).
 .. [2] V. Natraj, K.-F. Li, Y. L. Yung, ApJ 691:1909-1920 (2009),
    doi:10.1088/0004-637X/691/2/1909.
+.. [3] S. Chandrasekhar, *Radiative Transfer*, Oxford (1950; Dover 1960), sec. 72.
 """
 
 from __future__ import annotations
 
+import json
+from dataclasses import dataclass
 from functools import lru_cache
+from importlib import resources
 from typing import ClassVar
 
 import numpy as np
@@ -36,47 +59,94 @@ from skysim.geometry import wrap_axial_deg
 
 from . import Effect
 
-__all__ = ["EFFECT", "EffectUnavailableError", "MultipleScattering", "zenith_dop"]
+__all__ = ["EFFECT", "TABLE_NAME", "EffectUnavailableError", "MultipleScattering",
+           "ZenithTable", "load_table", "zenith_dop"]
 
-NODE_STEP_DEG = 5.0
-"""Spacing [deg] of the sun-elevation nodes at which the engine is called (cubic spline
-between them: the zenith DoP is smooth in sun elevation, interpolation error ~h^4)."""
+TABLE_NAME = "multiple_scattering_table.npz"
+"""Package-data file of :mod:`calibration.effects` holding the zenith table."""
 
 
 class EffectUnavailableError(RuntimeError):
     """The physics an effect needs is not installed or not built yet (says what to add)."""
 
 
-@lru_cache(maxsize=4096)
-def _zenith_dop_node(tau: float, albedo: float, sun_elevation_deg: float) -> float:
-    try:
-        from skysim.sky import make_sky
-        sky = make_sky("multiple", tau=tau, albedo=albedo)
-        return float(sky.field(90.0, 0.0, sun_elevation_deg, 180.0).dop)
-    except (ImportError, AttributeError) as exc:
+@dataclass(frozen=True)
+class ZenithTable:
+    """Interpolant of the diffuse zenith field over ``(tau, sun elevation)`` (module docstring).
+
+    Attributes
+    ----------
+    tau, sun_elevation_deg : ndarray
+        Grid nodes [1], [deg].
+    q, r, p : RectBivariateSpline
+        ``Q_0 / I_0``, ``I_1 / I_0`` and ``Q_1 / I_0`` over ``(ln tau, sun elevation)``.
+    s : CubicSpline
+        Spherical albedo of the atmosphere over ``ln tau``.
+    meta : dict
+        Build record (engine set-up, validation errors).
+    """
+
+    tau: np.ndarray
+    sun_elevation_deg: np.ndarray
+    q: object
+    r: object
+    p: object
+    s: object
+    meta: dict
+
+    @classmethod
+    def from_arrays(cls, a) -> ZenithTable:
+        """Interpolant from the table arrays (``tau``, ``sun_elevation_deg``, ``I0``, ``Q0``,
+        ``I1``, ``Q1``, ``s``, optional ``meta`` JSON text or dict)."""
+        from scipy.interpolate import CubicSpline, RectBivariateSpline
+        x = np.log(np.asarray(a["tau"], float))
+        y = np.asarray(a["sun_elevation_deg"], float)
+        i0 = np.asarray(a["I0"], float)
+        spline = (lambda z: RectBivariateSpline(x, y, z, kx=3, ky=3, s=0))
+        meta = a.get("meta", {}) if isinstance(a, dict) else a["meta"]
+        meta = json.loads(str(meta)) if not isinstance(meta, dict) else meta
+        return cls(np.exp(x), y, spline(np.asarray(a["Q0"]) / i0),
+                   spline(np.asarray(a["I1"]) / i0), spline(np.asarray(a["Q1"]) / i0),
+                   CubicSpline(x, np.asarray(a["s"], float)), meta)
+
+    def dop(self, sun_elevation_deg, tau, albedo) -> np.ndarray:
+        """Zenith DoP [1] at sun elevations [deg], optical thickness and ground albedo
+        (broadcast); ``|q + g p| / (1 + g r)`` with ``g = A / (1 - A s(tau))``."""
+        el, tau, albedo = np.broadcast_arrays(np.asarray(sun_elevation_deg, float),
+                                              np.asarray(tau, float),
+                                              np.asarray(albedo, float))
+        el = np.clip(el, self.sun_elevation_deg[0], self.sun_elevation_deg[-1])
+        lt = np.clip(np.log(tau), np.log(self.tau[0]), np.log(self.tau[-1]))
+        g = albedo / (1.0 - albedo * self.s(lt))
+        q, r, p = (f.ev(lt.ravel(), el.ravel()).reshape(el.shape) for f in (self.q, self.r,
+                                                                             self.p))
+        return np.abs(q + g * p) / (1.0 + g * r)
+
+
+@lru_cache(maxsize=1)
+def load_table() -> ZenithTable:
+    """The committed zenith table (:data:`TABLE_NAME`), loaded once.
+
+    Raises
+    ------
+    EffectUnavailableError
+        When the file is missing (rebuild it with
+        ``python -m calibration.effects.build_multiple_scattering_table``).
+    """
+    ref = resources.files(__package__).joinpath(TABLE_NAME)
+    if not ref.is_file():
         raise EffectUnavailableError(
-            "effect 'multiple_scattering' needs the multiple-scattering sky "
-            "make_sky('multiple', tau=..., albedo=...) of skysim.multiple (issue 3) and its "
-            f"radiative-transfer engine, which are not available here ({exc}); leave it out "
-            "with --effects or install skysim[rt]") from exc
+            f"effect 'multiple_scattering' needs its zenith table {TABLE_NAME} in "
+            f"{__package__}; build it with `python -m "
+            f"{__package__}.build_multiple_scattering_table` (needs sasktran2, skysim[rt])")
+    with ref.open("rb") as fh, np.load(fh) as z:
+        return ZenithTable.from_arrays({k: z[k] for k in z.files})
 
 
 def zenith_dop(sun_elevation_deg, tau: float, albedo: float) -> np.ndarray:
-    """Zenith DoP of the multiple-scattering sky at the given sun elevations [deg].
-
-    The engine runs at sun-elevation nodes every :data:`NODE_STEP_DEG` covering the requested
-    elevations (each node cached per ``(tau, albedo)``); a cubic spline interpolates between.
-    """
-    from scipy.interpolate import CubicSpline
-    el = np.asarray(sun_elevation_deg, dtype=float)
-    lo = max(NODE_STEP_DEG * (np.floor(el.min() / NODE_STEP_DEG) - 1), 1.0)
-    hi = min(NODE_STEP_DEG * (np.ceil(el.max() / NODE_STEP_DEG) + 1), 90.0)
-    nodes = np.unique(np.r_[np.arange(lo, hi, NODE_STEP_DEG), hi])
-    key = (round(float(tau), 5), round(float(albedo), 5))
-    values = np.array([_zenith_dop_node(*key, float(x)) for x in nodes])
-    if nodes.size < 2:
-        return np.full(el.shape, values[0])
-    return CubicSpline(nodes, values)(el)
+    """Zenith DoP of the multiple-scattering sky at the given sun elevations [deg]
+    (:meth:`ZenithTable.dop` of :func:`load_table`)."""
+    return load_table().dop(sun_elevation_deg, tau, albedo)
 
 
 class MultipleScattering(Effect):
@@ -91,16 +161,15 @@ class MultipleScattering(Effect):
     fd_step = np.array([2e-3, 5e-3])
     stage = "geometry"
     null = np.array([np.nan, np.nan])  # no parameter value gives single scattering
-    generation_range: ClassVar[dict] = {"tau": "U(0.05, 0.4) (Rayleigh optical thickness 700..400 nm)",
-                        "albedo": "U(0, 0.4)"}
+    generation_range: ClassVar[dict] = {
+        "tau": "U(0.05, 0.4) (Rayleigh optical thickness 700..400 nm)",
+        "albedo": "U(0, 0.4)"}
 
     def available(self):
-        import importlib.util
-        for module in ("skysim.multiple", "sasktran2"):
-            if importlib.util.find_spec(module) is None:
-                return (f"effect 'multiple_scattering' needs {module} (the multiple-scattering "
-                        "sky of issue 3 and its engine, extra skysim[rt]); leave it out with "
-                        "--effects or install it")
+        try:
+            load_table()
+        except EffectUnavailableError as exc:
+            return str(exc)
         return None
 
     def starts(self):
