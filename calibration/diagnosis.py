@@ -88,9 +88,10 @@ __all__ = [
 
 DIAGNOSIS_SCHEMA = "skysim.diagnosis/1"
 
-DEFAULT_CANDIDATES = tuple(n for n in EFFECT_NAMES if n != "multiple_scattering")
-"""Candidates tried unless others are named: every effect except ``multiple_scattering``,
-whose radiative-transfer engine costs ~1-30 s per sun-elevation node and (tau, albedo)."""
+DEFAULT_CANDIDATES = EFFECT_NAMES
+"""Candidates tried unless others are named: every effect (``multiple_scattering`` reads a
+precomputed zenith table, no radiative-transfer run; it is listed as unavailable when the
+table is missing)."""
 
 _BASE_PRIOR_SD = np.r_[np.full(6, 5.0), np.full(3, 0.2), 1.0]
 _BASE_STEP_TOL = np.r_[np.full(6, 1e-5), np.full(3, 1e-7), 1e-7]

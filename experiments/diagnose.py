@@ -505,8 +505,7 @@ def register(sub) -> None:
                                    "and give a verdict (schema skysim.diagnosis/1).",
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     d.add_argument("data", help="measurement table or photodiode data (.csv/.parquet + sidecar)")
-    d.add_argument("--effects", help="comma-separated candidates (default: all but "
-                   "multiple_scattering, whose RT engine takes minutes): "
+    d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES))
     d.add_argument("--out", help="output directory (default results/diagnose/<name>)")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
@@ -518,7 +517,7 @@ def register(sub) -> None:
     b.add_argument("--quick", action="store_true", help="27 data sets (3 per label)")
     b.add_argument("--seed", type=int, default=7)
     b.add_argument("--out", help="output directory (default results/gap_benchmark)")
-    b.add_argument("--effects", help="comma-separated effects to hide and to try (default: all "
-                   "but multiple_scattering)")
+    b.add_argument("--effects", help="comma-separated effects to hide and to try "
+                   "(default: all)")
     b.add_argument("--folds", type=int, default=3)
     b.set_defaults(func=_benchmark_cmd)
