@@ -58,18 +58,25 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass, field
+from itertools import pairwise
 
 import numpy as np
 
 from skysim import rayleigh
 from skysim.rt_sasktran import DEFAULT_SETTINGS, EngineSettings
 
-from .diagnosis import DIAGNOSIS_SCHEMA, DiagnosisError, InsufficientDataError, Thresholds, decide
+from .diagnosis import (
+    DIAGNOSIS_SCHEMA,
+    DiagnosisError,
+    InsufficientDataError,
+    Thresholds,
+    decide,
+)
 from .effects import UnknownEffectError
 
 __all__ = [
-    "SKY_CANDIDATES",
     "SKYGAP_LEVEL",
+    "SKY_CANDIDATES",
     "SkyCases",
     "SkyGapInputError",
     "albedo_decomposition",
@@ -91,6 +98,7 @@ NEUTRAL_ZONE_DEG = 30.0
 HORIZON_ELEVATION_DEG = 15.0
 _K = {"d_max": 1, "multiple_scattering": 1, "ground_albedo": 2}
 _ALBEDO_NODES = (0.0, 0.5, 1.0)
+DEFAULT_THRESHOLDS = Thresholds()
 
 
 class SkyGapInputError(DiagnosisError, ValueError):
@@ -150,7 +158,7 @@ class SkyCases:
     def case_ids(self) -> np.ndarray:
         return np.unique(self.case)
 
-    def subset(self, ids) -> "SkyCases":
+    def subset(self, ids) -> SkyCases:
         m = np.isin(self.case, np.asarray(ids))
         return SkyCases(self.case[m], self.view_elevation_deg[m], self.view_azimuth_deg[m],
                         self.sun_elevation_deg[m], self.sun_azimuth_deg[m], self.q[m],
@@ -301,11 +309,11 @@ def slice_residuals(c: SkyCases, dq, du, noise_floor: float, margin: float = 0.1
                                           c.sun_elevation_deg, c.sun_azimuth_deg)
     sun_edges = np.array([0.0, 30.0, 60.0, 90.0, 120.0, 150.0, 180.01])
     sun_lab = np.digitize(gamma, sun_edges) - 1
-    sun_names = [f"{a:g}-{min(b, 180):g} deg from sun" for a, b in zip(sun_edges, sun_edges[1:])]
+    sun_names = [f"{a:g}-{min(b, 180):g} deg from sun" for a, b in pairwise(sun_edges)]
     zen = 90.0 - c.view_elevation_deg
     zen_edges = np.array([0.0, 30.0, 60.0, 75.0, 90.01])
     zen_lab = np.digitize(zen, zen_edges) - 1
-    zen_names = [f"view zenith {a:g}-{min(b, 90):g} deg" for a, b in zip(zen_edges, zen_edges[1:])]
+    zen_names = [f"view zenith {a:g}-{min(b, 90):g} deg" for a, b in pairwise(zen_edges)]
     hor = (c.view_elevation_deg < HORIZON_ELEVATION_DEG).astype(int)
     neu = ((gamma < NEUTRAL_ZONE_DEG) | (gamma > 180.0 - NEUTRAL_ZONE_DEG)).astype(int)
     out = {"by_sun_distance": _slice_rows(r2, sun_lab, sun_names),
@@ -332,7 +340,7 @@ def slice_residuals(c: SkyCases, dq, du, noise_floor: float, margin: float = 0.1
 
 def diagnose_sky(cases: SkyCases, calibration_cases, *, candidates=SKY_CANDIDATES,
                  noise_floor: float, settings: EngineSettings = DEFAULT_SETTINGS,
-                 thresholds: Thresholds = Thresholds(), n_grid: int = TAU_GRID_NODES,
+                 thresholds: Thresholds = DEFAULT_THRESHOLDS, n_grid: int = TAU_GRID_NODES,
                  xatol: float = 0.01) -> dict:
     """Sky-level gap diagnosis; returns a "skysim.diagnosis/1" document with ``level: sky``.
 

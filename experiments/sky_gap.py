@@ -126,9 +126,9 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
 
 def _report(summary: pd.DataFrame, docs: dict, meta: dict) -> str:
     lines = ["# Sky-level gap on Natraj et al. (2009)", "",
-             f"Fitted on mu0 = {', '.join(f'{m:g}' for m in CALIBRATION_MU0)}; scored on the "
-             f"other suns. Noise floor {NOISE_FLOOR:g} (engine vs tables). Engine "
-             f"{meta['engine_settings']}. {meta['elapsed_s']:.0f} s.", "",
+             (f"Fitted on mu0 = {', '.join(f'{m:g}' for m in CALIBRATION_MU0)}; scored on "
+              f"the other suns. Noise floor {NOISE_FLOOR:g} (engine vs tables). Engine "
+              f"{meta['engine_settings']}. {meta['elapsed_s']:.0f} s."), "",
              "| tau | albedo | verdict | d_max | gap before | gap after | shrink | fitted |",
              "|---|---|---|---|---|---|---|---|"]
     for r in summary.itertuples():

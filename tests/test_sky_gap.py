@@ -140,3 +140,20 @@ def test_bad_input_specific_errors():
     with pytest.raises(SkyGapInputError, match="horizon"):
         SkyCases(c.case, c.view_elevation_deg, c.view_azimuth_deg, -c.sun_elevation_deg,
                  c.sun_azimuth_deg, c.q, c.u)
+
+
+def test_natraj_reader_conventions_thin_atmosphere_is_single_scattering(reference_dir):
+    """tau = 0.02 over a black ground is nearly single scattering (the multiply scattered
+    fraction is of order tau = 2 %): the base fit must give d_max within 0.03 of 1 and a gap
+    below 0.02, while the opposite Q sign (the table's Q = I_r - I_l) would leave a gap ~ 1.
+    No engine call."""
+    from calibration.sky_gap import fit_dmax, predict_qu
+    from experiments.sky_gap import cases_from_natraj, read_natraj
+    t = read_natraj(reference_dir)
+    c, mu0s = cases_from_natraj(t[(t.tau == 0.02) & (t.albedo == 0.0)])
+    assert mu0s.tolist() == [0.1, 0.2, 0.4, 0.6, 0.8, 0.92, 1.0]
+    p = fit_dmax(c)
+    q, u = predict_qu(c, "d_max", p)
+    assert p["d_max"] == pytest.approx(1.0, abs=0.03)
+    assert np.sqrt(np.mean((q - c.q) ** 2 + (u - c.u) ** 2)) < 0.02
+    assert np.sqrt(np.mean((q + c.q) ** 2 + (u - c.u) ** 2)) > 0.5
