@@ -234,8 +234,9 @@ def main(argv=None) -> int:
     from .multiple_scattering import ZenithTable
     zt = ZenithTable.from_arrays(table)
     dop_direct = np.abs(table["val_Q"]) / table["val_I"]
-    err = zt.dop(table["val_sun_elevation_deg"], table["val_tau"],
-                 table["val_albedo"]) - dop_direct
+    dop_table = np.array([zt.dop(el, tau, alb) for el, tau, alb in zip(
+        table["val_sun_elevation_deg"], table["val_tau"], table["val_albedo"])])
+    err = dop_table - dop_direct
     table["meta"].update(max_abs_dop_error_validation=float(np.max(np.abs(err))),
                          rms_dop_error_validation=float(np.sqrt(np.mean(err**2))),
                          max_q1_over_i1=float(np.max(np.abs(table["Q1"] / table["I1"]))))

@@ -26,7 +26,7 @@ physics keep it small:
   equal over sun elevations to 1e-10 in a trial build);
 - the zenith field is smooth in ``tau`` and sun elevation: the DoP at ``A = 0``,
   ``q = Q_0 / I_0``, and the ground ratios ``I_1 / I_0``, ``Q_1 / I_0`` are interpolated by
-  bicubic splines in ``(ln tau, sun elevation)`` on a 9 x 10 grid (``tau`` 0.02..1, sun
+  bicubic (not-a-knot) splines in ``(ln tau, sun elevation)`` on a 9 x 10 grid (``tau`` 0.02..1, sun
   1..90 deg), ``s`` by a cubic spline in ``ln tau``. The zenith DoP is then
 
   ``|q + g Q_1/I_0| / (1 + g I_1/I_0)``, ``g = A / (1 - A s)``.
@@ -70,16 +70,32 @@ class EffectUnavailableError(RuntimeError):
     """The physics an effect needs is not installed or not built yet (says what to add)."""
 
 
+@lru_cache(maxsize=8)
+def _design_matrix(el_bytes: bytes, knots_bytes: bytes):
+    """Cubic B-spline basis (sparse, n x n_nodes) at the sun elevations of a data set: a fit
+    evaluates the same elevations for every (tau, A), so the basis is built once."""
+    from scipy.interpolate import BSpline
+    el = np.frombuffer(el_bytes)
+    return BSpline.design_matrix(el, np.frombuffer(knots_bytes), 3).tocsr()
+
+
 @dataclass(frozen=True)
 class ZenithTable:
     """Interpolant of the diffuse zenith field over ``(tau, sun elevation)`` (module docstring).
+
+    The bicubic interpolating spline (not-a-knot in both directions) is held as a cubic spline
+    in ``ln tau`` whose values are the B-spline coefficients in sun elevation of
+    ``(Q_0 / I_0, I_1 / I_0, Q_1 / I_0)``: at one ``tau`` the DoP of ``n`` samples is then a
+    sparse ``(n x 10) @ (10 x 3)`` product.
 
     Attributes
     ----------
     tau, sun_elevation_deg : ndarray
         Grid nodes [1], [deg].
-    q, r, p : RectBivariateSpline
-        ``Q_0 / I_0``, ``I_1 / I_0`` and ``Q_1 / I_0`` over ``(ln tau, sun elevation)``.
+    coef : BSpline
+        Over ``ln tau``; values (n_el, 3) B-spline coefficients in sun elevation.
+    knots : ndarray
+        Knots of the sun-elevation B-splines [deg].
     s : CubicSpline
         Spherical albedo of the atmosphere over ``ln tau``.
     meta : dict
@@ -88,9 +104,8 @@ class ZenithTable:
 
     tau: np.ndarray
     sun_elevation_deg: np.ndarray
-    q: object
-    r: object
-    p: object
+    coef: object
+    knots: np.ndarray
     s: object
     meta: dict
 
@@ -98,29 +113,29 @@ class ZenithTable:
     def from_arrays(cls, a) -> ZenithTable:
         """Interpolant from the table arrays (``tau``, ``sun_elevation_deg``, ``I0``, ``Q0``,
         ``I1``, ``Q1``, ``s``, optional ``meta`` JSON text or dict)."""
-        from scipy.interpolate import CubicSpline, RectBivariateSpline
+        from scipy.interpolate import CubicSpline, make_interp_spline
         x = np.log(np.asarray(a["tau"], float))
         y = np.asarray(a["sun_elevation_deg"], float)
         i0 = np.asarray(a["I0"], float)
-        spline = (lambda z: RectBivariateSpline(x, y, z, kx=3, ky=3, s=0))
+        z = np.stack([np.asarray(a["Q0"]) / i0, np.asarray(a["I1"]) / i0,
+                      np.asarray(a["Q1"]) / i0], axis=-1)            # (n_tau, n_el, 3)
+        along_el = make_interp_spline(y, z, k=3, axis=1)
+        coef = make_interp_spline(x, along_el.c, k=3, axis=1)  # c: (n_el, n_tau, 3)
         meta = a.get("meta", {}) if isinstance(a, dict) else a["meta"]
         meta = json.loads(str(meta)) if not isinstance(meta, dict) else meta
-        return cls(np.exp(x), y, spline(np.asarray(a["Q0"]) / i0),
-                   spline(np.asarray(a["I1"]) / i0), spline(np.asarray(a["Q1"]) / i0),
+        return cls(np.exp(x), y, coef, np.asarray(along_el.t, float),
                    CubicSpline(x, np.asarray(a["s"], float)), meta)
 
-    def dop(self, sun_elevation_deg, tau, albedo) -> np.ndarray:
-        """Zenith DoP [1] at sun elevations [deg], optical thickness and ground albedo
-        (broadcast); ``|q + g p| / (1 + g r)`` with ``g = A / (1 - A s(tau))``."""
-        el, tau, albedo = np.broadcast_arrays(np.asarray(sun_elevation_deg, float),
-                                              np.asarray(tau, float),
-                                              np.asarray(albedo, float))
-        el = np.clip(el, self.sun_elevation_deg[0], self.sun_elevation_deg[-1])
-        lt = np.clip(np.log(tau), np.log(self.tau[0]), np.log(self.tau[-1]))
-        g = albedo / (1.0 - albedo * self.s(lt))
-        q, r, p = (f.ev(lt.ravel(), el.ravel()).reshape(el.shape) for f in (self.q, self.r,
-                                                                             self.p))
-        return np.abs(q + g * p) / (1.0 + g * r)
+    def dop(self, sun_elevation_deg, tau: float, albedo: float) -> np.ndarray:
+        """Zenith DoP [1] at sun elevations [deg] for one optical thickness and ground albedo:
+        ``|q + g p| / (1 + g r)`` with ``g = A / (1 - A s(tau))``."""
+        el = np.asarray(sun_elevation_deg, float)
+        flat = np.ascontiguousarray(np.clip(el.ravel(), self.sun_elevation_deg[0],
+                                            self.sun_elevation_deg[-1]))
+        lt = float(np.clip(np.log(tau), np.log(self.tau[0]), np.log(self.tau[-1])))
+        g = float(albedo) / (1.0 - float(albedo) * float(self.s(lt)))
+        q, r, p = (_design_matrix(flat.tobytes(), self.knots.tobytes()) @ self.coef(lt)).T
+        return (np.abs(q + g * p) / (1.0 + g * r)).reshape(el.shape)
 
 
 @lru_cache(maxsize=1)
