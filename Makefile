@@ -6,6 +6,7 @@ PIP    := $(BIN)/python -m pip
 # one BLAS thread per process (see experiments/cli.py): small batched systems, busy 2 cores
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
+export OMP_NUM_THREADS ?= 1
 
 .PHONY: run test bench clean venv
 

@@ -14,7 +14,9 @@ import os
 # adds thread hand-offs (5-100x slower on a busy 2-core machine, measured in the dark-current
 # calibration). One BLAS thread per process; sweeps parallelise over processes instead.
 # Set before numpy is first imported; a user's own setting wins.
-for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+# The radiative-transfer engine (OpenMP) is likewise steadier single-threaded here (0.45 s per
+# call vs 0.4-5 s with 2 threads on a busy 2-core machine).
+for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402

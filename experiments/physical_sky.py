@@ -53,6 +53,23 @@ def _save_png(fig, path: Path) -> None:
     plt.close(fig)
 
 
+def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
+    """Transmitted-field rows of the Natraj et al. (2009) subset with view cosine ``mu >= min_mu``
+    (Natraj's sign conventions: ``Q_table = -Q``, ``U_table = U``; docs/conventions.md).
+
+    Raises
+    ------
+    FileNotFoundError
+        If the table is missing (it lives in ``../shared/reference/natraj2009/``).
+    """
+    path = Path(table_path)
+    if not path.is_file():
+        raise FileNotFoundError(f"{path} not found: give the reference folder holding "
+                                "natraj2009/natraj2009_subset.csv.gz")
+    d = pd.read_csv(path)
+    return d[(d.field == "transmitted") & (d.mu >= min_mu)]
+
+
 def validate_against_natraj(table_path=NATRAJ_FILE, cases=None, min_mu: float = 0.1):
     """Compare the multiple-scattering sky with the tables, case by case.
 
@@ -60,8 +77,7 @@ def validate_against_natraj(table_path=NATRAJ_FILE, cases=None, min_mu: float = 
     """
     from skysim.multiple import MultipleScatteringSky
 
-    d = pd.read_csv(table_path)
-    d = d[(d.field == "transmitted") & (d.mu >= min_mu)]
+    d = read_natraj(table_path, min_mu)
     rows, points = [], []
     for (tau, albedo, mu0), s in d.groupby(["tau", "albedo", "mu0"]):
         if cases is not None and (tau, albedo, mu0) not in cases:

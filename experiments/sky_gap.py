@@ -25,7 +25,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .physical_sky import NATRAJ_FILE
+from .physical_sky import NATRAJ_FILE, read_natraj
 
 __all__ = ["CALIBRATION_MU0", "NOISE_FLOOR", "cases_from_natraj", "register",
            "register_reproduce", "run"]
@@ -44,16 +44,12 @@ def _save_png(fig, path: Path) -> None:
     plt.close(fig)
 
 
-def read_natraj(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
-    """Transmitted rows of the table with ``mu >= min_mu`` (the reading of
-    :func:`experiments.physical_sky.validate_against_natraj`)."""
+def natraj_table(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
+    """The Natraj 2009 transmitted rows from ``reference`` (a folder holding ``natraj2009/``),
+    or from ``../shared/reference`` by default (:func:`experiments.physical_sky.read_natraj`)."""
     path = NATRAJ_FILE if reference is None else (Path(reference) / "natraj2009"
                                                   / "natraj2009_subset.csv.gz")
-    if not path.is_file():
-        raise FileNotFoundError(f"{path} not found: give --reference DIR with "
-                                "natraj2009/natraj2009_subset.csv.gz inside")
-    d = pd.read_csv(path)
-    return d[(d.field == "transmitted") & (d.mu >= min_mu)]
+    return read_natraj(path, min_mu)
 
 
 def cases_from_natraj(rows: pd.DataFrame):
@@ -152,7 +148,7 @@ def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
     t0 = time.perf_counter()
     out = Path(out)
     settings = EngineSettings(n_streams=16)  # 16 streams: as accurate as 40 here (tables README)
-    table = read_natraj(reference)
+    table = natraj_table(reference)
     rows, docs, maps = [], {}, {}
     for (tau, albedo), g in table.groupby(["tau", "albedo"]):
         if quick and (tau, albedo) not in QUICK_CONFIGS:
