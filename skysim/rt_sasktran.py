@@ -64,6 +64,7 @@ __all__ = [
     "rayleigh_depolarization_factor",
     "require_sasktran2",
     "transmitted_stokes",
+    "transmitted_stokes_cases",
 ]
 
 MU_MIN = 1.0e-4
@@ -205,6 +206,45 @@ def transmitted_stokes(tau: float, albedo: float, mu0: float, mu, phi_deg, *,
     if tau == 0.0:
         z = np.zeros(mu.shape)
         return z, z.copy(), z.copy()
+    stokes = transmitted_stokes_cases([tau], [albedo], mu0, mu.ravel(), phi.ravel(),
+                                      depolarization_ratio=depolarization_ratio,
+                                      settings=settings)[0]
+    shape = mu.shape
+    return stokes[:, 0].reshape(shape), stokes[:, 1].reshape(shape), stokes[:, 2].reshape(shape)
+
+
+def transmitted_stokes_cases(taus, albedos, mu0: float, mu, phi_deg, *,
+                             depolarization_ratio: float = 0.0,
+                             settings: EngineSettings = DEFAULT_SETTINGS) -> np.ndarray:
+    """Diffuse Stokes for many ``(tau, albedo)`` cases at one sun, in one engine call.
+
+    Each case is one "wavelength" of the engine (the optical properties are per wavelength);
+    the set-up, normalisation and basis are those of :func:`transmitted_stokes`, which is the
+    single-case form of this function.
+
+    Parameters
+    ----------
+    taus, albedos : array-like (m,)
+        Optical thickness (> 0) and Lambertian albedo in [0, 1] of each case.
+    mu0 : float
+        Cosine of the solar zenith angle, in (0, 1].
+    mu, phi_deg : array-like (n,)
+        View cosines and relative azimuths [deg], as :func:`transmitted_stokes`.
+
+    Returns
+    -------
+    ndarray (m, n, 3)
+        ``I, Q, U`` of each case and direction (skysim basis, incident flux ``pi``).
+    """
+    taus, albedos = np.broadcast_arrays(np.atleast_1d(np.asarray(taus, float)),
+                                        np.atleast_1d(np.asarray(albedos, float)))
+    check_in_range("taus", taus, 0.0, np.inf, low_open=True,
+                   hint="optical thickness > 0 (tau = 0 has no diffuse sky)")
+    check_in_range("albedos", albedos, 0.0, 1.0)
+    mu0 = float(check_in_range("mu0", mu0, 0.0, 1.0, low_open=True,
+                               hint="the sun must be above the horizon"))
+    mu, phi = np.broadcast_arrays(np.atleast_1d(check_in_range("mu", mu, 0.0, 1.0)),
+                                  np.atleast_1d(np.asarray(phi_deg, dtype=float)))
     delta = rayleigh_depolarization_factor(depolarization_ratio)
     sk = require_sasktran2()
     cfg = sk.Config()
@@ -218,17 +258,14 @@ def transmitted_stokes(tau: float, albedo: float, mu0: float, mu, phi_deg, *,
                              sk.InterpolationMethod.LinearInterpolation,
                              sk.GeometryType.Spherical)
     viewing = sk.ViewingGeometry()
-    mu_engine = np.clip(mu.ravel(), MU_MIN, MU_MAX)
-    for m, p in zip(mu_engine, np.radians(phi.ravel())):
+    for m, p in zip(np.clip(mu.ravel(), MU_MIN, MU_MAX), np.radians(phi.ravel())):
         viewing.add_ray(sk.SolarAnglesObserverLocation(mu0, float(p), float(m), 0.0))
-    atmosphere = sk.Atmosphere(geometry, cfg, numwavel=1, calculate_derivatives=False)
-    atmosphere.storage.total_extinction[:] = tau / settings.slab_height_m
+    atmosphere = sk.Atmosphere(geometry, cfg, numwavel=taus.size, calculate_derivatives=False)
+    atmosphere.storage.total_extinction[:] = taus.ravel()[None, :] / settings.slab_height_m
     atmosphere.storage.ssa[:] = 1.0
     _set_rayleigh_phase_matrix(sk, atmosphere, delta)
-    atmosphere.surface.albedo[:] = albedo
+    atmosphere.surface.albedo[:] = albedos.ravel()
     radiance = sk.Engine(cfg, geometry, viewing).calculate_radiance(atmosphere)
-    stokes = np.pi * np.asarray(radiance.radiance.values[0], dtype=float)  # (n, 3): I, Q, U
-    shape = mu.shape
-    # sasktran2's U has the opposite sense to skysim's (module docstring)
-    return (stokes[:, 0].reshape(shape), stokes[:, 1].reshape(shape),
-            -stokes[:, 2].reshape(shape))
+    stokes = np.pi * np.asarray(radiance.radiance.values, dtype=float)  # (m, n, 3): I, Q, U
+    stokes[..., 2] *= -1.0  # sasktran2's U has the opposite sense to skysim's (module docstring)
+    return stokes

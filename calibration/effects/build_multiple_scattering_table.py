@@ -66,8 +66,7 @@ from skysim.rt_sasktran import (
     DEFAULT_SETTINGS,
     MU_MAX,
     EngineSettings,
-    _set_rayleigh_phase_matrix,
-    require_sasktran2,
+    transmitted_stokes_cases,
 )
 
 __all__ = ["BUILD_ALBEDOS", "SUN_ELEVATIONS_DEG", "S_REFERENCE_ELEVATION_DEG", "TABLE_PATH",
@@ -110,34 +109,11 @@ def zenith_stokes(taus, albedos, sun_elevation_deg: float,
     ndarray (m, 3)
         ``I, Q, U`` of each case.
     """
-    taus, albedos = np.broadcast_arrays(np.asarray(taus, float), np.asarray(albedos, float))
-    if np.any(taus <= 0) or np.any((albedos < 0) | (albedos > 1)):
-        raise ValueError(f"taus must be > 0 and albedos in [0, 1]; got {taus}, {albedos}")
     if not 0.0 < sun_elevation_deg <= 90.0:
         raise ValueError(f"sun_elevation_deg must lie in (0, 90]; got {sun_elevation_deg}")
-    sk = require_sasktran2()
     mu0 = float(np.sin(np.radians(sun_elevation_deg)))
-    cfg = sk.Config()
-    cfg.num_stokes = 3
-    cfg.single_scatter_source = sk.SingleScatterSource.Exact
-    cfg.multiple_scatter_source = sk.MultipleScatterSource.DiscreteOrdinates
-    cfg.num_streams = settings.n_streams
-    cfg.num_singlescatter_moments = max(16, settings.n_streams)
-    altitudes = np.linspace(0.0, settings.slab_height_m, settings.n_levels)
-    geometry = sk.Geometry1D(mu0, 0.0, settings.planet_radius_m, altitudes,
-                             sk.InterpolationMethod.LinearInterpolation,
-                             sk.GeometryType.Spherical)
-    viewing = sk.ViewingGeometry()
-    viewing.add_ray(sk.SolarAnglesObserverLocation(mu0, 0.0, MU_MAX, 0.0))
-    atmosphere = sk.Atmosphere(geometry, cfg, numwavel=taus.size, calculate_derivatives=False)
-    atmosphere.storage.total_extinction[:] = taus.ravel()[None, :] / settings.slab_height_m
-    atmosphere.storage.ssa[:] = 1.0
-    _set_rayleigh_phase_matrix(sk, atmosphere, 1.0)
-    atmosphere.surface.albedo[:] = albedos.ravel()
-    radiance = sk.Engine(cfg, geometry, viewing).calculate_radiance(atmosphere)
-    stokes = np.pi * np.asarray(radiance.radiance.values, dtype=float)[:, 0, :]  # (m, 3)
-    stokes[:, 2] *= -1.0  # sasktran2's U sense is opposite to skysim's (rt_sasktran)
-    return stokes
+    return transmitted_stokes_cases(taus, albedos, mu0, [MU_MAX], [0.0],
+                                    depolarization_ratio=0.0, settings=settings)[:, 0, :]
 
 
 def albedo_reduction(x0, xa, xb, a=BUILD_ALBEDOS[1], b=BUILD_ALBEDOS[2]):
