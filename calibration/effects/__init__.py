@@ -39,6 +39,7 @@ References
 
 from __future__ import annotations
 
+import abc
 import importlib
 from dataclasses import dataclass, field
 from typing import ClassVar
@@ -185,7 +186,7 @@ class Context:
                        self.sun, self.t_ref_s)
 
 
-class Effect:
+class Effect(abc.ABC):
     """One unmodelled physical effect: parameters, priors, forward hooks and generation range.
 
     Subclasses set the class attributes and override the hooks their physics touches; every
@@ -234,9 +235,10 @@ class Effect:
         """Initial parameter vectors of a fit (several for multi-modal problems)."""
         return [np.clip(self.prior_mean, self.bounds[:, 0], self.bounds[:, 1])]
 
+    @abc.abstractmethod
     def draw(self, rng: np.random.Generator) -> np.ndarray:
-        """Draw parameters from :attr:`generation_range` (benchmark generator)."""
-        raise NotImplementedError
+        """Draw parameters from :attr:`generation_range` (benchmark generator); every effect
+        defines its own documented magnitudes."""
 
     def clip(self, p) -> np.ndarray:
         return np.clip(np.asarray(p, float), self.bounds[:, 0], self.bounds[:, 1])
