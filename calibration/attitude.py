@@ -60,6 +60,7 @@ from sensor.compound_eye import CompoundEyeSensor, attitude_angles
 from sensor.imu import check_rate
 from sensor.platform import TrajectoryTooShortError
 from skysim.exceptions import InvalidParameterError
+from skysim.geometry import wrap_deg
 from skysim.validation import check_finite, check_sun_above_horizon
 
 from .installation import (
@@ -379,5 +380,5 @@ def attitude_error_deg(estimate: AttitudeEstimate, truth: Rotation) -> dict:
     total = np.degrees((R_true.inv() * estimate.rotation()).magnitude()).reshape(S, K)
     yaw, pitch, roll = estimate.angles_deg()
     ty, tp, tr = attitude_angles(truth)
-    return {"total": total, "yaw": np.mod(yaw - ty + 180.0, 360.0) - 180.0,
+    return {"total": total, "yaw": wrap_deg(yaw - ty),
             "pitch": pitch - tp, "roll": roll - tr}

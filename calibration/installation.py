@@ -41,9 +41,15 @@ from scipy.spatial.transform import Rotation
 from sensor.compound_eye import CompoundEyeSensor, attitude_angles, body_attitude
 from sensor.opponent import GAIN
 from sensor.photodiodes_io import ACCEL_COLUMNS, PhotodiodeData
+from skysim.geometry import wrap_axial_deg
 from skysim.sun import sun_vector
 
-from .exceptions import CalibrationError, ConvergenceError, RankDeficientError, TooFewSamplesError
+from .exceptions import (
+    CalibrationError,
+    ConvergenceError,
+    RankDeficientError,
+    TooFewSamplesError,
+)
 from .solve import solve_pair
 
 __all__ = ["UnobservableError", "SaturatedUnitError", "InstallationEstimate",
@@ -156,7 +162,7 @@ def polarization_from_photodiodes(readings, angles_deg, method: str = "stokes"):
                           for c in (60, 0, 120)], axis=-1)
         # solve_pair's model is cos 2(phi + a); Malus's pair ratio is cos 2(chi - a): chi = -phi
         phi, dop = solve_pair(U, (1, 2), GAIN)
-        return np.mod(-phi + 90.0, 180.0) - 90.0, dop
+        return wrap_axial_deg(-phi), dop
     if method != "stokes":
         raise ValueError(f"unknown method {method!r}; valid: 'stokes', 'opponent'")
     A = np.stack([np.ones_like(a), np.cos(2 * a), np.sin(2 * a)], axis=1)
@@ -164,7 +170,7 @@ def polarization_from_photodiodes(readings, angles_deg, method: str = "stokes"):
     with np.errstate(divide="ignore", invalid="ignore"):
         dop = np.hypot(s[..., 1], s[..., 2]) / s[..., 0]
     aop = 0.5 * np.degrees(np.arctan2(s[..., 2], s[..., 1]))
-    return np.mod(aop + 90.0, 180.0) - 90.0, dop
+    return wrap_axial_deg(aop), dop
 
 
 def unit_polarization(data: PhotodiodeData, min_dop: float = 0.05,

@@ -25,6 +25,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.geometry import wrap_deg
 from skysim.io import atomic_write, write_json_atomic
 from skysim.sun import Site
 
@@ -81,7 +82,7 @@ def _attitude_errors(data, sensors: dict) -> dict:
         att, _ = attitude_from_data(data, sensor)
         yaw, pitch, roll = attitude_angles(att)
         rms = lambda x: float(np.sqrt(np.mean(np.square(x))))  # noqa: E731
-        out[name] = {"heading_rms_deg": rms(np.mod(yaw - t["true_yaw_deg"] + 180, 360) - 180),
+        out[name] = {"heading_rms_deg": rms(wrap_deg(yaw - t["true_yaw_deg"])),
                      "pitch_rms_deg": rms(pitch - t["true_pitch_deg"]),
                      "roll_rms_deg": rms(roll - t["true_roll_deg"]),
                      "attitude_rms_deg": rms(np.degrees((att * truth.inv()).magnitude()))}
@@ -94,7 +95,10 @@ def run(trials: int = 50, seed: int = 2020, out=None, scenario: Scenario = SCENA
     from tqdm import tqdm
 
     from calibration.installation import calibrate_installation
-    from sensor.compound_eye import patent_configuration, with_random_installation_errors
+    from sensor.compound_eye import (
+        patent_configuration,
+        with_random_installation_errors,
+    )
     from skysim.sky import RayleighSky
 
     t0 = time.perf_counter()
@@ -239,7 +243,7 @@ def plot_heading_errors(ex: dict, path: Path) -> None:
     for name, sensor in (("uncompensated", ex["sensor"].nominal()),
                          ("compensated", ex["cal"].sensor)):
         yaw = attitude_angles(attitude_from_data(ex["test"], sensor)[0])[0]
-        err = np.mod(yaw - t["true_yaw_deg"] + 180, 360) - 180
+        err = wrap_deg(yaw - t["true_yaw_deg"])
         ax.plot(t["true_yaw_deg"], err, ".", ms=3,
                 label=f"{name} (RMS {np.sqrt(np.mean(err ** 2)):.3f}°)")
     ax.axhline(0, color="k", lw=0.5)

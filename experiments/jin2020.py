@@ -42,6 +42,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.geometry import wrap_deg
 from skysim.io import atomic_write, atomic_write_many, write_json_atomic
 from skysim.sun import Site
 
@@ -60,7 +61,7 @@ PAPER_SUN = {"17:20": (20.54, -100.89), "18:00": (12.98, -106.62)}
 def azimuth_from_south(azimuth_deg):
     """The paper's azimuth [deg]: from south, west negative, in [-180, 180)
     (``180 - azimuth`` with the skysim azimuth clockwise from north)."""
-    return np.mod(180.0 - np.asarray(azimuth_deg, float) + 180.0, 360.0) - 180.0
+    return wrap_deg(180.0 - np.asarray(azimuth_deg, float))
 
 
 def _clock_time(hhmm: str, reading: str) -> pd.Timestamp:
@@ -308,20 +309,16 @@ def format_sun_table(sun: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def _wrap180(a):
-    return np.mod(np.asarray(a, float) + 180.0, 360.0) - 180.0
-
-
 def _timeseries(r: dict) -> pd.DataFrame:
     """Seed 0: true and estimated attitude at the update samples."""
     from sensor.compound_eye import attitude_angles
     y, p, ro = attitude_angles(r["truth"])
-    y = _wrap180(y)
+    y = wrap_deg(y)
     cols = {"t_s": r["estimates"]["gyro"].t_s, "true_yaw_deg": y, "true_pitch_deg": p,
             "true_roll_deg": ro}
     for m, est in r["estimates"].items():
         ey, ep, er = (a[0] for a in est.angles_deg())
-        ey = _wrap180(ey)
+        ey = wrap_deg(ey)
         cols.update({f"{m}_yaw_deg": ey, f"{m}_pitch_deg": ep, f"{m}_roll_deg": er,
                      f"{m}_error_deg": r["errors"][m]["total"][0]})
     return pd.DataFrame(cols)

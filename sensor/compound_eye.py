@@ -43,13 +43,17 @@ from scipy.spatial.transform import Rotation
 
 from skysim import __version__
 from skysim.exceptions import InvalidParameterError
-from skysim.geometry import elevation_azimuth, local_basis
+from skysim.geometry import elevation_azimuth, local_basis, wrap_axial_deg, wrap_deg
 from skysim.sky import Sky
 from skysim.sun import Site, sun_vector
 from skysim.validation import check_finite
 
-from .photodiodes_io import (ACCEL_COLUMNS, PHOTODIODES_SCHEMA, PhotodiodeData,
-                             photodiode_column)
+from .photodiodes_io import (
+    ACCEL_COLUMNS,
+    PHOTODIODES_SCHEMA,
+    PhotodiodeData,
+    photodiode_column,
+)
 
 __all__ = ["THREE_PAIR_ANGLES_DEG", "FOUR_ANGLES_DEG", "GRAVITY_MPS2", "UnitBelowHorizonError",
            "Unit", "PhotodiodeModel", "CompoundEyeSensor", "SkySample", "body_attitude",
@@ -153,7 +157,7 @@ def body_attitude(yaw_deg, pitch_deg=0.0, roll_deg=0.0) -> Rotation:
 def attitude_angles(attitude: Rotation) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Inverse of :func:`body_attitude`: ``(yaw in [0, 360), pitch, roll)`` [deg]."""
     zxy = np.atleast_2d(attitude.as_euler("ZXY", degrees=True))
-    return np.mod(-zxy[:, 0], 360.0), zxy[:, 1], zxy[:, 2]
+    return wrap_deg(-zxy[:, 0], 0.0), zxy[:, 1], zxy[:, 2]
 
 
 def _unit_matrices(units, with_errors: bool) -> np.ndarray:
@@ -254,7 +258,7 @@ class CompoundEyeSensor:
         e_s = np.einsum("mij,nmj->nmi", self.unit_matrices(True),
                         np.stack([e_u[..., 0], e_u[..., 1], np.zeros_like(chi)], axis=-1))
         e_s /= np.linalg.norm(e_s, axis=-1, keepdims=True)
-        return SkySample(fld.I, fld.dop, np.mod(chi + 90.0, 180.0) - 90.0, e_s, el, az)
+        return SkySample(fld.I, fld.dop, wrap_axial_deg(chi), e_s, el, az)
 
     def photodiode_readings(self, obs: SkySample, rng: np.random.Generator):
         """Readings [counts] of all photodiodes (n, P) and their column names (P,).
