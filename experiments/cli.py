@@ -68,6 +68,9 @@ def build_parser() -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true",
                      help="a small, fast run (few trials) for smoke tests")
     rep.add_argument("--out", default=None, help="output folder (default results/<target>)")
+    rep.add_argument("--data", default=None, metavar="DIR",
+                     help="folder of recorded sessions (real-sky-compass; default: the "
+                          "reference recordings beside the checkout)")
     rep.set_defaults(func=lambda args: _run_target(targets, args))
     for mod in modules:
         if hasattr(mod, "register"):

@@ -446,8 +446,51 @@ def _effects_arg(text: str | None):
     return names
 
 
+def _photodiode_instrument(path) -> bool:
+    """True for a ``skysim.photodiodes/1`` file that is not a one-unit three-pair sensor."""
+    import json
+
+    from calibration.photodiode_diagnosis import is_three_pair_sensor
+    from skysim.io import sidecar_path
+    side = sidecar_path(path)
+    if not side.exists():
+        return False
+    try:
+        sidecar = json.loads(side.read_text())
+    except ValueError:
+        return False
+    return (isinstance(sidecar, dict) and sidecar.get("schema") == "skysim.photodiodes/1"
+            and not is_three_pair_sensor(sidecar))
+
+
+def _diagnose_photodiodes_cmd(args) -> int:
+    from calibration.photodiode_diagnosis import RING_EFFECT_NAMES, diagnose_photodiodes
+    from calibration.photodiode_diagnosis.effects import get_ring_effect
+    from sensor.photodiodes_io import read_photodiodes
+
+    from .real_compass import photodiode_report_markdown, plot_photodiode_diagnosis
+    effects = RING_EFFECT_NAMES
+    if args.effects:
+        effects = tuple(x.strip() for x in args.effects.split(",") if x.strip())
+        for e in effects:
+            get_ring_effect(e)
+    doc = diagnose_photodiodes(read_photodiodes(args.data), effects, n_folds=args.folds,
+                               seed=args.seed, where=str(args.data))
+    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "diagnosis.json", doc)
+    md = photodiode_report_markdown(doc)
+    atomic_write(out / "report.md", lambda p: p.write_text(md))
+    plot_photodiode_diagnosis(doc, out)
+    print(md)
+    print(f"wrote {out}/diagnosis.json, report.md, residuals_by_slice.png")
+    return 0
+
+
 def _diagnose_cmd(args) -> int:
     from calibration.diagnosis import load_diagnosis_data
+    if _photodiode_instrument(args.data):
+        return _diagnose_photodiodes_cmd(args)
     effects = _effects_arg(args.effects)
     data = load_diagnosis_data(args.data)
     doc = diagnose(data, effects, n_folds=args.folds, seed=args.seed)
@@ -473,7 +516,28 @@ def _diagnose_cmd(args) -> int:
     return 0
 
 
+def _real_benchmark_cmd(args) -> int:
+    from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
+
+    from .real_compass import run_real_benchmark
+    from .real_injection import INJECTABLE
+    inject = INJECTABLE
+    cands = RING_EFFECT_NAMES
+    if args.effects:
+        inject = tuple(x.strip() for x in args.effects.split(",") if x.strip())
+    n = 1 if args.quick else (args.n if args.n != 200 else 3)
+    if args.quick:
+        cands = ("clock_offset", "yaw_scale", "occlusion")
+    out = Path(args.out or "results/gap_benchmark_real")
+    table = run_real_benchmark(args.real, inject, cands, out, n, args.seed, args.folds)
+    print(table.to_string(index=False))
+    print(f"wrote {out}/real_cases.csv, real_summary.json")
+    return 0
+
+
 def _benchmark_cmd(args) -> int:
+    if getattr(args, "real", None):
+        return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
     effects = _effects_arg(args.effects)
     out = Path(args.out or "results/gap_benchmark")
@@ -506,7 +570,8 @@ def register(sub) -> None:
                        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     d.add_argument("data", help="measurement table or photodiode data (.csv/.parquet + sidecar)")
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
-                   + ",".join(EFFECT_NAMES))
+                   + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
+                   "multiple_scattering,fov,occlusion,yaw_scale,clock_offset,tilt")
     d.add_argument("--out", help="output directory (default results/diagnose/<name>)")
     d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
     d.add_argument("--folds", type=int, default=3, help="held-out folds (whole sweeps)")
@@ -520,4 +585,7 @@ def register(sub) -> None:
     b.add_argument("--effects", help="comma-separated effects to hide and to try "
                    "(default: all)")
     b.add_argument("--folds", type=int, default=3)
+    b.add_argument("--real", metavar="DIR", help="inject clock offset, yaw scale, occlusion and "
+                   "a stuck photodiode into the real photodiode sessions of DIR (--n: how "
+                   "many sessions, default 3) and score the diagnosis")
     b.set_defaults(func=_benchmark_cmd)

@@ -22,7 +22,13 @@ import numpy as np
 
 from . import rayleigh
 from .geometry import e_vector_from_aop, wrap_axial_deg
-from .validation import check_dop, check_finite, check_in_range, check_sun_above_horizon
+from .validation import (
+    TWILIGHT_LIMIT_DEG,
+    check_dop,
+    check_finite,
+    check_in_range,
+    check_sun_above_horizon,
+)
 
 __all__ = ["SkyField", "Sky", "RayleighSky", "make_sky", "SKY_MODELS"]
 
@@ -70,6 +76,8 @@ class Sky(abc.ABC):
     """
 
     name: str = "abstract"
+    min_sun_elevation_deg: float = 0.0
+    """Lowest sun elevation [deg] the model holds for (0: a sunlit atmosphere is needed)."""
 
     def field(self, view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
               sun_azimuth_deg) -> SkyField:
@@ -78,11 +86,12 @@ class Sky(abc.ABC):
         Raises
         ------
         SunBelowHorizonError
-            If any sun elevation is <= 0 deg.
+            If any sun elevation is <= :attr:`min_sun_elevation_deg` (0 deg, or -10 deg for
+            the single-scattering models, which hold in twilight).
         InvalidParameterError
             If a view direction is below the horizon or an input is not finite.
         """
-        check_sun_above_horizon(sun_elevation_deg)
+        check_sun_above_horizon(sun_elevation_deg, self.min_sun_elevation_deg)
         check_in_range("view_elevation_deg", view_elevation_deg, 0.0, 90.0,
                        hint="ground-based sky models only look up")
         check_finite("view_azimuth_deg", view_azimuth_deg)
@@ -110,6 +119,7 @@ class RayleighSky(Sky):
     """
 
     name = "rayleigh"
+    min_sun_elevation_deg = TWILIGHT_LIMIT_DEG
 
     def __init__(self, dmax: float = 1.0):
         if dmax != 1.0:

@@ -13,6 +13,7 @@ __all__ = [
     "check_dop",
     "check_in_range",
     "check_sun_above_horizon",
+    "TWILIGHT_LIMIT_DEG",
 ]
 
 
@@ -67,12 +68,26 @@ def check_dop(name: str, values) -> np.ndarray:
     return check_in_range(name, values, 0.0, 1.0, low_open=True, high_open=True)
 
 
-def check_sun_above_horizon(sun_elevation_deg) -> np.ndarray:
-    """Raise :class:`SunBelowHorizonError` when any sun elevation is <= 0 degrees."""
+TWILIGHT_LIMIT_DEG = -10.0
+"""Lowest sun elevation [deg] of the single-scattering sky models: in civil and early nautical
+twilight the sky is still lit by singly scattered sunlight from the sunlit upper layers and
+stays polarized with the Rayleigh pattern about the (sub-horizon) sun (Cronin et al. 2006,
+doi:10.1364/AO.45.005582); below about -10 deg the skylight is too faint for a compass."""
+
+
+def check_sun_above_horizon(sun_elevation_deg, min_elevation_deg: float = 0.0) -> np.ndarray:
+    """Raise :class:`SunBelowHorizonError` when any sun elevation is <= ``min_elevation_deg``.
+
+    ``min_elevation_deg`` is 0 for models that need a sunlit atmosphere (plane-parallel
+    radiative transfer, illuminance) and :data:`TWILIGHT_LIMIT_DEG` for the single-scattering
+    sky models, which hold in twilight.
+    """
     el = check_finite("sun_elevation_deg", sun_elevation_deg)
-    bad = el <= 0.0
+    bad = el <= min_elevation_deg
     if bad.any():
+        where = "above the horizon" if min_elevation_deg == 0.0 else \
+            f"above {min_elevation_deg:g} deg (twilight limit of this model)"
         raise SunBelowHorizonError(
-            f"sun elevation must be above the horizon; got {_first_bad(el, bad)} deg. "
+            f"sun elevation must be {where}; got {_first_bad(el, bad)} deg. "
             "Choose times between sunrise and sunset at this site (check the timezone).")
     return el

@@ -91,8 +91,8 @@ def test_geometry_round_trip():
 
 
 def test_bad_input():
-    with pytest.raises(SunBelowHorizonError, match="-2.0"):
-        RayleighSky().field(90.0, 0.0, -2.0, 100.0)
+    with pytest.raises(SunBelowHorizonError, match="-12.0"):
+        RayleighSky().field(90.0, 0.0, -12.0, 100.0)
     with pytest.raises(InvalidParameterError, match="view_elevation_deg"):
         RayleighSky().field(-5.0, 0.0, 20.0, 100.0)
     with pytest.raises(InvalidParameterError, match="dmax"):
@@ -103,3 +103,16 @@ def test_bad_input():
         RayleighSky().field(np.nan, 0.0, 20.0, 100.0)
     with pytest.raises(ValueError, match="valid: berry, multiple, rayleigh"):
         make_sky("mie")
+
+
+def test_twilight_sky_keeps_the_rayleigh_pattern():
+    """Sun 6 deg below the horizon (civil twilight): the single-scattering closed forms still
+    hold (DoP = d_max at 90 deg from the sun, the zenith E-vector perpendicular to the solar
+    meridian), and the model refuses a sun below -10 deg."""
+    f = RayleighSky(dmax=0.8).field(84.0, 0.0, -6.0, 0.0)      # 90 deg from the sun
+    np.testing.assert_allclose(f.dop, 0.8, atol=1e-12)
+    z = RayleighSky().field(90.0, 0.0, -6.0, 275.0)
+    np.testing.assert_allclose(np.abs(z.e_vector @ direction_vector(0.0, 275.0)), 0.0,
+                               atol=1e-12)
+    with pytest.raises(SunBelowHorizonError, match="twilight"):
+        RayleighSky().field(90.0, 0.0, -10.5, 0.0)

@@ -1,0 +1,28 @@
+"""Sim-to-real gap diagnosis of multi-unit photodiode instruments (``skysim.photodiodes/1``).
+
+One file one idea: :mod:`.instrument` (adapter from the file), :mod:`.faults` (dead, stuck,
+saturated, zero, duplicated and non-Malus channels), :mod:`.forward` (compound-eye sensor
+under a sky, Malus's law, profiled radiance), :mod:`.fit` (grouped-Jacobian
+Levenberg-Marquardt), :mod:`.effects` (multiple scattering, field of view, occlusion, yaw
+scale, clock offset, tilt) and :mod:`.run` (held-out gap, where, which, how far, heading
+error). Method and report: ``docs/diagnosis.md``.
+"""
+
+from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
+from .errors import InstrumentDataError, NoUsableChannelsError, SunTooLowError
+from .faults import screen
+from .instrument import Instrument, instrument_from_photodiodes
+from .run import diagnose_instrument, diagnose_photodiodes
+
+__all__ = ["RING_EFFECT_NAMES", "EffectUnavailableError", "Instrument", "InstrumentDataError",
+           "NoUsableChannelsError", "SunTooLowError", "diagnose_instrument",
+           "diagnose_photodiodes", "get_ring_effect", "instrument_from_photodiodes",
+           "is_three_pair_sensor", "screen"]
+
+
+def is_three_pair_sensor(sidecar: dict) -> bool:
+    """True for a one-unit instrument with the three orthogonal pairs 60/150, 0/90, 120/30 deg
+    (the three-pair sensor, diagnosed through its log-ratio channels)."""
+    units = sidecar.get("units") or []
+    need = {60, 150, 0, 90, 120, 30}
+    return len(units) == 1 and {round(float(a)) % 180 for a in units[0]["photodiodes"]} >= need

@@ -1,0 +1,283 @@
+"""Unmodelled effects of real multi-unit (ring) compasses, each a physical extension of the
+base model that reduces to it at its null parameters (tested), used to fit here and, through
+the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind benchmark.
+
+- ``multiple_scattering`` (``tau``, ``albedo``): the sky of
+  :class:`skysim.multiple.MultipleScatteringSky` (plane-parallel Rayleigh atmosphere of optical
+  thickness ``tau`` over a Lambertian ground, validated against Natraj et al. 2009) instead of
+  single scattering; the DoP scale stays free. Tends to the base sky as ``tau -> 0``.
+- ``fov`` (``alpha_deg``): each unit integrates the Stokes vector over a cone of half-angle
+  ``alpha`` about its axis. The cone is sampled by six directions on the ring at the RMS
+  radius ``alpha / sqrt(2)`` of a uniform cap, which reproduces the cone average to second
+  order in ``alpha`` (the first non-vanishing order: the mean of the ring is exact for any
+  field linear or quadratic in the offset). Base at ``alpha = 0``.
+- ``occlusion`` (``center_deg``, ``width_deg``, ``depolarization``): a sector of sky azimuth
+  (world frame) blocked by canopy or buildings. What reaches a unit looking into it is
+  foliage-scattered, nearly unpolarized light: its DoP is multiplied by
+  ``1 - depolarization * w(az)``, ``w`` a box over the sector with 3-deg soft edges (a unit's
+  own field of view blurs the edge). The darkening is absorbed by the profiled radiance. Base
+  at ``depolarization = 0``.
+- ``yaw_scale`` (``factor``): the recorded yaw change within a sweep is ``factor`` times the
+  true change (a gyro scale-factor error): ``true = y_0 + (y_rec - y_0) / factor``. Base at 1.
+- ``clock_offset`` (``clock_offset_s``): true minus recorded time, from seconds to whole-hour
+  timezone errors (up to +-14 h), searched on whole and half hours before refining.
+- ``tilt`` (``pitch_deg``, ``roll_deg``): a constant tilt of the instrument on the platform
+  (added to the recorded attitude), so the units' views circle the zenith as it turns. Base
+  at 0.
+
+References
+----------
+.. [1] V. Natraj, K.-F. Li, Y. L. Yung, "Rayleigh scattering in planetary atmospheres:
+   corrected tables through accurate computation of X and Y functions", ApJ 691:1909 (2009),
+   doi:10.1088/0004-637X/691/2/1909.
+.. [2] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
+   compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
+   Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w (ring compass, canopy scenes).
+"""
+
+from __future__ import annotations
+
+import importlib.util
+from dataclasses import replace
+from typing import ClassVar
+
+import numpy as np
+
+from sensor.compound_eye import SkySample
+from skysim.geometry import elevation_azimuth, wrap_deg
+
+from ..effects import UnknownEffectError
+
+__all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
+           "occlusion_weight", "fov_offsets_deg", "integrate_stokes"]
+
+RING_EFFECT_NAMES = ("multiple_scattering", "fov", "occlusion", "yaw_scale", "clock_offset",
+                     "tilt")
+
+
+class EffectUnavailableError(RuntimeError):
+    """An effect that cannot be evaluated here (optional engine missing, sun too low)."""
+
+
+class RingEffect:
+    """Base class: the hooks are identities (the base model)."""
+
+    name: ClassVar[str] = ""
+    names: ClassVar[tuple] = ()
+    units: ClassVar[tuple] = ()
+    null: ClassVar[tuple] = ()
+    lower: ClassVar[tuple] = ()
+    upper: ClassVar[tuple] = ()
+    prior_sd: ClassVar[tuple] = ()
+    fd_step: ClassVar[tuple] = ()
+    time_margin_s: ClassVar[float] = 0.0
+    observes: ClassVar[bool] = False
+
+    @property
+    def k(self) -> int:
+        return len(self.names)
+
+    @property
+    def prior_mean(self) -> np.ndarray:
+        return np.asarray(self.null, float)
+
+    def starts(self, ctx) -> list:
+        """Starting vectors (the caller keeps the best after a short fit)."""
+        return [np.asarray(self.null, float)]
+
+    def time_shift_s(self, p) -> float:
+        return 0.0
+
+    def yaw(self, inst, p) -> np.ndarray:
+        return inst.yaw_deg
+
+    def attitude(self, pitch, roll, p):
+        return pitch, roll
+
+    def sky(self, p, base_sky, sun_enu):
+        return base_sky
+
+    def observe(self, sensor, sky, att, sun, p) -> SkySample:  # pragma: no cover - abstract
+        raise NotImplementedError
+
+    def modify(self, obs: SkySample, p) -> SkySample:
+        return obs
+
+    def available(self, sun_elevation_deg) -> None:
+        """Raise :class:`EffectUnavailableError` when the effect cannot be evaluated."""
+
+
+class ClockOffset(RingEffect):
+    name = "clock_offset"
+    names = ("clock_offset_s",)
+    units = ("s",)
+    null = (0.0,)
+    lower = (-14 * 3600.0,)
+    upper = (14 * 3600.0,)
+    prior_sd = (6 * 3600.0,)
+    fd_step = (5.0,)
+    time_margin_s = 15 * 3600.0
+    COARSE_S: ClassVar[np.ndarray] = np.arange(-28, 29) * 1800.0
+    """Whole and half hours within +-14 h: timezone and daylight-saving errors."""
+
+    def time_shift_s(self, p) -> float:
+        return float(p[0])
+
+
+class YawScale(RingEffect):
+    name = "yaw_scale"
+    names = ("factor",)
+    units = ("1",)
+    null = (1.0,)
+    lower = (0.8,)
+    upper = (1.25,)
+    prior_sd = (0.1,)
+    fd_step = (1e-4,)
+
+    def yaw(self, inst, p) -> np.ndarray:
+        first = np.r_[True, inst.sweep[1:] != inst.sweep[:-1]]
+        y0 = inst.yaw_deg[first][np.cumsum(first) - 1]
+        return y0 + (inst.yaw_deg - y0) / float(p[0])
+
+
+class Tilt(RingEffect):
+    name = "tilt"
+    names = ("pitch_deg", "roll_deg")
+    units = ("deg", "deg")
+    null = (0.0, 0.0)
+    lower = (-15.0, -15.0)
+    upper = (15.0, 15.0)
+    prior_sd = (5.0, 5.0)
+    fd_step = (1e-2, 1e-2)
+
+    def attitude(self, pitch, roll, p):
+        return pitch + p[0], roll + p[1]
+
+
+def fov_offsets_deg(alpha_deg: float) -> np.ndarray:
+    """Installation-error rotation vectors [deg] (6, 3) of the six cone directions (module
+    doc): rotations about unit x/y axes by ``alpha / sqrt(2)`` at 60-deg steps."""
+    beta = np.radians(np.arange(6) * 60.0)
+    r = float(alpha_deg) / np.sqrt(2.0)
+    return np.stack([r * np.cos(beta), r * np.sin(beta), np.zeros(6)], axis=-1)
+
+
+def integrate_stokes(radiance, dop, aop_deg, axis):
+    """Radiance-weighted mean of the Stokes vectors along ``axis``: ``(I, dop, aop_deg)``."""
+    x = np.radians(2.0 * aop_deg)
+    I = radiance.mean(axis=axis)
+    Q = (radiance * dop * np.cos(x)).mean(axis=axis)
+    U = (radiance * dop * np.sin(x)).mean(axis=axis)
+    return I, np.hypot(Q, U) / I, 0.5 * np.degrees(np.arctan2(U, Q))
+
+
+class FieldOfView(RingEffect):
+    name = "fov"
+    names = ("alpha_deg",)
+    units = ("deg",)
+    null = (0.0,)
+    lower = (0.0,)
+    upper = (40.0,)
+    prior_sd = (20.0,)
+    fd_step = (0.05,)
+    observes = True
+
+    def starts(self, ctx) -> list:
+        return [np.array([5.0]), np.array([15.0])]
+
+    def observe(self, sensor, sky, att, sun, p) -> SkySample:
+        if p[0] == 0.0:
+            return sensor.observe(sky, att, sun)
+        m = sensor.n_units
+        offs = fov_offsets_deg(p[0])
+        units = tuple(replace(u, installation_error_deg=tuple(o))
+                      for u in sensor.units for o in offs)
+        wide = replace(sensor, units=units)
+        obs = wide.observe(sky, att, sun)
+        n = obs.radiance.shape[0]
+        rad = obs.radiance.reshape(n, m, 6)
+        I, d, chi = integrate_stokes(rad, obs.dop.reshape(n, m, 6),
+                                     obs.aop_unit_deg.reshape(n, m, 6), axis=-1)
+        v = obs.view_elevation_deg.reshape(n, m, 6), obs.view_azimuth_deg.reshape(n, m, 6)
+        el, az = elevation_azimuth(np.mean(_unit_vectors(*v), axis=2))
+        return SkySample(I, d, chi, obs.e_vector_sensor.reshape(n, m, 6, 3)[:, :, 0], el, az)
+
+
+def _unit_vectors(el, az):
+    e, a = np.radians(el), np.radians(az)
+    return np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
+
+
+def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):
+    """Soft box over the sector ``center +- width / 2`` of azimuth [deg]: 1 inside, 0 outside."""
+    d = np.abs(wrap_deg(np.asarray(azimuth_deg, float) - center_deg))
+    return 1.0 / (1.0 + np.exp((d - 0.5 * width_deg) / edge_deg))
+
+
+class Occlusion(RingEffect):
+    name = "occlusion"
+    names = ("center_deg", "width_deg", "depolarization")
+    units = ("deg", "deg", "1")
+    null = (180.0, 90.0, 0.0)
+    lower = (-720.0, 10.0, 0.0)
+    upper = (1080.0, 300.0, 1.0)
+    prior_sd = (np.inf, np.inf, 1.0)
+    fd_step = (0.2, 0.2, 1e-3)
+
+    def starts(self, ctx) -> list:
+        return [np.array([c, w, 0.6]) for c in np.arange(0.0, 360.0, 30.0)
+                for w in (60.0, 120.0, 180.0)]
+
+    def modify(self, obs: SkySample, p) -> SkySample:
+        w = occlusion_weight(obs.view_azimuth_deg, p[0], p[1])
+        return replace(obs, dop=obs.dop * (1.0 - p[2] * w))
+
+
+class MultipleScattering(RingEffect):
+    name = "multiple_scattering"
+    names = ("tau", "albedo")
+    units = ("1", "1")
+    null = (0.0, 0.0)
+    lower = (0.02, 0.0)
+    upper = (1.0, 0.6)
+    prior_sd = (0.5, 0.3)
+    fd_step = (2e-3, 2e-3)
+
+    @property
+    def prior_mean(self) -> np.ndarray:
+        return np.array([0.15, 0.1])
+
+    def starts(self, ctx) -> list:
+        return [np.array([0.15, 0.1])]
+
+    def available(self, sun_elevation_deg) -> None:
+        if importlib.util.find_spec("sasktran2") is None:
+            raise EffectUnavailableError(
+                "multiple_scattering needs the radiative-transfer engine: pip install -e "
+                "'.[rt]' in the skysim checkout")
+        if np.min(sun_elevation_deg) <= 0.0:
+            raise EffectUnavailableError(
+                f"multiple_scattering needs the sun above the horizon (plane-parallel "
+                f"atmosphere); got {float(np.min(sun_elevation_deg)):.2f} deg")
+
+    def sky(self, p, base_sky, sun_enu):
+        from skysim.multiple import MultipleScatteringSky
+        return MultipleScatteringSky(tau=float(p[0]), albedo=float(p[1]), sun_step_deg=1.0)
+
+
+_EFFECTS = {c.name: c for c in (MultipleScattering, FieldOfView, Occlusion, YawScale,
+                                ClockOffset, Tilt)}
+
+
+def get_ring_effect(name: str) -> RingEffect:
+    """The effect of that name.
+
+    Raises
+    ------
+    UnknownEffectError
+        Listing the valid names.
+    """
+    if name not in _EFFECTS:
+        raise UnknownEffectError(f"unknown effect {name!r} for a photodiode instrument; valid: "
+                                 f"{', '.join(RING_EFFECT_NAMES)}")
+    return _EFFECTS[name]()

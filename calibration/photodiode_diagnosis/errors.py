@@ -1,0 +1,20 @@
+"""Errors of the photodiode-instrument diagnosis (each message says how to fix the input)."""
+
+from __future__ import annotations
+
+from ..diagnosis import DiagnosisError, InsufficientDataError
+
+__all__ = ["InstrumentDataError", "InsufficientDataError", "NoUsableChannelsError",
+           "SunTooLowError"]
+
+
+class InstrumentDataError(DiagnosisError, ValueError):
+    """A photodiode file whose content cannot be diagnosed as it is (names value and row)."""
+
+
+class NoUsableChannelsError(DiagnosisError, ValueError):
+    """After the fault screen too few units keep three or more working photodiodes."""
+
+
+class SunTooLowError(DiagnosisError, ValueError):
+    """The sun is below the twilight limit (-10 deg) at a recorded time: the sky is dark."""

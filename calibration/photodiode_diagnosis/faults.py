@@ -1,0 +1,221 @@
+"""Faults of a photodiode instrument, found before (and after) the base fit.
+
+Channel faults (a whole photodiode column is excluded and reported):
+
+- ``dead``: one constant value over the file (the reader's flag), or no finite reading;
+- ``zero``: at least :data:`ZERO_FRACTION` of the readings exactly 0 (dropped conversions or
+  no light);
+- ``saturated``: at least :data:`SATURATED_FRACTION` of the readings at the declared
+  saturation value or at the instrument's own rail (below);
+- ``stuck``: one value in at least :data:`STUCK_FRACTION` of the samples taken while the
+  platform turns (a real photodiode's reading changes as its view sweeps the sky);
+- ``duplicated``: two photodiodes of one unit equal in at least :data:`DUPLICATE_FRACTION` of
+  the samples (a wiring or logging fault: two polarizer angles cannot read the same sky);
+- ``not_malus``: after the base fit, residual RMS far above the other channels'
+  (:func:`malus_outliers`): the channel does not follow Malus's law against the fitted sky.
+
+Unit faults: a unit left with fewer than three working photodiodes at distinct polarizer
+angles (modulo 180 deg) cannot measure a linear polarization and is excluded (``too_few``).
+
+Reading exclusions (counted, not faults): missing, zero and saturated readings, and every
+reading of a unit at a sample where one of its photodiodes is saturated (the sun or its glare
+is in the unit's view and the channels are no longer linear).
+
+The rail: an instrument can clip below its declared ``saturation_value`` (a light-to-digital
+converter's own full scale). Readings within :data:`RAIL_BAND` of the highest reading below
+the declared value are a rail when at least :data:`RAIL_MIN_FRACTION` of all readings and two
+or more channels sit there and they pile up (at least twice as many readings as in the next
+two bands below: a smooth sky thins out towards its brightest reading, a clipped one piles up).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .instrument import Instrument
+
+__all__ = ["ZERO_FRACTION", "SATURATED_FRACTION", "STUCK_FRACTION", "DUPLICATE_FRACTION",
+           "RAIL_BAND", "RAIL_MIN_FRACTION", "Screen", "screen", "malus_outliers"]
+
+ZERO_FRACTION = 0.2
+SATURATED_FRACTION = 0.25
+STUCK_FRACTION = 0.5
+DUPLICATE_FRACTION = 0.9
+RAIL_BAND = 0.02
+RAIL_MIN_FRACTION = 0.002
+MALUS_FACTOR = 2.5
+"""A channel fails Malus's law when its residual RMS exceeds this multiple of the median
+channel's and the robust spread of the channels (median + 5 MAD)."""
+
+
+@dataclass
+class Screen:
+    """Result of the fault screen.
+
+    Attributes
+    ----------
+    faults : list of dict
+        ``{"channel", "kind", "evidence"}`` per faulty photodiode or unit.
+    channel_ok : ndarray (P,) bool
+    unit_ok : ndarray (U,) bool
+    reading_ok : ndarray (n, P) bool
+        Readings used by the fit (channel and unit working, reading not excluded).
+    counts : dict
+        Excluded readings by reason.
+    rail : float or None
+        The instrument's own clipping level, where found.
+    """
+
+    faults: list
+    channel_ok: np.ndarray
+    unit_ok: np.ndarray
+    reading_ok: np.ndarray
+    counts: dict = field(default_factory=dict)
+    rail: float | None = None
+
+    @property
+    def faulty_channels(self) -> list:
+        return [f["channel"] for f in self.faults]
+
+
+def _rail(values, finite, sat_value):
+    below = finite & (values < sat_value)
+    if not below.any():
+        return None
+    top = float(values[below].max())
+    near = below & (values >= (1.0 - RAIL_BAND) * top)
+    under = below & (values < (1.0 - RAIL_BAND) * top) & (values >= (1.0 - 3 * RAIL_BAND) * top)
+    pile_up = near.sum() >= 2 * under.sum()
+    if (pile_up and near.mean() >= RAIL_MIN_FRACTION and (near.sum(axis=0) > 0).sum() >= 2
+            and top > 0):
+        return (1.0 - RAIL_BAND) * top
+    return None
+
+
+def _mode_fraction(x) -> tuple[float, float]:
+    if x.size == 0:
+        return np.nan, 0.0
+    vals, cnt = np.unique(x, return_counts=True)
+    k = int(np.argmax(cnt))
+    return float(vals[k]), float(cnt[k] / x.size)
+
+
+def _unit_check(inst: Instrument, channel_ok, faults):
+    unit_ok = np.ones(inst.n_units, bool)
+    for u in range(inst.n_units):
+        cols = np.flatnonzero((inst.pd_unit == u) & channel_ok)
+        angles = {float(a) % 180.0 for a in inst.pd_angle_deg[cols]}
+        if len(angles) < 3:
+            unit_ok[u] = False
+            faults.append({"channel": f"u{u}", "kind": "too_few",
+                           "evidence": {"working_photodiodes": [inst.columns[c] for c in cols],
+                                        "needed": "3 at distinct polarizer angles"}})
+    return unit_ok
+
+
+def screen(inst: Instrument) -> Screen:
+    """Find the faulty channels and units and the readings to exclude (see module doc)."""
+    R = inst.readings
+    n, P = R.shape
+    finite = np.isfinite(R)
+    sat_value = float(inst.source.get("saturation_value", np.inf))
+    rail = _rail(R, finite, sat_value)
+    with np.errstate(invalid="ignore"):
+        saturated = finite & ((R >= sat_value) | ((R >= rail) if rail is not None else False))
+        zero = finite & (R == 0.0)
+    faults, ok = [], np.ones(P, bool)
+    for p, col in enumerate(inst.columns):
+        x = R[:, p]
+        f = finite[:, p]
+        if not f.any() or (f.sum() >= 10 and np.nanmax(x) == np.nanmin(x)):
+            faults.append({"channel": col, "kind": "dead",
+                           "evidence": {"value": None if not f.any() else float(np.nanmax(x)),
+                                        "finite_readings": int(f.sum())}})
+            ok[p] = False
+            continue
+        zf = float(zero[:, p].sum() / f.sum())
+        if zf >= ZERO_FRACTION:
+            faults.append({"channel": col, "kind": "zero", "evidence": {"zero_fraction": zf}})
+            ok[p] = False
+            continue
+        sf = float(saturated[:, p].sum() / f.sum())
+        if sf >= SATURATED_FRACTION:
+            faults.append({"channel": col, "kind": "saturated",
+                           "evidence": {"saturated_fraction": sf,
+                                        "level": rail if rail is not None else sat_value}})
+            ok[p] = False
+            continue
+        turning = f & inst.rotating & ~saturated[:, p] & ~zero[:, p]
+        value, mf = _mode_fraction(x[turning])
+        if turning.sum() >= 20 and mf >= STUCK_FRACTION:
+            faults.append({"channel": col, "kind": "stuck",
+                           "evidence": {"value": value, "fraction_while_turning": mf}})
+            ok[p] = False
+    for u in range(inst.n_units):
+        cols = np.flatnonzero(inst.pd_unit == u)
+        for i, a in enumerate(cols):
+            for b in cols[i + 1:]:
+                if not (ok[a] or ok[b]):
+                    continue
+                both = finite[:, a] & finite[:, b] & ~saturated[:, a] & ~saturated[:, b]
+                if both.sum() < 20:
+                    continue
+                eq = float(np.mean(R[both, a] == R[both, b]))
+                if eq >= DUPLICATE_FRACTION:
+                    for c, other in ((a, b), (b, a)):
+                        faults.append({"channel": inst.columns[c], "kind": "duplicated",
+                                       "evidence": {"same_as": inst.columns[other],
+                                                    "equal_fraction": eq}})
+                        ok[c] = False
+    unit_ok = _unit_check(inst, ok, faults)
+    return _finish(inst, faults, ok, unit_ok, saturated, zero, finite, rail)
+
+
+def _finish(inst, faults, ok, unit_ok, saturated, zero, finite, rail) -> Screen:
+    n, P = inst.readings.shape
+    usable_channel = ok & unit_ok[inst.pd_unit]
+    member = inst.pd_unit[None, :] == np.arange(inst.n_units)[:, None]
+    glare_unit = (saturated & usable_channel[None, :]).astype(float) @ member.T.astype(float) > 0
+    glare = glare_unit[:, inst.pd_unit] & ~saturated
+    reading_ok = (usable_channel[None, :] & finite & ~saturated & ~zero & ~glare
+                  & ~inst.flagged)
+    counts = {"readings": int(n * P), "missing": int((~finite).sum()),
+              "saturated": int(saturated.sum()), "zero": int(zero.sum()),
+              "glare_unit_readings": int((glare & usable_channel[None, :]).sum()),
+              "faulty_channel_readings": int((~usable_channel).sum() * n),
+              "used": int(reading_ok.sum())}
+    return Screen(faults, ok, unit_ok, reading_ok, counts, rail)
+
+
+def malus_outliers(inst: Instrument, scr: Screen, residual, usable) -> Screen:
+    """Add ``not_malus`` faults from base-fit residuals (n, P) and return the updated screen."""
+    w = usable & scr.reading_ok
+    cnt = w.sum(axis=0)
+    rms = np.sqrt(np.where(cnt > 0, np.sum(np.where(w, residual, 0.0) ** 2, axis=0)
+                           / np.maximum(cnt, 1), np.nan))
+    live = scr.channel_ok & scr.unit_ok[inst.pd_unit] & (cnt > 0)
+    if live.sum() < 4:
+        return scr
+    med = float(np.median(rms[live]))
+    mad = float(np.median(np.abs(rms[live] - med)))
+    limit = max(MALUS_FACTOR * med, med + 5.0 * 1.4826 * mad)
+    faults, ok = list(scr.faults), scr.channel_ok.copy()
+    for p in np.flatnonzero(live & (rms > limit)):
+        faults.append({"channel": inst.columns[p], "kind": "not_malus",
+                       "evidence": {"residual_rms": float(rms[p]), "median_rms": med,
+                                    "limit": float(limit)}})
+        ok[p] = False
+    if ok.sum() == scr.channel_ok.sum():
+        return scr
+    faults = [f for f in faults if f["kind"] != "too_few"]
+    unit_ok = _unit_check(inst, ok, faults)
+    R = inst.readings
+    finite = np.isfinite(R)
+    sat_value = float(inst.source.get("saturation_value", np.inf))
+    with np.errstate(invalid="ignore"):
+        saturated = finite & ((R >= sat_value) | ((R >= scr.rail) if scr.rail is not None
+                                                  else False))
+        zero = finite & (R == 0.0)
+    return _finish(inst, faults, ok, unit_ok, saturated, zero, finite, scr.rail)

@@ -1,0 +1,221 @@
+"""Forward model of a photodiode instrument under a sky: the base model and its parameters.
+
+Geometry (what each unit sees) comes from the project's compound-eye sensor
+(:meth:`sensor.compound_eye.CompoundEyeSensor.observe`) sampling a :class:`skysim.sky.Sky`
+along each unit's view at the body attitude of every sample; the readings from Malus's law of
+the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`):
+
+``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - delta_u)) + o_p``
+
+with ``d_iu``, ``chi_iu`` the degree and angle of linear polarization of the light reaching
+unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle, ``delta_u`` the
+unit's polarizer-angle (installation) offset, ``s`` the DoP scale (the sky's ``d_max``),
+``g_p = exp(lambda_p)`` the photodiode's gain and ``o_p`` its dark offset. The radiance
+``I_iu`` reaching a unit is a nuisance profiled out in closed form (least squares over the
+unit's photodiodes at each sample, variable projection, Golub & Pereyra 1973 [1]_): a
+polarization compass does not use it, and the single-scattering radiance misses the real
+sky's aerosol brightening near the sun and horizon by factors of several, which would bury
+every polarization effect. Residuals are relative: ``(r - r_hat) / mean_u(r)``.
+
+Which parameters are shared and which are per sweep: gains, offsets, polarizer offsets and the
+DoP scale belong to the instrument and the sky of a session, so they are shared by all sweeps
+(fitted on the training sweeps, held fixed on the held-out ones). The heading offset between
+the recorded (relative) yaw and the true heading is re-fitted for every sweep, training and
+held-out alike, because the platform's IMU is re-zeroed between recordings; with absolute
+yaw it is one shared offset (a mounting offset of the yaw reference).
+
+References
+----------
+.. [1] G. H. Golub, V. Pereyra, "The differentiation of pseudo-inverses and nonlinear least
+   squares problems whose variables separate", SIAM J. Numer. Anal. 10(2):413-432 (1973),
+   doi:10.1137/0710036.
+.. [2] E. Hecht, Optics, 5th ed., Pearson (2017), sect. 8.2 (Malus's law).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from sensor.compound_eye import SkySample, body_attitude
+from sensor.photodiode import photodiode_signal
+from skysim.sky import RayleighSky, Sky
+from skysim.sun import Site, sun_vector
+
+from .instrument import Instrument
+
+__all__ = ["Layout", "SunTrack", "Forward", "RELATIVE_FLOOR"]
+
+RELATIVE_FLOOR = 1e-3
+"""Floor of a unit's mean reading, as a fraction of the session's median reading, below which
+its relative residuals are not formed (a unit in the dark carries no polarization signal)."""
+
+
+@dataclass(frozen=True)
+class Layout:
+    """Positions of the parameter groups in the parameter vector.
+
+    Order: ``lambda_p`` (P log-gains), ``o_p`` (P offsets, in units of the session's median
+    reading), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``h_k`` (one heading
+    offset per sweep [deg]; one shared offset for absolute yaw), effect parameters.
+    """
+
+    n_pd: int
+    n_units: int
+    n_heading: int
+    n_effect: int
+
+    @property
+    def lam(self):
+        return slice(0, self.n_pd)
+
+    @property
+    def off(self):
+        return slice(self.n_pd, 2 * self.n_pd)
+
+    @property
+    def delta(self):
+        return slice(2 * self.n_pd, 2 * self.n_pd + self.n_units)
+
+    @property
+    def scale(self) -> int:
+        return 2 * self.n_pd + self.n_units
+
+    @property
+    def heading(self):
+        return slice(self.scale + 1, self.scale + 1 + self.n_heading)
+
+    @property
+    def effect(self):
+        return slice(self.heading.stop, self.heading.stop + self.n_effect)
+
+    @property
+    def size(self) -> int:
+        return self.effect.stop
+
+    @property
+    def n_base(self) -> int:
+        return self.heading.start
+
+
+class SunTrack:
+    """Sun direction over a span of times, from ephemeris knots (linear in the ENU vector).
+
+    Knots every ``step_s`` from :func:`skysim.sun.sun_vector`; 60 s knots err by < 1e-4 deg
+    (the sun turns 0.25 deg/min; the chord error is ``(0.25 deg)^2 / 8`` in radians).
+    """
+
+    def __init__(self, site: Site, t_min_s: float, t_max_s: float, margin_s: float,
+                 step_s: float = 60.0):
+        import pandas as pd
+        t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
+        times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)
+        self.t_s = t
+        self.vectors, _ = sun_vector(times, site)
+
+    def __call__(self, t_s) -> np.ndarray:
+        """Unit sun vectors in ENU (n, 3) at times ``t_s`` [s since epoch, UTC]."""
+        t_s = np.asarray(t_s, float)
+        v = np.stack([np.interp(t_s, self.t_s, self.vectors[:, c]) for c in range(3)], axis=-1)
+        return v / np.linalg.norm(v, axis=-1, keepdims=True)
+
+
+class Forward:
+    """Predicted readings of an instrument for a parameter vector (base model + one effect).
+
+    ``polarizer_sign`` is -1 when the instrument counts its polarizer angles in the opposite
+    sense to the unit frame's (from the meridian towards decreasing azimuth); the base model
+    finds it from the data (:func:`calibration.photodiode_diagnosis.run.orient`).
+    ``heading_override`` (n,) replaces the headings, for heading decoding.
+
+    Parameters
+    ----------
+    inst : Instrument
+    effect : RingEffect, optional
+    sun : SunTrack, optional
+        Shared between folds (built once per data set).
+    """
+
+    def __init__(self, inst: Instrument, effect=None, sun: SunTrack | None = None,
+                 polarizer_sign: float = 1.0):
+        self.inst = inst
+        self.polarizer_sign = float(polarizer_sign)
+        self.heading_override = None
+        self.effect = effect
+        k = 0 if effect is None else effect.k
+        n_heading = 1 if inst.absolute_yaw else inst.n_sweeps
+        self.layout = Layout(inst.readings.shape[1], inst.n_units, n_heading, k)
+        self.sun = sun or SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(),
+                                   margin_s=0.0 if effect is None else effect.time_margin_s)
+        good = ~inst.flagged & np.isfinite(inst.readings)
+        self.good = good
+        r = np.where(good, inst.readings, 0.0)
+        self.level = float(np.median(inst.readings[good])) if good.any() else 1.0
+        self.level = max(self.level, 1e-12)
+        self.y = r / self.level                        # readings in session-median units
+        units = inst.pd_unit
+        self.member = (units[None, :] == np.arange(inst.n_units)[:, None]).astype(float)  # (U, P)
+        cnt = good.astype(float) @ self.member.T        # (n, U)
+        mean = (self.y @ self.member.T) / np.maximum(cnt, 1.0)
+        self.unit_mean = mean
+        self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= 3))[:, units]
+        self._scale = np.where(self.usable, mean[:, units], 1.0)
+        self._sky = RayleighSky(1.0)
+
+    # ---------------------------------------------------------------- geometry stage
+    def headings(self, theta) -> np.ndarray:
+        """True headings [deg, clockwise from north] of every sample."""
+        if self.heading_override is not None:
+            return self.heading_override
+        L, inst = self.layout, self.inst
+        h = theta[L.heading]
+        off = h[0] if inst.absolute_yaw else h[inst.sweep]
+        if self.effect is not None:
+            return off + self.effect.yaw(inst, theta[L.effect])
+        return off + inst.yaw_deg
+
+    def observe(self, theta) -> SkySample:
+        """What every unit sees (degree of polarization for ``s = 1``)."""
+        inst, e = self.inst, self.effect
+        pe = None if e is None else theta[self.layout.effect]
+        t = inst.t_s if e is None else inst.t_s + e.time_shift_s(pe)
+        pitch, roll = inst.pitch_deg, inst.roll_deg
+        if e is not None:
+            pitch, roll = e.attitude(pitch, roll, pe)
+        att = body_attitude(self.headings(theta), pitch, roll)
+        sun = self.sun(t)
+        sky = self._sky if e is None else e.sky(pe, self._sky, sun)
+        if e is not None and e.observes:
+            return e.observe(inst.sensor, sky, att, sun, pe)
+        obs = inst.sensor.observe(sky, att, sun)
+        return obs if e is None else e.modify(obs, pe)
+
+    # ---------------------------------------------------------------- output stage
+    def channel_model(self, theta, obs: SkySample) -> np.ndarray:
+        """``g_p (1 + s d cos 2(chi - a_p - delta_u))`` (n, P), Malus's law [2]_."""
+        L, inst = self.layout, self.inst
+        u = inst.pd_unit
+        d = np.clip(theta[L.scale] * obs.dop[:, u], 0.0, 0.999)
+        return photodiode_signal(1.0, obs.aop_unit_deg[:, u],
+                                 d, self.polarizer_sign * inst.pd_angle_deg + theta[L.delta][u],
+                                 responsivity=np.exp(theta[L.lam]))
+
+    def predict(self, theta, obs: SkySample):
+        """Predicted readings (n, P) in session-median units and the profiled radiance (n, U)."""
+        L = self.layout
+        m = self.channel_model(theta, obs)
+        off = theta[L.off]
+        w = self.usable
+        yo = np.where(w, self.y - off, 0.0)
+        mw = np.where(w, m, 0.0)
+        num = (yo * mw) @ self.member.T
+        den = (mw * mw) @ self.member.T
+        radiance = num / np.maximum(den, 1e-300)
+        return radiance[:, self.inst.pd_unit] * m + off, radiance
+
+    def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:
+        """Relative residuals (n, P): ``(r - r_hat) / unit mean``, 0 where not usable."""
+        obs = self.observe(theta) if obs is None else obs
+        pred, _ = self.predict(theta, obs)
+        return np.where(self.usable, (self.y - pred) / self._scale, 0.0)

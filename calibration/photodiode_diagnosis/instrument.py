@@ -1,0 +1,192 @@
+"""Adapter from raw photodiode data (``skysim.photodiodes/1``) to the arrays the diagnosis fits.
+
+Any multi-unit instrument: N units x M photodiodes, any unit azimuth/elevation, any polarizer
+angles, counts or volts, absolute or relative yaw in either sense. The adapter converts the
+yaw to the project's heading convention (clockwise from north, unwrapped along each sweep so
+that a turn stays one continuous angle), finds the sweeps and whether the platform is turning,
+and keeps the reader's per-reading flags. It never drops a sample.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from sensor.compound_eye import CompoundEyeSensor, PhotodiodeModel
+from sensor.photodiodes_io import PhotodiodeData
+from skysim.sun import Site, as_utc_index
+
+from .errors import InsufficientDataError, InstrumentDataError
+
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "instrument_from_photodiodes"]
+
+ROTATING_RATE_DEG_PER_SAMPLE = 0.2
+"""A sample is *rotating* when the yaw changes by more than this per sample [deg] (median over
+a 5-sample window): an IMU at rest drifts by far less, a platform turning once in a few hundred
+samples by about 1 deg per sample."""
+
+
+@dataclass
+class Instrument:
+    """The photodiode instrument and its readings, ready for the forward model.
+
+    Attributes
+    ----------
+    sensor : CompoundEyeSensor
+        Nominal geometry from the sidecar (unit views and polarizer angles).
+    site : Site
+    t_s : ndarray (n,)
+        Recorded sample times [s since 1970-01-01 UTC].
+    yaw_deg : ndarray (n,)
+        Recorded yaw converted to clockwise [deg], unwrapped within each sweep.
+    sweep : ndarray (n,) of int
+        Sweep index 0..S-1 (the ``sweep`` column, else runs separated by time gaps).
+    rotating : ndarray (n,) bool
+    pitch_deg, roll_deg : ndarray (n,)
+        Recorded body attitude [deg] (zeros where the file has none).
+    readings : ndarray (n, P)
+        Photodiode readings in the file's unit.
+    pd_unit : ndarray (P,) of int ; pd_angle_deg : ndarray (P,)
+    columns : list of str
+        Photodiode column names (P,).
+    flagged : ndarray (n, P) bool
+        Readings the reader flagged (saturated, zero, missing, dead).
+    absolute_yaw : bool
+        True when the yaw is a heading from north (``yaw_reference == "north"``).
+    source : dict
+    """
+
+    sensor: CompoundEyeSensor
+    site: Site
+    t_s: np.ndarray
+    yaw_deg: np.ndarray
+    sweep: np.ndarray
+    rotating: np.ndarray
+    pitch_deg: np.ndarray
+    roll_deg: np.ndarray
+    readings: np.ndarray
+    pd_unit: np.ndarray
+    pd_angle_deg: np.ndarray
+    columns: list
+    flagged: np.ndarray
+    absolute_yaw: bool
+    source: dict = field(default_factory=dict)
+
+    @property
+    def n(self) -> int:
+        return self.t_s.size
+
+    @property
+    def n_units(self) -> int:
+        return self.sensor.n_units
+
+    @property
+    def n_sweeps(self) -> int:
+        return int(self.sweep.max()) + 1
+
+    def subset(self, rows) -> "Instrument":
+        """The same instrument on a subset of samples (sweeps renumbered 0..S'-1)."""
+        rows = np.asarray(rows)
+        _, sweep = np.unique(self.sweep[rows], return_inverse=True)
+        return Instrument(self.sensor, self.site, self.t_s[rows], self.yaw_deg[rows], sweep,
+                          self.rotating[rows], self.pitch_deg[rows], self.roll_deg[rows],
+                          self.readings[rows], self.pd_unit, self.pd_angle_deg, self.columns,
+                          self.flagged[rows], self.absolute_yaw, self.source)
+
+    def with_readings(self, readings) -> "Instrument":
+        """The same instrument and samples with other readings (same shape)."""
+        readings = np.asarray(readings, float)
+        if readings.shape != self.readings.shape:
+            raise ValueError(f"readings must have shape {self.readings.shape}; "
+                             f"got {readings.shape}")
+        return Instrument(self.sensor, self.site, self.t_s, self.yaw_deg, self.sweep,
+                          self.rotating, self.pitch_deg, self.roll_deg, readings, self.pd_unit,
+                          self.pd_angle_deg, self.columns, self.flagged, self.absolute_yaw,
+                          self.source)
+
+
+def _sweeps(table, t_s: np.ndarray) -> np.ndarray:
+    if "sweep" in table.columns:
+        raw = table["sweep"].to_numpy()
+        if table["sweep"].isna().any():
+            row = int(np.flatnonzero(table["sweep"].isna().to_numpy())[0])
+            raise InstrumentDataError(f"column 'sweep' is empty in row {row}; give every "
+                                      "sample its sweep or drop the column")
+        # sweeps in order of first appearance
+        _, first, inv = np.unique(raw, return_index=True, return_inverse=True)
+        order = np.argsort(np.argsort(first))
+        return order[inv.ravel()]
+    # no sweep column: new sweep where the clock jumps by more than 60 s
+    jump = np.r_[False, np.diff(t_s) > 60.0]
+    return np.cumsum(jump)
+
+
+def _unwrap_per_sweep(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    out = np.empty_like(yaw)
+    for s in np.unique(sweep):
+        m = sweep == s
+        out[m] = np.degrees(np.unwrap(np.radians(yaw[m])))
+    return out
+
+
+def _rotating(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    rate = np.abs(np.gradient(yaw)) if yaw.size > 1 else np.zeros_like(yaw)
+    edge = np.r_[True, sweep[1:] != sweep[:-1]] | np.r_[sweep[1:] != sweep[:-1], True]
+    rate[edge] = 0.0
+    k = 5
+    pad = np.pad(rate, k // 2, mode="edge")
+    windows = np.lib.stride_tricks.sliding_window_view(pad, k)
+    return np.median(windows, axis=1) > ROTATING_RATE_DEG_PER_SAMPLE
+
+
+def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode data") -> Instrument:
+    """Build the :class:`Instrument` of a photodiode file.
+
+    Raises
+    ------
+    InstrumentDataError
+        For a yaw that is not a finite number, an empty sweep label, or a unit without columns.
+    InsufficientDataError
+        With fewer than two sweeps (a held-out split needs whole sweeps).
+    """
+    table = data.table
+    yaw = table["yaw_deg"].to_numpy(dtype=float)
+    if not np.isfinite(yaw).all():
+        row = int(np.flatnonzero(~np.isfinite(yaw))[0])
+        raise InstrumentDataError(f"{where}: yaw_deg is not a finite number in row {row} "
+                                  f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
+                                  "sample is needed")
+    if data.sidecar["yaw_sense"] == "counterclockwise":
+        yaw = -yaw
+    t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
+    sweep = _sweeps(table, t_s)
+    if np.unique(sweep).size < 2:
+        raise InsufficientDataError(
+            f"{where}: only one sweep in {len(table)} samples; the diagnosis fits on some "
+            "sweeps and scores on held-out ones: record at least two (column 'sweep')")
+    yaw = _unwrap_per_sweep(yaw, sweep)
+    att = {}
+    for c in ("pitch_deg", "roll_deg"):
+        v = table[c].to_numpy(dtype=float) if c in table.columns else np.zeros(len(table))
+        att[c] = np.where(np.isfinite(v), v, 0.0)
+    counts = PhotodiodeModel(counts_per_radiance=1.0, noise_counts=0.0)
+    sensor = CompoundEyeSensor.from_sidecar(data.sidecar, counts)
+    pd_unit = np.array([i for i, u in enumerate(data.units) for _ in u["photodiodes"]])
+    pd_angle = np.array([float(a) for u in data.units for a in u["photodiodes"]])
+    for i in range(sensor.n_units):
+        if not np.any(pd_unit == i):
+            raise InstrumentDataError(f"{where}: unit {i} lists no photodiode columns")
+    return Instrument(
+        sensor=sensor, site=data.site, t_s=t_s, yaw_deg=yaw, sweep=sweep,
+        rotating=_rotating(yaw, sweep), pitch_deg=att["pitch_deg"], roll_deg=att["roll_deg"],
+        readings=data.readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
+        columns=list(data.columns), flagged=data.flags.bad.copy(),
+        absolute_yaw=data.sidecar["yaw_reference"] == "north",
+        source={"path": where, "schema": data.sidecar["schema"],
+                "readings": data.sidecar["readings"], "samples": int(len(table)),
+                "photodiodes": len(data.columns), "units": sensor.n_units,
+                "sweeps": int(np.unique(sweep).size),
+                "yaw_reference": data.sidecar["yaw_reference"],
+                "yaw_sense": data.sidecar["yaw_sense"],
+                "saturation_value": float(data.sidecar["saturation_value"])})

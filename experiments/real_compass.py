@@ -1,0 +1,291 @@
+"""Real ring-compass sessions: the photodiode-instrument diagnosis on every session of a folder
+(``skysim reproduce real-sky-compass``), its report and figures, and the blind check on real
+sessions with injected effects (``skysim gap-benchmark --real DIR``).
+
+Default data: the Gkanias et al. (2023) ring-compass recordings (Sardinia, May 2022) in
+``../shared/reference/gkanias2023`` beside the checkout, when present.
+"""
+
+from __future__ import annotations
+
+import time
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+
+from skysim.io import atomic_write, write_json_atomic
+
+__all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
+           "run_real_benchmark", "photodiode_report_markdown", "plot_photodiode_diagnosis"]
+
+DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
+DEFAULT_SEED = 2023
+QUICK_EFFECTS = ("yaw_scale", "occlusion")
+
+
+def session_files(folder) -> list[Path]:
+    """Photodiode sessions (data files with a ``skysim.photodiodes/1`` sidecar) of a folder."""
+    import json
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise FileNotFoundError(
+            f"no session folder {folder}: give --data DIR with skysim.photodiodes/1 files "
+            "(e.g. the ring-compass recordings of Gkanias et al. 2023)")
+    out = []
+    for f in sorted(folder.iterdir()):
+        if f.suffix not in (".csv", ".parquet"):
+            continue
+        for side in (f.with_name(f.name + ".json"), f.with_suffix(".json")):
+            if side.exists():
+                try:
+                    if json.loads(side.read_text()).get("schema") == "skysim.photodiodes/1":
+                        out.append(f)
+                except (ValueError, OSError):
+                    pass
+                break
+    if not out:
+        raise FileNotFoundError(f"{folder} holds no skysim.photodiodes/1 session")
+    return out
+
+
+def session_row(name: str, doc: dict) -> dict:
+    """One row of the per-session table."""
+    v, he = doc["verdict"], doc.get("heading_error") or {}
+    best = next((c for c in doc["candidates"] if c.get("effect") == v.get("best_candidate")),
+                {})
+    sun = doc.get("data", {}).get("sun_elevation_deg", [np.nan, np.nan])
+    return {"session": name, "sun_elevation_deg": float(np.mean(sun)),
+            "faults": len(doc["faults"]),
+            "faulty": ", ".join(f"{f['channel']}:{f['kind']}" for f in doc["faults"]),
+            "gap_base": v.get("gap_before"), "verdict": v["effect"],
+            "best": v.get("best_candidate"), "gap_best": best.get("gap_after"),
+            "shrink": best.get("shrink"),
+            "params": "; ".join(f"{k}={p['value']:.4g}" for k, p in best.get("params", {}).items()),
+            "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
+            "top_where": "; ".join(f"{w['dimension']}={w['label']} ({100 * w['share']:.0f}%)"
+                                   for w in doc["where"][:3])}
+
+
+def _diagnose_file(path, effects, folds, seed):
+    from calibration.photodiode_diagnosis import diagnose_photodiodes
+    from sensor.photodiodes_io import read_photodiodes
+    return diagnose_photodiodes(read_photodiodes(path), effects, n_folds=folds, seed=seed,
+                                where=str(path))
+
+
+def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_SEED):
+    """Diagnose every session; write per-session reports, the table and the figures."""
+    from calibration.diagnosis import DiagnosisError
+    from tqdm import tqdm
+    rows = []
+    for f in tqdm(files, desc="sessions", unit="session"):
+        sub = out / Path(f).stem
+        try:
+            doc = _diagnose_file(f, effects, folds, seed)
+        except DiagnosisError as exc:
+            rows.append({"session": Path(f).name, "verdict": "error", "faulty": str(exc)})
+            continue
+        sub.mkdir(parents=True, exist_ok=True)
+        write_json_atomic(sub / "diagnosis.json", doc)
+        rows.append(session_row(Path(f).name, doc))
+        if "canopy" in Path(f).name or len(files) == 1:
+            plot_residual_over_azimuth(doc, sub / "residual_by_sky_azimuth.png")
+    table = pd.DataFrame(rows)
+    atomic_write(out / "sessions.csv", lambda p: table.to_csv(p, index=False))
+    atomic_write(out / "sessions.md", lambda p: p.write_text(_table_md(table)))
+    plot_day(table, out / "gap_and_heading_over_day.png")
+    return table
+
+
+def _table_md(table: pd.DataFrame) -> str:
+    cols = ["session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best", "gap_best",
+            "shrink", "params", "heading_rms_base_deg", "heading_rms_best_deg"]
+    cols = [c for c in cols if c in table.columns]
+    lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
+    for _, r in table.iterrows():
+        cells = []
+        for c in cols:
+            x = r.get(c)
+            cells.append(f"{x:.4g}" if isinstance(x, float) and np.isfinite(x) else
+                         ("" if x is None or (isinstance(x, float) and not np.isfinite(x))
+                          else str(x)))
+        lines.append("| " + " | ".join(cells) + " |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_day(table: pd.DataFrame, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    t = table.dropna(subset=["gap_base"]) if "gap_base" in table else table.iloc[:0]
+    fig, ax = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    if len(t):
+        x = t["sun_elevation_deg"]
+        ax[0].plot(x, 100 * t["gap_base"], "o", label="base model")
+        ax[0].plot(x, 100 * t["gap_best"].astype(float), "s", label="best candidate")
+        ax[1].plot(x, t["heading_rms_base_deg"], "o", label="base model")
+        ax[1].plot(x, t["heading_rms_best_deg"].astype(float), "s", label="best candidate")
+    ax[0].set_xlabel("sun elevation [deg]")
+    ax[0].set_ylabel("held-out gap [% of unit mean reading]")
+    ax[1].set_xlabel("sun elevation [deg]")
+    ax[1].set_ylabel("heading error, RMS [deg]")
+    for a in ax:
+        a.legend()
+        a.grid(alpha=0.3)
+    fig.suptitle("Ring compass over the day: held-out gap and heading error")
+    atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
+    plt.close(fig)
+
+
+def plot_residual_over_azimuth(doc: dict, path: Path) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    rows = sorted((w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"),
+                  key=lambda w: w["lo_deg"])
+    fig, ax = plt.subplots(figsize=(6, 3.5), constrained_layout=True)
+    if rows:
+        ax.bar([0.5 * (w["lo_deg"] + w["hi_deg"]) for w in rows], [100 * w["rms"] for w in rows],
+               width=28)
+    ax.set_xlabel("sky azimuth of the unit's view [deg, clockwise from north]")
+    ax.set_ylabel("held-out residual RMS [%]")
+    ax.set_title("Base-model residual over sky azimuth")
+    atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
+    plt.close(fig)
+
+
+def photodiode_report_markdown(doc: dict) -> str:
+    """``report.md`` of a photodiode diagnosis."""
+    v = doc["verdict"]
+    lines = [f"# Diagnosis: {v['effect']}", "", v["reason"], ""]
+    if v.get("gap_before") is not None:
+        lines += [f"- held-out gap {100 * v['gap_before']:.2f} % -> {100 * v['gap_after']:.2f} % "
+                  f"of the unit mean reading (noise floor {100 * v['noise_floor']:.2f} %)"]
+        he = doc.get("heading_error") or {}
+        if he.get("base_deg") is not None:
+            lines += [f"- heading error (RMS): base {he['base_deg']:.2f} deg"
+                      + (f", best {he['best_deg']:.2f} deg" if he.get("best_deg") else "")]
+    lines += ["", "## Faults", ""]
+    lines += [f"- {f['channel']}: {f['kind']} {f['evidence']}" for f in doc["faults"]] or ["none"]
+    lines += ["", "## Where (share of the excess held-out variance)", ""]
+    lines += [f"- {w['dimension']} {w['label']}: {100 * w['share']:.1f} % (n={w['n']})"
+              for w in doc["where"][:12]]
+    lines += ["", "## Candidates", "", "| effect | held-out gap [%] | shrink | score |",
+              "|---|---|---|---|"]
+    for c in doc["candidates"]:
+        if c.get("available", True):
+            lines.append(f"| {c['effect']} | {100 * c['gap_after']:.3f} | "
+                         f"{100 * c['shrink']:.1f} % | {c['score']:.0f} |")
+        else:
+            lines.append(f"| {c['effect']} | unavailable: {c['error']} | | |")
+    return "\n".join(lines) + "\n"
+
+
+def plot_photodiode_diagnosis(doc: dict, out: Path) -> list[Path]:
+    """Where (top slices) and the candidates' held-out gaps."""
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
+    top = doc["where"][:10]
+    ax[0].barh([f"{w['dimension']} {w['label']}" for w in top][::-1],
+               [100 * w["share"] for w in top][::-1])
+    ax[0].set_xlabel("share of the excess held-out variance [%]")
+    ax[0].set_title("Where the base model misses")
+    cands = [c for c in doc["candidates"] if c.get("available", True)]
+    gb = doc["verdict"].get("gap_before")
+    names = ["base"] + [c["effect"] for c in cands]
+    gaps = [gb] + [c["gap_after"] for c in cands]
+    if gb is not None:
+        ax[1].bar(names, [100 * g for g in gaps])
+        ax[1].tick_params(axis="x", rotation=30)
+    ax[1].set_ylabel("held-out gap [% of unit mean reading]")
+    ax[1].set_title("Which effect closes the gap")
+    p = out / "residuals_by_slice.png"
+    atomic_write(p, lambda q: fig.savefig(q, dpi=110, format="png"))
+    plt.close(fig)
+    return [p]
+
+
+def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessions: int,
+                       seed: int, folds: int = 3) -> pd.DataFrame:
+    """Inject each effect into real sessions and score where / which / how far."""
+    from calibration.photodiode_diagnosis import diagnose_photodiodes
+    from sensor.photodiodes_io import read_photodiodes
+    from tqdm import tqdm
+
+    from .real_injection import inject
+    files = session_files(folder)[:n_sessions]
+    rng = np.random.default_rng(seed)
+    rows = []
+    jobs = [(f, e) for f in files for e in effects_to_inject]
+    for f, e in tqdm(jobs, desc="injected sessions", unit="case"):
+        data, truth = inject(read_photodiodes(f), e, rng)
+        doc = diagnose_photodiodes(data, candidates, n_folds=folds, seed=seed, where=str(f))
+        rows.append(_score_case(Path(f).name, truth, doc))
+    table = pd.DataFrame(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    atomic_write(out / "real_cases.csv", lambda p: table.to_csv(p, index=False))
+    summary = {"cases": len(table), "named": float(table["named"].mean()) if len(table) else None,
+               "parameter_ok": float(table["parameter_ok"].mean()) if len(table) else None,
+               "seed": seed, "sessions": [Path(f).name for f in files]}
+    write_json_atomic(out / "real_summary.json", summary)
+    return table
+
+
+def _score_case(name, truth, doc) -> dict:
+    e = truth["effect"]
+    v = doc["verdict"]
+    row = {"session": name, "effect": e, "verdict": v["effect"], "truth": str(truth)}
+    if e == "stuck":
+        row["named"] = any(f["channel"] == truth["channel"] and f["kind"] in ("stuck", "dead")
+                           for f in doc["faults"])
+        row["parameter_ok"] = row["named"]
+        return row
+    row["named"] = v["effect"] == e
+    cand = next((c for c in doc["candidates"] if c.get("effect") == e), {})
+    p = cand.get("params", {})
+    if e == "clock_offset" and p:
+        row["error"] = abs(p["clock_offset_s"]["value"] - truth["clock_offset_s"])
+        row["parameter_ok"] = row["error"] <= 600.0
+    elif e == "yaw_scale" and p:
+        row["error"] = abs(p["factor"]["value"] / truth["factor"] - 1.0)
+        row["parameter_ok"] = row["error"] <= 0.015
+    elif e == "occlusion":
+        offs = doc["base_fit"]["heading_offset_deg"]
+        shift = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(offs))))))
+        c = (truth["center_deg"] + shift) % 360.0
+        top = [w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"][:3]
+        hw = 0.5 * truth["width_deg"]
+        row["parameter_ok"] = any(abs(((0.5 * (w["lo_deg"] + w["hi_deg"]) - c + 180) % 360)
+                                      - 180) <= hw + 15 for w in top)
+    else:
+        row["parameter_ok"] = False
+    return row
+
+
+# --------------------------------------------------------------------------- command line
+def _reproduce(args) -> int:
+    from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
+    folder = Path(getattr(args, "data", None) or DEFAULT_DATA)
+    files = session_files(folder)
+    effects = RING_EFFECT_NAMES
+    if args.quick:
+        files, effects = files[:1], QUICK_EFFECTS
+    out = Path(args.out or "results/real_sky_compass")
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    table = run_sessions(files, effects, out, seed=args.seed)
+    write_json_atomic(out / "summary.json", {
+        "sessions": len(table), "effects": list(effects), "data": str(folder),
+        "seed": args.seed, "elapsed_s": time.perf_counter() - t0,
+        "rows": table.to_dict(orient="records")})
+    print(_table_md(table))
+    print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png "
+          "and one diagnosis.json per session")
+    return 0
+
+
+def register_reproduce(targets: dict) -> None:
+    targets["real-sky-compass"] = _reproduce

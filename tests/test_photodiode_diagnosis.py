@@ -1,0 +1,203 @@
+"""Diagnosis of multi-unit photodiode instruments: faults, effects at their null parameters,
+blind recovery of injected effects on simulated ring data, and the real ring-compass sessions.
+
+Simulated sessions come from the compound-eye sensor (``sensor.compound_eye``) under a
+single-scattering sky; the checks are round trips (simulate with known parameters, recover
+them within what the noise allows) and closed-form limits.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calibration.photodiode_diagnosis import (
+    InstrumentDataError,
+    SunTooLowError,
+    diagnose_photodiodes,
+    instrument_from_photodiodes,
+    is_three_pair_sensor,
+    screen,
+)
+from calibration.photodiode_diagnosis.effects import (
+    fov_offsets_deg,
+    get_ring_effect,
+    integrate_stokes,
+    occlusion_weight,
+)
+from calibration.photodiode_diagnosis.forward import Forward, SunTrack
+from calibration.photodiode_diagnosis.run import held_out_folds
+from experiments.real_injection import inject
+from sensor.compound_eye import ring_configuration
+from sensor.photodiodes_io import PhotodiodeData, PhotodiodeFormatError
+from skysim.sky import RayleighSky
+from skysim.sun import Site
+
+REAL = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
+SITE = Site(39.258648, 8.440184, 0.0)
+
+
+def ring_session(n_sweeps=3, per_sweep=90, start="2022-05-12T10:00:00+02:00", seed=1,
+                 dmax=0.6):
+    """A relative-yaw, counter-clockwise ring session: each sweep one full turn."""
+    rng = np.random.default_rng(seed)
+    sensor = ring_configuration(8, 45.0)
+    t0 = pd.Timestamp(start)
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
+                              for s in range(n_sweeps) for k in range(per_sweep)])
+    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
+    sweep = np.repeat(np.arange(n_sweeps), per_sweep)
+    data = sensor.sample(RayleighSky(dmax), SITE, times, yaw, 0.0, 0.0, rng,
+                         yaw_reference="relative", yaw_offset_deg=35.0, include_truth=False,
+                         sweep=sweep)
+    t = data.table.drop(columns=["pitch_deg", "roll_deg"])
+    t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
+    side = dict(data.sidecar, yaw_sense="counterclockwise")
+    return PhotodiodeData(t, side)
+
+
+@pytest.fixture(scope="module")
+def session():
+    return ring_session()
+
+
+def test_adapter_converts_yaw_and_finds_sweeps(session):
+    inst = instrument_from_photodiodes(session)
+    assert inst.n_sweeps == 3 and inst.n_units == 8
+    # counter-clockwise input -> clockwise, unwrapped within each sweep: one full turn
+    span = [np.ptp(inst.yaw_deg[inst.sweep == s]) for s in range(3)]
+    np.testing.assert_allclose(span, 356.0, atol=0.1)
+    assert inst.rotating.mean() > 0.9
+
+
+def test_base_model_reproduces_noise_free_readings(session):
+    """At the true parameters the forward model equals the simulator to rounding (counts are
+    integers: relative residual <= 0.5 / 20,000 counts per unit radiance)."""
+    inst = instrument_from_photodiodes(session)
+    fwd = Forward(inst)
+    L = fwd.layout
+    th = np.zeros(L.size)
+    th[L.scale] = 0.6
+    th[L.heading] = 35.0 + 20.0 - 20.0   # recorded = true - offset
+    r = fwd.residual(th)
+    assert np.sqrt(np.mean(r[fwd.usable] ** 2)) < 5e-4
+
+
+@pytest.mark.parametrize("name", ["fov", "occlusion", "yaw_scale", "clock_offset", "tilt"])
+def test_effects_vanish_at_null(session, name):
+    inst = instrument_from_photodiodes(session)
+    e = get_ring_effect(name)
+    sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
+    base, ext = Forward(inst, sun=sun), Forward(inst, e, sun=sun)
+    th = np.zeros(ext.layout.size)
+    th[ext.layout.scale] = 0.6
+    th[ext.layout.heading] = 35.0
+    th[ext.layout.effect] = e.null
+    np.testing.assert_allclose(ext.residual(th), base.residual(th[:base.layout.size]),
+                               atol=1e-12)
+
+
+def test_fov_ring_is_second_order_exact():
+    """The six-direction ring at alpha/sqrt(2) averages any quadratic field exactly as the
+    uniform cap does (mean r^2 = alpha^2 / 2 on a cap of radius alpha, small-angle)."""
+    a = 10.0
+    offs = fov_offsets_deg(a)
+    r2 = np.sum(offs[:, :2] ** 2, axis=1)
+    np.testing.assert_allclose(r2.mean(), a ** 2 / 2, rtol=1e-12)
+    np.testing.assert_allclose(offs[:, :2].mean(axis=0), 0.0, atol=1e-12)
+    # equal Stokes average: two orthogonal fully polarized halves cancel
+    I, d, _ = integrate_stokes(np.ones(2), np.ones(2), np.array([0.0, 90.0]), axis=0)
+    assert I == 1.0 and d < 1e-12
+
+
+def test_occlusion_weight_is_a_sector():
+    w = occlusion_weight(np.array([100.0, 130.0, 160.0, 300.0]), 130.0, 60.0)
+    np.testing.assert_allclose(w, [0.5, 1.0, 0.5, 0.0], atol=1e-3)
+
+
+def test_faults_found_and_excluded(session):
+    t = session.table.copy()
+    t["u3_p045"] = 1234.0                                   # dead
+    t["u5_p090"] = t["u5_p000"]                             # duplicated
+    t.loc[t.index[::2], "u6_p135"] = 0.0                    # zero in half the readings
+    med = float(t["u2_p000"].median())
+    t.loc[t.index[20:], "u2_p000"] = med                    # stuck from sample 20 on
+    scr = screen(instrument_from_photodiodes(PhotodiodeData(t, session.sidecar)))
+    kinds = {f["channel"]: f["kind"] for f in scr.faults}
+    assert kinds["u3_p045"] == "dead"
+    assert kinds["u5_p090"] == "duplicated" and kinds["u5_p000"] == "duplicated"
+    assert kinds["u6_p135"] == "zero"
+    assert kinds["u2_p000"] == "stuck"
+    cols = instrument_from_photodiodes(session).columns
+    assert not scr.reading_ok[:, cols.index("u3_p045")].any()
+    # unit 5 keeps only 45 and 135 deg: no linear polarization from two angles
+    assert kinds["u5"] == "too_few" and scr.unit_ok.sum() == 7
+    assert scr.rail is None                       # the simulated converter does not clip
+
+
+def test_yaw_scale_named_and_recovered(session):
+    """A gyro scale factor of 1.05 injected into the recorded yaw: named, factor within 1.5 %."""
+    data, truth = inject(session, "yaw_scale", np.random.default_rng(3))
+    doc = diagnose_photodiodes(data, ("yaw_scale", "tilt"), n_folds=3)
+    assert doc["verdict"]["effect"] == "yaw_scale"
+    k = doc["verdict"]["params"]["factor"]["value"]
+    assert abs(k / truth["factor"] - 1) < 0.015
+    assert doc["heading_error"]["best_deg"] < doc["heading_error"]["base_deg"]
+
+
+def test_clock_offset_hours_found(session):
+    """A 2.5 h clock error (recorded times early) is found by the half-hour search and
+    refined to within 10 min (the sun moves 0.25 deg/min; the fit is far finer)."""
+    t = session.table.copy()
+    t["time"] = t["time"] - pd.Timedelta(hours=2.5)
+    doc = diagnose_photodiodes(PhotodiodeData(t, session.sidecar), ("clock_offset",),
+                               n_folds=3)
+    assert doc["verdict"]["effect"] == "clock_offset"
+    assert abs(doc["verdict"]["params"]["clock_offset_s"]["value"] - 9000.0) < 600.0
+
+
+def test_twilight_and_too_low_sun():
+    twilight = ring_session(start="2022-05-12T21:03:00+02:00", n_sweeps=2, per_sweep=60)
+    doc = diagnose_photodiodes(twilight, ("yaw_scale",), n_folds=2)
+    assert doc["verdict"]["gap_before"] is not None
+    night = twilight.table.copy()
+    night["time"] = night["time"] + pd.Timedelta(hours=1.5)
+    with pytest.raises(SunTooLowError, match="below the twilight limit"):
+        diagnose_photodiodes(PhotodiodeData(night, twilight.sidecar), ("yaw_scale",))
+
+
+def test_bad_input(session):
+    t = session.table.copy()
+    t.loc[t.index[5], "yaw_deg"] = np.nan
+    with pytest.raises(PhotodiodeFormatError, match="yaw_deg.*row 5"):
+        instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+    one = session.table[session.table["sweep"] == 0].copy()
+    with pytest.raises(Exception, match="only one sweep"):
+        instrument_from_photodiodes(PhotodiodeData(one, session.sidecar))
+    sat = session.table.copy()
+    for c in session.columns:
+        sat[c] = session.sidecar["saturation_value"]
+    with pytest.raises(InstrumentDataError, match="saturation"):
+        diagnose_photodiodes(PhotodiodeData(sat, session.sidecar), ("yaw_scale",))
+    with pytest.raises(Exception, match="folds"):
+        held_out_folds(np.repeat([0, 1, 2], 5), 1)
+    assert not is_three_pair_sensor(session.sidecar)
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="reference recordings ../shared/reference/"
+                    "gkanias2023 not present")
+def test_real_session_faults():
+    """The real ring compass: unit 7's photodiodes read in identical pairs (0 = 90 deg and
+    45 = 135 deg in > 90 % of samples): duplicated, and the unit excluded."""
+    from sensor.photodiodes_io import read_photodiodes
+    data = read_photodiodes(REAL / "tod_Thursday_12-05-22_13-00-12_CEST.csv")
+    scr = screen(instrument_from_photodiodes(data))
+    kinds = {f["channel"]: f["kind"] for f in scr.faults}
+    assert {kinds.get(c) for c in ("u7_p000", "u7_p090", "u7_p045", "u7_p135")} == {"duplicated"}
+    assert kinds.get("u7") == "too_few"
+    assert scr.rail is not None and 11000 < scr.rail < 11700   # the converter's own clipping
