@@ -43,7 +43,7 @@ ZERO_FRACTION = 0.2
 SATURATED_FRACTION = 0.25
 STUCK_FRACTION = 0.5
 DUPLICATE_FRACTION = 0.9
-RAIL_BAND = 0.02
+RAIL_BAND = 0.04
 RAIL_MIN_FRACTION = 0.002
 MALUS_FACTOR = 2.5
 """A channel fails Malus's law when its residual RMS exceeds this multiple of the median
