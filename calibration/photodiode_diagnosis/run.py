@@ -31,6 +31,15 @@ sky is never reproduced to the noise floor by one effect (aerosols, clouds, the 
 own optics all add), so the three-pair rule "down to the floor" would call every real
 session unexplained; 10 % keeps a candidate that only nibbles at the gap from being named."""
 NONE_MARGIN = 0.10
+FIT_SAMPLES = 1500
+"""Fits use every k-th sample of a sweep so that about this many samples remain: a platform
+turning once in ~400 samples moves ~1 deg per sample, far finer than the sky's polarization
+pattern varies, so thinning loses only noise averaging; held-out gaps use every sample."""
+
+
+def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
+    k = max(1, int(np.ceil(inst.n / target)))
+    return inst if k == 1 else inst.subset(np.arange(0, inst.n, k))
 
 
 def held_out_folds(sweep, n_folds: int) -> np.ndarray:
@@ -150,11 +159,14 @@ def _shared_mask(layout) -> np.ndarray:
 
 
 def _held_out(fwd_ho: Forward, theta_tr, layout_tr, sigma):
-    """Held-out residuals: shared parameters from training, headings refitted per sweep."""
+    """Held-out residuals: shared parameters from training, headings refitted per sweep (on
+    every k-th sample, :data:`FIT_SAMPLES`), residuals on every sample."""
     t = np.zeros(fwd_ho.layout.size)
     sh_tr, sh_ho = _shared_mask(layout_tr), _shared_mask(fwd_ho.layout)
     t[sh_ho] = theta_tr[sh_tr]
-    res = fit_headings(fwd_ho, t, sigma=sigma)
+    thin = Forward(_thin(fwd_ho.inst, FIT_SAMPLES // 2), fwd_ho.effect, sun=fwd_ho.sun,
+                   polarizer_sign=fwd_ho.polarizer_sign)
+    res = fit_headings(thin, t, sigma=sigma)
     return res.theta, fwd_ho.residual(res.theta)
 
 
@@ -266,21 +278,23 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         return _no_signal_report(inst, scr, f"fewer than two units keep three working "
                                             f"photodiodes ({len(scr.faults)} faults)")
     work = replace(inst, flagged=~scr.reading_ok)
-    base = Forward(work, sun=sun)
+    base = Forward(_thin(work), sun=sun)
     L = base.layout
     theta = np.zeros(L.size)
     theta[L.scale] = 0.6
     sign, theta = orient(base, theta)
     first = fit(base, theta, sigma=0.02, max_iter=max_iter)
-    scr2 = malus_outliers(inst, scr, base.residual(first.theta), base.usable)
+    full = Forward(work, sun=sun, polarizer_sign=sign)
+    scr2 = malus_outliers(inst, scr, full.residual(first.theta), full.usable)
     if scr2 is not scr:
         scr = scr2
         if scr.unit_ok.sum() < 2:
             return _no_signal_report(inst, scr, "fewer than two units follow Malus's law")
         work = replace(inst, flagged=~scr.reading_ok)
-        base = Forward(work, sun=sun, polarizer_sign=sign)
+        base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
         first = fit(base, first.theta, sigma=0.02, max_iter=max_iter)
-    sigma = max(noise_floor(base.residual(first.theta), base.usable, work.sweep), 1e-4)
+        full = Forward(work, sun=sun, polarizer_sign=sign)
+    sigma = max(noise_floor(full.residual(first.theta), full.usable, work.sweep), 1e-4)
 
     shape = work.readings.shape
     res = {"base": np.zeros(shape)}
@@ -296,7 +310,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             unavailable[e.name] = str(exc)
     for f in np.unique(folds):
         tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
-        itr, iho = work.subset(tr), work.subset(ho)
+        itr, iho = _thin(work.subset(tr)), work.subset(ho)
         ftr = Forward(itr, sun=sun, polarizer_sign=sign)
         t0 = np.r_[first.theta[:L.n_base], _sweep_headings(first.theta, L, work, tr, ftr)]
         btr = fit(ftr, t0, sigma=sigma, max_iter=max_iter)
