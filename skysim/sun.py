@@ -59,13 +59,14 @@ from pysolar import solar as _solar
 from pysolar import solartime as _solartime
 
 from .exceptions import BroadcastError, InvalidTimeError, NaiveDatetimeError
-from .geometry import direction_vector, elevation_azimuth
+from .geometry import direction_vector
 from .validation import check_finite, check_in_range, check_latitude, check_longitude
 
 __all__ = [
     "Site",
     "as_utc_index",
     "delta_t_seconds",
+    "pysolar_delta_t_s",
     "sun_position",
     "sun_vector",
     "apparent_solar_time",
@@ -554,7 +555,11 @@ def _sun_angles(times, latitude_deg, longitude_deg, altitude_m, refraction, meth
         el, az = _pysolar_angles(idx, lat, lon, alt)
     else:
         if delta_t_s is not None:
-            delta_t_s = np.broadcast_to(check_finite("delta_t_s", delta_t_s), (len(idx),))
+            delta_t_s = check_finite("delta_t_s", delta_t_s)
+            if delta_t_s.ndim > 1 or delta_t_s.size not in (1, len(idx)):
+                raise BroadcastError(f"delta_t_s has shape {delta_t_s.shape}; give a scalar or "
+                                     f"one value per time ({len(idx)} times)")
+            delta_t_s = np.broadcast_to(delta_t_s, (len(idx),))
         E, N, U = _topocentric_enu(_utc_days(idx), lat, lon, alt, method, delta_t_s)
         el = np.degrees(np.arctan2(U, np.hypot(E, N)))
         az = np.degrees(np.arctan2(E, N))

@@ -230,8 +230,9 @@ def test_bad_latitude_raises(lat):
 
 @pytest.mark.parametrize("kwargs,name", [({"latitude_deg": [1.0, 2.0, 3.0]}, "latitude_deg"),
                                          ({"longitude_deg": np.zeros(4)}, "longitude_deg"),
-                                         ({"altitude_m": np.zeros((2, 1))}, "altitude_m")])
-def test_non_broadcasting_sites_name_the_argument(kwargs, name):
+                                         ({"altitude_m": np.zeros((2, 1))}, "altitude_m"),
+                                         ({"delta_t_s": [69.0, 69.0, 69.0]}, "delta_t_s")])
+def test_non_broadcasting_arrays_name_the_argument(kwargs, name):
     args = {"latitude_deg": 34.1, "longitude_deg": 108.5, "altitude_m": 0.0, **kwargs}
     times = pd.date_range("2013-05-22T17:10+08:00", periods=2, freq="1min")
     with pytest.raises(BroadcastError, match=name):
