@@ -354,8 +354,9 @@ def _knot_plan(d_tt: np.ndarray, force: bool = False):
 
     Knots lie every :data:`KNOT_SPACING_DAYS` of TT; a time in the interval starting at knot
     ``k`` uses knots ``k-1 .. k+2``. They pay when they are fewer than the times (a knot costs
-    what one direct time costs, the interpolation about 1/30 of it): a contiguous run over
-    the span of the times, else the distinct intervals of clustered times, else none.
+    what one direct time costs, the interpolation about 1/30 of it). Of the contiguous run of
+    knots over the span of the times and the union of the knots the times need (fewer for
+    clustered times, e.g. a few days in each of several years), the shorter is used.
 
     Returns ``(knot_days, first, interval, x)``: knot times [days], the first knot of each
     interval, the interval of each time and its position in it, in [0, 1).
@@ -364,15 +365,17 @@ def _knot_plan(d_tt: np.ndarray, force: bool = False):
     kf = np.floor(u)
     x = u - kf
     k0, k1 = float(kf.min()), float(kf.max())
-    if k1 - k0 + 4 < d_tt.size:                           # dense for its span
-        first = np.arange(int(k1 - k0) + 1)
-        return (np.arange(k0 - 1, k1 + 3) * KNOT_SPACING_DAYS, first,
-                (kf - k0).astype(np.intp), x)
-    distinct, interval = np.unique(kf, return_inverse=True)
-    if 4 * distinct.size >= d_tt.size and not force:      # sparse: direct is cheaper
-        return None
-    knots = np.unique(distinct[:, None] + np.arange(-1.0, 3.0))
-    return knots * KNOT_SPACING_DAYS, np.searchsorted(knots, distinct - 1), interval, x
+    run = int(k1 - k0) + 4
+    if 8 * run > d_tt.size:  # not clearly dense: are the needed knots fewer?
+        distinct, interval = np.unique(kf, return_inverse=True)
+        knots = np.unique(distinct[:, None] + np.arange(-1.0, 3.0))
+        if min(run, knots.size) >= d_tt.size and not force:  # sparse: direct is cheaper
+            return None
+        if knots.size < run:
+            return (knots * KNOT_SPACING_DAYS, np.searchsorted(knots, distinct - 1),
+                    interval, x)
+    return (np.arange(k0 - 1, k1 + 3) * KNOT_SPACING_DAYS, np.arange(run - 3),
+            (kf - k0).astype(np.intp), x)
 
 
 def _interpolate(values: np.ndarray, first: np.ndarray, interval: np.ndarray,

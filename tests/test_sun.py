@@ -280,3 +280,16 @@ def test_clock_time_from_apparent_solar_time_round_trip():
     assert back == pytest.approx(17 + 20 / 60, abs=1e-6)
     lead_min = (17 + 20 / 60 - (clock.hour + clock.minute / 60 + clock.second / 3600)) * 60
     assert lead_min == pytest.approx(9.2, abs=0.2)
+
+
+def test_clustered_times_use_only_the_knots_they_need():
+    """A few days in each of several years: the union of needed knots (not the whole span)
+    is evaluated, and the result is the same interpolation as on the full grid."""
+    from skysim.sun import _knot_plan
+    days = np.concatenate([np.linspace(0, 3, 500) + 365.25 * y for y in range(10)])
+    knot_days, first, interval, x = _knot_plan(days)
+    assert knot_days.size <= 10 * 6 and first.size == np.unique(np.floor(days / 2)).size
+    times = pd.Timestamp("2020-01-01T00:00Z") + pd.to_timedelta(days, "D")
+    clustered, _ = sun_vector(pd.DatetimeIndex(times), Site(40.0, 10.0))
+    direct, _ = sun_vector(pd.DatetimeIndex(times), Site(40.0, 10.0), method="spa")
+    assert 0 < angle_between_deg(clustered, direct).max() <= INTERPOLATION_ERROR_BOUND_DEG
