@@ -112,6 +112,7 @@ def _periodic_terms():
 _TERM_B, _TERM_C, _TERM_WEIGHTS, _ORDERS = _periodic_terms()
 _NUTATION_Y = np.array(_pysolar_constants.aberration_sin_terms, dtype=float)       # (63, 5)
 _NUTATION_ABCD = np.array(_pysolar_constants.nutation_coefficients, dtype=float)   # (63, 4)
+_OBLIQUITY_TERMS = np.flatnonzero(np.any(_NUTATION_ABCD[:, 2:] != 0, axis=1))  # 38 of 63
 
 # Fundamental arguments X0..X4 [deg] (eqs. 15-19): a + b JCE + c JCE^2 + JCE^3 / d.
 _NUTATION_X = np.array([
@@ -331,10 +332,12 @@ def _geocentric_block(d_tt: np.ndarray) -> np.ndarray:
     a, b, c, d = _NUTATION_X.T
     x = a + jce[:, None] * (b + jce[:, None] * c) + jce[:, None] ** 3 / d
     arg = np.radians(x @ _NUTATION_Y.T)
-    A, Bn, C, D = _NUTATION_ABCD.T
-    s, co = np.sin(arg), np.cos(arg)
-    dpsi = (s @ A + jce * (s @ Bn)) / 36e6                            # eq. 20 [deg]
-    deps = (co @ C + jce * (co @ D)) / 36e6                           # eq. 21 [deg]
+    A, Bn = _NUTATION_ABCD[:, 0], _NUTATION_ABCD[:, 1]
+    C, D = _NUTATION_ABCD[_OBLIQUITY_TERMS, 2], _NUTATION_ABCD[_OBLIQUITY_TERMS, 3]
+    s = np.sin(arg)
+    co = np.cos(arg[:, _OBLIQUITY_TERMS])  # the other terms have no obliquity part
+    dpsi = (s @ A + jce * (s @ Bn)) / 36e6                            # eqs. 20, 22 [deg]
+    deps = (co @ C + jce * (co @ D)) / 36e6                           # eqs. 21, 23 [deg]
     eps = np.polynomial.polynomial.polyval(jme / 10.0, _OBLIQUITY) / 3600.0 + deps  # 24-25
     lam = np.radians(theta + dpsi - 20.4898 / (3600.0 * R))           # eqs. 26-27
     eps_r, beta_r = np.radians(eps), np.radians(beta)
