@@ -492,7 +492,7 @@ def _pysolar_topocentric(lat: float, lon: float, when: _dt.datetime, alt: float)
     """Topocentric declination and hour angle [deg] from pysolar's steps, composed as its
     ``get_topocentric_position`` does, with three equations as SPA publishes them where
     pysolar 0.13 departs from them: eq. 29 (pysolar takes the cosine of the obliquity in
-    degrees as if in radians: up to 0.005 deg of hour angle), eq. 33 (it multiplies the
+    degrees as if in radians: about 0.005 deg of hour angle), eq. 33 (it multiplies the
     parallax by R instead of dividing: 1e-4 deg) and eq. 39 (it uses the axial term y where
     the radial term x belongs: up to 0.0015 deg of declination)."""
     jd = _solartime.get_julian_solar_day(when)
