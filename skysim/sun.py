@@ -569,7 +569,8 @@ def _sun_angles(times, latitude_deg, longitude_deg, altitude_m, refraction, meth
         E, N, U = _topocentric_enu(_utc_days(idx), lat, lon, alt, method, delta_t_s)
         el = np.degrees(np.arctan2(U, np.hypot(E, N)))
         az = np.degrees(np.arctan2(E, N))
-        az[az < 0] += 360.0  # [0, 360) (cheaper than np.mod)
+        az[az < 0] += 360.0  # [0, 360) (cheaper than np.mod) ...
+        az[az >= 360.0] = 0.0  # ... including -1e-15 + 360, which rounds to 360
         if want_vector and not refraction:
             vec = np.stack([E, N, U], axis=-1)
             vec /= np.linalg.norm(vec, axis=1, keepdims=True)
