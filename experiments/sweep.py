@@ -56,8 +56,9 @@ import numpy as np
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
-           "simulate_trials", "evaluate_trials", "ChunkTask", "plan_chunks", "run_chunk",
-           "run_sweep", "sensitivity_indices", "summary_table", "register"]
+           "simulate_trials", "evaluate_trials", "ephemeris_sun_elevation", "ChunkTask",
+           "plan_chunks", "run_chunk", "run_sweep", "sensitivity_indices", "summary_table",
+           "register"]
 
 BLOCK_TRIALS = 64
 """Trials per random-number block (the unit of seeding; chunks are whole blocks)."""
@@ -151,6 +152,39 @@ def trial_parameters(cfg: SweepConfig, n: int, rng: np.random.Generator, X=None,
     if conditions is not None and np.isfinite(conditions).all():
         out["sun_elevation_deg"] = np.asarray(conditions, dtype=float)
     return out
+
+
+def ephemeris_sun_elevation(cfg: SweepConfig, params: dict) -> np.ndarray:
+    """Sun elevation [deg] of each trial from its site and date, in one array call of
+    :func:`skysim.sun.sun_position` (geometric, NREL SPA).
+
+    The trial's UTC time is 1 January of ``cfg.year`` + ``floor(day_of_year) - 1`` days +
+    ``local_time_h - longitude_deg / 15`` hours (``day_of_year`` picks the date, its fraction
+    is ignored; ``local_time_h`` is local mean solar time).
+
+    Raises
+    ------
+    SweepConfigError
+        If the sun is not above the horizon (or is at the zenith) for some trial: the
+        message gives the first such trial's site and date and how many there are.
+    """
+    import pandas as pd
+
+    from skysim.sun import sun_position
+    lat, lon = params["latitude_deg"], params["longitude_deg"]
+    hours = (24.0 * (np.floor(params["day_of_year"]) - 1.0) + params["local_time_h"]
+             - lon / 15.0)
+    times = pd.Timestamp(f"{cfg.year}-01-01T00:00Z") + pd.to_timedelta(hours * 3600.0, "s")
+    el = sun_position(pd.DatetimeIndex(times), lat, lon).elevation_deg.to_numpy()
+    bad = np.flatnonzero(~((el > 0.0) & (el < 90.0)))
+    if bad.size:
+        k = bad[0]
+        raise SweepConfigError(
+            f"{bad.size} of {el.size} trials have the sun at {el[k]:.2f} deg, outside (0, 90) "
+            f"(first: latitude_deg {lat[k]:.3f}, longitude_deg {lon[k]:.3f}, day_of_year "
+            f"{params['day_of_year'][k]:.2f}, local_time_h {params['local_time_h'][k]:.2f}); "
+            "narrow the latitude, date or local-time ranges to daytime")
+    return el
 
 
 # --------------------------------------------------------------------------- physics
@@ -392,6 +426,8 @@ def run_chunk(task: ChunkTask) -> dict:
         tnoise.append(rng.standard_normal((hi - lo, cfg.stops)))
         blocks.append(np.full(hi - lo, b))
     params = {k: np.concatenate([p[k] for p in parts]) for k in PARAMETERS}
+    if cfg.uses_ephemeris:
+        params["sun_elevation_deg"] = ephemeris_sun_elevation(cfg, params)
     noise, tnoise = np.concatenate(noise), np.concatenate(tnoise)
     if cfg.method != "montecarlo":  # common random numbers: a deterministic model for SALib
         noise, tnoise = common_noise(cfg, task.stop - task.start)
@@ -710,6 +746,8 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
     digest = cfg.digest()
     _check_state(out, cfg, digest)
     n_trials, X, conditions = design(cfg)
+    if cfg.uses_ephemeris and X is not None:  # a SALib design: every sun checked up front
+        ephemeris_sun_elevation(cfg, trial_parameters(cfg, n_trials, None, X, conditions))
     tasks = plan_chunks(cfg, out, digest, n_trials, X, conditions)
     todo = []
     for task in tasks:

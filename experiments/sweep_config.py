@@ -19,7 +19,16 @@ name                      unit    meaning (Yang et al. 2014 [1]_, eqs. 2-3, gene
 ``tilt_azimuth_deg``      deg     azimuth (relative to the sun) towards which it tilts
 ``dmax``                  1       scale of the sky model's DoP (the Rayleigh d_max)
 ``sun_elevation_deg``     deg     sun elevation
+``latitude_deg``          deg     site latitude (north positive)
+``longitude_deg``         deg     site longitude (east positive)
+``day_of_year``           d       date: 1 is 1 January of ``[sweep] year`` (integer part)
+``local_time_h``          h       local mean solar time (UTC + longitude / 15 h)
 ========================  ======  =======================================================
+
+The last four place each trial at a site and a date (:data:`EPHEMERIS`): when any of them is
+configured, each trial's sun elevation comes from the ephemeris at its site and time (UTC =
+1 January of ``year`` + ``floor(day_of_year) - 1`` days + ``local_time_h - longitude_deg /
+15`` hours) instead of ``sun_elevation_deg``.
 
 Groups expand to independent draws of their members and appear as one factor in the
 sensitivity indices: ``misalignment_deg`` (``dtheta1_deg`` .. ``dtheta6_deg``) and
@@ -47,13 +56,15 @@ from pathlib import Path
 from skysim.exceptions import InvalidParameterError
 
 __all__ = ["SweepConfigError", "ParameterSpec", "SweepConfig", "load_config", "parse_config",
-           "read_toml", "PARAMETERS", "GROUPS", "METHODS"]
+           "read_toml", "PARAMETERS", "GROUPS", "METHODS", "EPHEMERIS"]
 
 PARAMETERS = {
     **{f"dtheta{k}_deg": 0.0 for k in range(1, 7)},
     **{f"f{k}": 0.0 for k in range(1, 4)},
     "noise_V": 0.0, "dark_current_rel": 0.0, "turntable_error_deg": 0.0, "tilt_deg": 0.0,
     "tilt_azimuth_deg": 0.0, "dmax": 0.7, "sun_elevation_deg": 30.0,
+    "latitude_deg": 34.1447, "longitude_deg": 108.5467, "day_of_year": 143.0,
+    "local_time_h": 12.0,
 }
 """Every sweep parameter and its nominal value (used when the configuration omits it)."""
 
@@ -61,10 +72,18 @@ GROUPS = {"misalignment_deg": tuple(f"dtheta{k}_deg" for k in range(1, 7)),
           "transmittance": tuple(f"f{k}" for k in range(1, 4))}
 """Group names: one configured distribution, independent draws for every member."""
 
+EPHEMERIS = ("latitude_deg", "longitude_deg", "day_of_year", "local_time_h")
+"""Site and date parameters; configuring any of them derives the sun elevation (nominal: Xi'an,
+22 May, noon)."""
+
 NONNEGATIVE = ("noise_V", "dark_current_rel", "turntable_error_deg", "tilt_deg")
-BOUNDED = {"sun_elevation_deg": (0.0, 90.0), "dmax": (0.0, 1.0), "tilt_deg": (-1.0, 60.0)}
-"""Open intervals the parameter's draws must stay in (sun above the horizon, 0 < d < 1, a
-tilt small enough that the boresight stays well above the horizon)."""
+BOUNDED = {"sun_elevation_deg": (0.0, 90.0), "dmax": (0.0, 1.0), "tilt_deg": (-1.0, 60.0),
+           "latitude_deg": (-90.0, 90.0), "longitude_deg": (-180.0, 360.0),
+           "day_of_year": (0.0, 367.0), "local_time_h": (0.0, 24.0)}
+"""Intervals the parameter's draws must stay in (sun above the horizon, 0 < d < 1, a
+tilt small enough that the boresight stays well above the horizon, a site on the globe);
+open unless named in :data:`CLOSED`."""
+CLOSED = ("latitude_deg", "longitude_deg")
 METHODS = ("montecarlo", "sobol", "morris")
 DISTRIBUTIONS = ("uniform", "normal", "value")
 OUTPUT_PAIRS = ("1-2", "1-3", "2-3")
@@ -110,6 +129,8 @@ class SweepConfig:
         SALib's ``N``.
     morris_levels : int
     seed : int
+    year : int
+        Year of ``day_of_year`` (with the site and date parameters, :data:`EPHEMERIS`).
     parameters : tuple of ParameterSpec
     conditions : tuple of float
         Sun elevations [deg] at which a SALib design is repeated (the indices' dependence on
@@ -136,6 +157,7 @@ class SweepConfig:
     base_samples: int = 64
     morris_levels: int = 4
     seed: int = 0
+    year: int = 2024
     parameters: tuple = ()
     conditions: tuple = ()
     stops: int = 182
@@ -152,6 +174,11 @@ class SweepConfig:
         """The varying (non-fixed) specifications: the factors of a sensitivity analysis."""
         return tuple(p for p in self.parameters if not p.fixed)
 
+    @property
+    def uses_ephemeris(self) -> bool:
+        """True when the sun elevation comes from each trial's site and date."""
+        return any(m in EPHEMERIS for p in self.parameters for m in p.members)
+
     def to_dict(self) -> dict:
         d = asdict(self)
         d["parameters"] = {p.name: {p.dist: list(p.args) if len(p.args) > 1 else p.args[0]}
@@ -160,9 +187,10 @@ class SweepConfig:
 
     def digest(self) -> str:
         """SHA-256 of the canonical JSON of everything that determines the results (the
-        execution settings ``chunk_trials`` and ``memory_mb`` do not: they are left out)."""
+        execution settings ``chunk_trials`` and ``memory_mb`` do not: they are left out, and so
+        is ``year`` unless the site and date parameters use it)."""
         d = self.to_dict()
-        for k in ("chunk_trials", "memory_mb"):
+        for k in ("chunk_trials", "memory_mb", *(() if self.uses_ephemeris else ("year",))):
             d.pop(k)
         blob = json.dumps(d, sort_keys=True, default=str).encode()
         return hashlib.sha256(blob).hexdigest()
@@ -202,17 +230,20 @@ def _parse_parameter(name: str, spec) -> ParameterSpec:
                 f"value >= 0 (normal draws would go negative); got {dist} = {list(args)}")
     if name in BOUNDED:
         lo, hi = BOUNDED[name]
-        inside = dist != "normal" and all(lo < a < hi for a in args)
+        closed = name in CLOSED
+        inside = dist != "normal" and all((lo <= a <= hi) if closed else (lo < a < hi)
+                                          for a in args)
         if not inside:
+            span = f"[{lo:g}, {hi:g}]" if closed else f"({lo:g}, {hi:g})"
             raise SweepConfigError(
-                f"parameter {name!r} must stay inside ({lo:g}, {hi:g}): use uniform bounds or a "
+                f"parameter {name!r} must stay inside {span}: use uniform bounds or a "
                 f"value inside that interval; got {dist} = {list(args)}")
     return ParameterSpec(name, dist, args)
 
 
 _SECTIONS = {"sweep", "parameters", "sensitivity", "sky", "sensor", "execution"}
 _KEYS = {
-    "sweep": {"name", "method", "trials", "seed", "stops", "pairs", "calibrate"},
+    "sweep": {"name", "method", "trials", "seed", "stops", "pairs", "calibrate", "year"},
     "sensitivity": {"base_samples", "morris_levels", "sun_elevations_deg"},
     "sensor": {"daq_bits", "daq_range_V"},
     "execution": {"chunk_trials", "memory_mb"},
@@ -255,6 +286,15 @@ def parse_config(raw: dict) -> SweepConfig:
     if conditions and "sun_elevation_deg" in names:
         raise SweepConfigError("give the sun elevation either as a parameter or as "
                                "[sensitivity] sun_elevations_deg, not both")
+    ephemeris = sorted(set(names) & set(EPHEMERIS))
+    if ephemeris and ("sun_elevation_deg" in names or conditions):
+        raise SweepConfigError(
+            f"site and date parameters {ephemeris} set each trial's sun elevation; drop "
+            "sun_elevation_deg (parameter) and [sensitivity] sun_elevations_deg, or the site "
+            "and date parameters")
+    year = sw.get("year", 2024)
+    if not isinstance(year, int) or not 1900 <= year <= 2200:
+        raise SweepConfigError(f"[sweep] year must be an integer in [1900, 2200]; got {year!r}")
     if any(not 0 < c < 90 for c in conditions):
         raise SweepConfigError(f"[sensitivity] sun_elevations_deg must lie in (0, 90); "
                                f"got {list(conditions)}")
@@ -285,7 +325,7 @@ def parse_config(raw: dict) -> SweepConfig:
     return SweepConfig(
         name=str(sw.get("name", "sweep")), method=method, trials=counts["trials"],
         base_samples=counts["base_samples"], morris_levels=int(sens.get("morris_levels", 4)),
-        seed=int(sw.get("seed", 0)), parameters=params, conditions=conditions,
+        seed=int(sw.get("seed", 0)), year=year, parameters=params, conditions=conditions,
         stops=counts["stops"], pairs=pairs, calibrate=bool(sw.get("calibrate", True)), sky=sky,
         daq_bits=None if bits in (None, 0, "none") else int(bits),
         daq_range_V=float(sensor.get("daq_range_V", 10.0)), chunk_trials=chunk,

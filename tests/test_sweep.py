@@ -341,3 +341,77 @@ def test_dask_local_cluster_matches_local_backend(tmp_path):
     dask = run_sweep(cfg, tmp_path / "d", backend="dask", workers=2, progress=False,
                      figures=False, log=lambda m: None)
     pd.testing.assert_frame_equal(local["trials"], dask["trials"])
+
+
+# --------------------------------------------------------------------------- site and date
+
+
+SITE_DATE = {"sweep": {"name": "site", "method": "sobol", "seed": 4, "stops": 32,
+                       "pairs": ["1-2"], "year": 2021},
+             "sensitivity": {"base_samples": 16},
+             "parameters": {"latitude_deg": {"uniform": [30.0, 50.0]},
+                            "longitude_deg": {"uniform": [-180.0, 180.0]},
+                            "day_of_year": {"uniform": [1.0, 365.0]},
+                            "local_time_h": {"uniform": [9.0, 10.5]},
+                            "noise_V": {"uniform": [1e-4, 1e-3]}},
+             "execution": {"chunk_trials": 64}}
+
+
+def test_sobol_over_site_and_date_one_sun_call_per_chunk(tmp_path, monkeypatch):
+    """Each chunk computes the sun of all its trials in one array call; the elevations are
+X
+    lon/15 h) within 0.01 deg (the project's tolerance against SPA)."""
+    import skysim.sun
+    pvlib = pytest.importorskip("pvlib", reason="pvlib is the independent SPA reference")
+    calls = []
+    real = skysim.sun.sun_position
+
+    def counting(times, *args, **kwargs):
+        calls.append(len(times))
+        return real(times, *args, **kwargs)
+
+    monkeypatch.setattr(skysim.sun, "sun_position", counting)
+    from experiments.sweep import design
+    cfg = parse_config(SITE_DATE)
+    n, X, cond = design(cfg)
+    tasks = plan_chunks(cfg, tmp_path, cfg.digest(), n, X, cond)
+    for task in tasks:
+        run_chunk(task)
+    assert calls == [t.stop - t.start for t in tasks] and len(tasks) == 2
+    trials = pd.concat([pd.read_parquet(t.path) for t in tasks])
+    utc = (pd.Timestamp("2021-01-01T00:00Z") + pd.to_timedelta(
+        24 * (np.floor(trials.day_of_year) - 1) + trials.local_time_h - trials.longitude_deg / 15,
+        "h"))
+    ref = [pvlib.solarposition.spa_python(pd.DatetimeIndex([t]), la, lo).elevation.iloc[0]
+           for t, la, lo in zip(utc, trials.latitude_deg, trials.longitude_deg)]
+    np.testing.assert_allclose(trials.sun_elevation_deg, ref, atol=0.01)
+    assert np.ptp(trials.sun_elevation_deg) > 15  # the design spans sites and dates
+
+
+def test_site_and_date_night_is_refused_before_any_chunk(tmp_path):
+    raw = {k: dict(v) for k, v in SITE_DATE.items()}
+    raw["parameters"] = {**raw["parameters"], "local_time_h": {"uniform": [16.0, 23.0]}}
+    with pytest.raises(SweepConfigError, match="narrow the latitude, date or local-time"):
+        run_sweep(parse_config(raw), tmp_path / "night", workers=1, progress=False,
+                  log=lambda m: None)
+    assert not (tmp_path / "night" / "chunks").exists()
+
+
+@pytest.mark.parametrize("change,match", [
+    ({"parameters": {"sun_elevation_deg": {"uniform": [5.0, 60.0]}}}, "site and date"),
+    ({"sensitivity": {"sun_elevations_deg": [20.0]}}, "site and date"),
+    ({"sweep": {"year": 1850}}, r"year must be an integer in \[1900, 2200\]"),
+    ({"parameters": {"latitude_deg": {"uniform": [-95.0, 10.0]}}}, r"inside \[-90, 90\]")])
+def test_site_and_date_configuration_errors(change, match):
+    raw = {k: dict(v) for k, v in SITE_DATE.items()}
+    for section, values in change.items():
+        raw[section] = {**raw.get(section, {}), **values}
+    with pytest.raises(SweepConfigError, match=match):
+        parse_config(raw)
+
+
+def test_year_enters_the_digest_only_with_site_and_date():
+    plain = _cfg()
+    assert replace(plain, year=2000).digest() == plain.digest()
+    site = parse_config(SITE_DATE)
+    assert replace(site, year=2000).digest() != site.digest()
