@@ -233,6 +233,60 @@ class Occlusion(RingEffect):
         return replace(obs, dop=obs.dop * (1.0 - p[2] * w))
 
 
+class GridMultipleSky:
+    """Multiple-scattering sky at any ``(tau, albedo)`` from engine runs on a node grid.
+
+    Nodes: ``tau`` in :data:`TAU_NODES` (interpolated linearly in ``ln tau``), albedo 0, 0.3,
+    0.6 (quadratic in albedo: the ground term ``A T / (1 - A s)`` of Chandrasekhar's
+    reduction bends by less than ``A s`` ~ 0.1 over the range). The node skies are
+    :class:`skysim.multiple.MultipleScatteringSky` objects, so every engine run is cached per
+    (tau, albedo, sun elevation) and reused by every fold and every fit step.
+    """
+
+    TAU_NODES: ClassVar[np.ndarray] = np.array([0.02, 0.05, 0.1, 0.2, 0.4, 1.0])
+    ALBEDO_NODES: ClassVar[np.ndarray] = np.array([0.0, 0.3, 0.6])
+
+    def __init__(self, sun_step_deg):
+        from skysim.multiple import MultipleScatteringSky
+        self.skies = {(i, j): MultipleScatteringSky(tau=float(t), albedo=float(a),
+                                                    sun_step_deg=sun_step_deg)
+                      for i, t in enumerate(self.TAU_NODES)
+                      for j, a in enumerate(self.ALBEDO_NODES)}
+
+    def at(self, tau: float, albedo: float):
+        from skysim.sky import Sky
+        grid = self
+
+        class _Mixed(Sky):
+            name = "multiple"
+
+            def _stokes(self, vel, vaz, sel, saz):
+                return grid.stokes(tau, albedo, vel, vaz, sel, saz)
+
+            def describe(self):
+                return {"model": "multiple", "tau": tau, "albedo": albedo,
+                        "interpolated": "ln tau linear, albedo quadratic"}
+        return _Mixed()
+
+    def stokes(self, tau, albedo, vel, vaz, sel, saz):
+        lt = np.log(self.TAU_NODES)
+        x = float(np.clip(np.log(tau), lt[0], lt[-1]))
+        i = int(np.clip(np.searchsorted(lt, x) - 1, 0, lt.size - 2))
+        f = (x - lt[i]) / (lt[i + 1] - lt[i])
+        a0, a1, a2 = self.ALBEDO_NODES
+        A = float(albedo)
+        wa = [(A - a1) * (A - a2) / ((a0 - a1) * (a0 - a2)),
+              (A - a0) * (A - a2) / ((a1 - a0) * (a1 - a2)),
+              (A - a0) * (A - a1) / ((a2 - a0) * (a2 - a1))]
+        out = 0.0
+        for ii, wt in ((i, 1.0 - f), (i + 1, f)):
+            for j in range(3):
+                if wt * wa[j] != 0.0:
+                    sky = self.skies[(ii, j)]
+                    out = out + wt * wa[j] * np.stack(sky._stokes(vel, vaz, sel, saz))
+        return out[0], out[1], out[2]
+
+
 class MultipleScattering(RingEffect):
     name = "multiple_scattering"
     names = ("tau", "albedo")
@@ -260,9 +314,16 @@ class MultipleScattering(RingEffect):
                 f"multiple_scattering needs the sun above the horizon (plane-parallel "
                 f"atmosphere); got {float(np.min(sun_elevation_deg)):.2f} deg")
 
+    def __init__(self):
+        self._grid = None
+
     def sky(self, p, base_sky, sun_enu):
-        from skysim.multiple import MultipleScatteringSky
-        return MultipleScatteringSky(tau=float(p[0]), albedo=float(p[1]), sun_step_deg=1.0)
+        if self._grid is None:
+            el = np.degrees(np.arcsin(np.clip(np.asarray(sun_enu)[..., 2], -1, 1)))
+            # exact engine runs when the session has (nearly) one sun elevation, 1-deg nodes
+            # with linear interpolation otherwise (error stated in skysim.multiple)
+            self._grid = GridMultipleSky(None if np.ptp(el) < 0.05 else 1.0)
+        return self._grid.at(float(p[0]), float(p[1]))
 
 
 _EFFECTS = {c.name: c for c in (MultipleScattering, FieldOfView, Occlusion, YawScale,

@@ -138,7 +138,7 @@ def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
 
 
 def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma: float = 0.01,
-        max_iter: int = 40, tol: float = 1e-7, covariance: bool = False) -> FitResult:
+        max_iter: int = 40, tol: float = 1e-6, covariance: bool = False) -> FitResult:
     """Levenberg-Marquardt MAP fit of the parameters marked ``free`` (default: all).
 
     Parameters
