@@ -16,6 +16,18 @@ to the scattering plane, "negative" polarization). The neutral points are the ze
 :mod:`skysim.multiple` (``Q(theta, 0) = Q_0 + Q_1 + Q_2`` towards the sun,
 ``Q(theta, 180) = Q_0 - Q_1 + Q_2`` away from it).
 
+**High sun.** Babinet and Brewster then lie a few degrees from the sun, near the zenith,
+where the spline's nodes are ~6 deg apart; and Babinet passes the zenith once it is closer
+to it than the sun is. For suns above :data:`DENSE_SCAN_ELEVATION_DEG` (or when the spline
+finds no point beside the sun) the two are found on a dense engine scan of ``Q`` along the
+solar vertical (:data:`DENSE_SCAN_STEP_DEG` steps, across the zenith; ``Q`` is continuous
+there since the meridian basis turns by 180 deg), refined by Brent's method on a cubic
+spline of the scan. Within ~6 deg of the zenith the two points merge with the sun (``Q`` keeps
+its sign, with a DoLP minimum below the engine's accuracy, :data:`MERGED_DOP`, beside the sun):
+both are then reported at that minimum. A Babinet point past the zenith is reported with an elevation above
+90 deg (measured along the solar vertical through the zenith: ``180 - e`` above the
+anti-solar horizon).
+
 References
 ----------
 .. [1] K. L. Coulson, *Polarization and Intensity of Light in the Atmosphere*, A. Deepak
@@ -26,14 +38,25 @@ References
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
-__all__ = ["NeutralPoints", "neutral_points", "neutral_points_from_modes"]
+__all__ = ["NeutralPoints", "neutral_points", "neutral_points_from_modes",
+           "DENSE_SCAN_ELEVATION_DEG", "DENSE_SCAN_STEP_DEG", "MERGED_DOP"]
+
+DENSE_SCAN_ELEVATION_DEG = 60.0
+"""Sun elevation [deg] above which Babinet and Brewster come from the dense meridian scan."""
+DENSE_SCAN_STEP_DEG = 0.25
+"""Step [deg] of the dense scan along the solar vertical (+-30 deg around the sun)."""
+MERGED_DOP = 1e-3
+"""DoLP below which the near-sun minimum counts as a neutral point when ``Q`` has no sign
+change beside the sun (the engine set-up is verified to ~1e-3 in DoLP): Babinet and Brewster
+have then merged with the sun (sun within ~6 deg of the zenith) and are both reported at
+that minimum."""
 
 
 @dataclass(frozen=True)
@@ -41,7 +64,8 @@ class NeutralPoints:
     """Elevations [deg] of the three classical neutral points on the solar meridian.
 
     A point that lies below the horizon (not visible from the ground) is ``nan`` and its
-    ``*_visible`` flag is False; distances are angular distances [deg] from the sun (Babinet,
+    ``*_visible`` flag is False; a Babinet elevation above 90 deg lies past the zenith on the
+    solar vertical (module docstring); distances are angular distances [deg] from the sun (Babinet,
     Brewster) or from the anti-solar point (Arago).
     """
 
@@ -91,7 +115,8 @@ class NeutralPoints:
                               ("Brewster", self.brewster_elevation_deg, sun_azimuth_deg),
                               ("Arago", self.arago_elevation_deg, anti)]:
             if np.isfinite(el):
-                out[label] = (float(el), float(az))
+                out[label] = ((float(el), float(az)) if el <= 90.0
+                              else (float(180.0 - el), float(anti)))
         return out
 
 
@@ -108,6 +133,40 @@ def _zeros_on_half_meridian(modes, sign: float, step_deg: float = 0.05) -> np.nd
     idx = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
     roots = [brentq(lambda t: float(q(t)[0]), theta[i], theta[i + 1], xtol=1e-6) for i in idx]
     return 90.0 - np.asarray(roots, dtype=float)
+
+
+def _dense_near_sun(sky, sun_elevation_deg: float) -> tuple[float, float]:
+    """Babinet and Brewster elevations [deg] from a dense engine scan of Q along the solar
+    vertical (module docstring, "High sun")."""
+    from scipy.interpolate import CubicSpline
+    from scipy.optimize import brentq
+
+    from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes
+    theta_sun = 90.0 - float(sun_elevation_deg)
+    # signed zenith angle x along the vertical: x > 0 towards the sun, x < 0 beyond the zenith
+    x = np.arange(theta_sun - 30.0, min(theta_sun + 30.0, 90.0) + 1e-9, DENSE_SCAN_STEP_DEG)
+    mu = np.clip(np.cos(np.radians(np.abs(x))), MU_MIN, MU_MAX)
+    x = np.sign(x) * np.degrees(np.arccos(mu))          # the angles the engine traces
+    phi = np.where(x >= 0.0, 0.0, 180.0)
+    I, Q, _ = transmitted_stokes(sky.tau, sky.albedo, float(np.sin(np.radians(sun_elevation_deg))),
+                                 mu, phi, depolarization_ratio=sky.depolarization_ratio,
+                                 settings=sky.settings)
+    x, keep = np.unique(x, return_index=True)
+    q = CubicSpline(x, Q[keep])
+    idx = np.flatnonzero(np.sign(Q[keep][:-1]) * np.sign(Q[keep][1:]) < 0)
+    roots = np.array([brentq(q, x[i], x[i + 1], xtol=1e-6) for i in idx])
+    above, below = roots[roots < theta_sun], roots[roots > theta_sun]
+    if not (above.size and below.size):
+        # no sign change beside the sun: the two points have merged with the sun to within
+        # the engine's verified DoLP accuracy; report both at the DoP minimum near the sun
+        dop = np.abs(Q[keep]) / I[keep]
+        near = np.abs(x - theta_sun) <= 10.0
+        k = np.flatnonzero(near)[np.argmin(dop[near])]
+        if dop[k] <= MERGED_DOP:
+            return 90.0 - float(x[k]), 90.0 - float(x[k])
+    babinet = 90.0 - float(above.max()) if above.size else np.nan
+    brewster = 90.0 - float(below.min()) if below.size else np.nan
+    return babinet, (brewster if brewster >= 0.0 else np.nan)
 
 
 def neutral_points_from_modes(modes, sun_elevation_deg: float, tau: float = np.nan,
@@ -133,6 +192,7 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     ----------
     sun_elevation_deg : float
         Sun elevation [deg] in (0, 89.5] (at the zenith the solar meridian is undefined).
+        Above :data:`DENSE_SCAN_ELEVATION_DEG` one more engine call (the dense scan).
     tau, albedo : float
         Rayleigh optical thickness and Lambertian ground albedo.
     **sky_kwargs
@@ -151,4 +211,8 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     if not np.isfinite(tau):
         raise InvalidParameterError(f"tau must be finite; got {tau!r}")
     sky = MultipleScatteringSky(tau=tau, albedo=albedo, **sky_kwargs)
-    return neutral_points_from_modes(sky.modes(sun), sun, sky.tau, sky.albedo)
+    n = neutral_points_from_modes(sky.modes(sun), sun, sky.tau, sky.albedo)
+    if sun > DENSE_SCAN_ELEVATION_DEG or not (n.babinet_visible and n.brewster_visible):
+        babinet, brewster = _dense_near_sun(sky, sun)
+        n = replace(n, babinet_elevation_deg=babinet, brewster_elevation_deg=brewster)
+    return n

@@ -69,3 +69,22 @@ def test_invisible_points_are_flagged_not_guessed():
     n = NeutralPoints(5.0, 0.25, 0.0, 28.0, float("nan"), 20.0)
     assert n.babinet_visible and n.arago_visible and not n.brewster_visible
     assert set(n.marks(0.0)) == {"Babinet", "Arago"} and n.marks(0.0)["Arago"] == (20.0, 180.0)
+
+
+@pytest.mark.parametrize("sun_el", [80.0, 86.0, 89.0])
+def test_neutral_points_beside_a_high_sun(sun_el):
+    """Sun at 80-89 deg (tau 0.25): Babinet and Brewster are found beside the sun (within 5
+    deg; they merge with it as the sun nears the zenith) and are not flagged "not visible".
+    Independent check: a direct engine call at each reported point gives DoLP below the
+    engine's verified accuracy (1e-3); at 80 deg, where Q changes sign, below 1e-4."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    from skysim.rt_sasktran import transmitted_stokes
+    n = neutral_points(sun_el, 0.25)
+    assert n.babinet_visible and n.brewster_visible
+    assert abs(n.babinet_distance_deg) <= 5.0 and abs(n.brewster_distance_deg) <= 5.0
+    assert n.babinet_elevation_deg >= n.brewster_elevation_deg
+    x = 90.0 - np.array([n.babinet_elevation_deg, n.brewster_elevation_deg])
+    mu = np.clip(np.cos(np.radians(np.abs(x))), 1e-4, 1 - 1e-6)
+    I, Q, _ = transmitted_stokes(0.25, 0.0, np.sin(np.radians(sun_el)), mu,
+                                 np.where(x >= 0, 0.0, 180.0))
+    assert np.all(np.abs(Q) / I < (1e-4 if sun_el == 80.0 else 1e-3))
