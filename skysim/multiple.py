@@ -44,7 +44,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .exceptions import InvalidParameterError
-from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, transmitted_stokes
+from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, check_verified_tau,
+                          transmitted_stokes)
 from .sky import Sky
 from .validation import check_in_range
 
@@ -271,7 +272,9 @@ class MultipleScatteringSky(Sky):
     Parameters
     ----------
     tau : float, optional
-        Rayleigh optical thickness (> 0). Give either ``tau`` or ``wavelength_nm``.
+        Rayleigh optical thickness in :data:`skysim.rt_sasktran.VERIFIED_TAU_RANGE`
+        (1e-3 to 1; outside it :class:`~skysim.rt_sasktran.TauOutsideVerifiedRangeError`).
+        Give either ``tau`` or ``wavelength_nm``.
     albedo : float
         Lambertian ground albedo in [0, 1].
     wavelength_nm : float, optional
@@ -318,9 +321,7 @@ class MultipleScatteringSky(Sky):
         if tau is None:
             tau = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa, latitude_deg,
                                                    altitude_m))
-        self.tau = float(check_in_range("tau", tau, 0.0, np.inf, low_open=True,
-                                        hint="optical thickness must be > 0 (tau = 0 has no "
-                                             "diffuse sky); Rayleigh at 550 nm: ~0.097"))
+        self.tau = float(check_verified_tau("tau", tau))
         self.albedo = float(check_in_range("albedo", albedo, 0.0, 1.0,
                                            hint="Lambertian ground albedo is a fraction"))
         self.wavelength_nm = None if wavelength_nm is None else float(wavelength_nm)

@@ -61,6 +61,9 @@ __all__ = [
     "MU_MIN",
     "EngineSettings",
     "SasktranUnavailableError",
+    "TauOutsideVerifiedRangeError",
+    "VERIFIED_TAU_RANGE",
+    "check_verified_tau",
     "rayleigh_depolarization_factor",
     "require_sasktran2",
     "transmitted_stokes",
@@ -72,6 +75,34 @@ MU_MIN = 1.0e-4
 
 MU_MAX = 1.0 - 1.0e-6
 """Largest view cosine passed to the engine (exactly mu = 1 gives wrong Q, U): 0.08 deg off zenith."""
+
+
+VERIFIED_TAU_RANGE = (1.0e-3, 1.0)
+"""Optical thicknesses for which this engine set-up is verified: 0.02-1 against the Natraj et
+al. (2009) tables (DoLP to 1e-3, tests/test_multiple.py), down to 1e-3 against the closed-form
+single-scattering limit. Beyond 1 nothing checks it, and it fails silently: at tau = 1e3-1e4
+the radiance sits on a plateau near 2e-3, at 1e6 it is 4e-25."""
+
+
+class TauOutsideVerifiedRangeError(InvalidParameterError):
+    """The optical thickness lies outside :data:`VERIFIED_TAU_RANGE`, where the engine set-up
+    is not verified (and is known to return wrong radiances for very thick slabs)."""
+
+
+def check_verified_tau(name: str, tau) -> np.ndarray:
+    """Return ``tau`` as a float array; raise :class:`TauOutsideVerifiedRangeError` outside
+    :data:`VERIFIED_TAU_RANGE` (and ``InvalidParameterError`` for tau <= 0 or not finite)."""
+    t = check_in_range(name, tau, 0.0, np.inf, low_open=True,
+                       hint="optical thickness > 0 (tau = 0 has no diffuse sky)")
+    lo, hi = VERIFIED_TAU_RANGE
+    bad = (t < lo) | (t > hi)
+    if bad.any():
+        raise TauOutsideVerifiedRangeError(
+            f"{name}={float(np.asarray(t).ravel()[np.flatnonzero(bad.ravel())[0]])!r} lies outside "
+            f"[{lo:g}, {hi:g}], the range in which the multiple-scattering engine set-up is "
+            "verified (tables for 0.02-1, the single-scattering limit below); a clear Rayleigh "
+            "sky has tau ~ 0.01-1 from 1000 to 300 nm")
+    return t
 
 
 class SasktranUnavailableError(ImportError):
@@ -235,11 +266,15 @@ def transmitted_stokes_cases(taus, albedos, mu0: float, mu, phi_deg, *,
     -------
     ndarray (m, n, 3)
         ``I, Q, U`` of each case and direction (skysim basis, incident flux ``pi``).
+
+    Raises
+    ------
+    TauOutsideVerifiedRangeError
+        For a tau outside :data:`VERIFIED_TAU_RANGE`.
     """
     taus, albedos = np.broadcast_arrays(np.atleast_1d(np.asarray(taus, float)),
                                         np.atleast_1d(np.asarray(albedos, float)))
-    check_in_range("taus", taus, 0.0, np.inf, low_open=True,
-                   hint="optical thickness > 0 (tau = 0 has no diffuse sky)")
+    check_verified_tau("taus", taus)
     check_in_range("albedos", albedos, 0.0, 1.0)
     mu0 = float(check_in_range("mu0", mu0, 0.0, 1.0, low_open=True,
                                hint="the sun must be above the horizon"))

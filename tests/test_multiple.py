@@ -293,3 +293,16 @@ def test_sun_step_interpolation_error():
     assert MultipleScatteringSky(tau=0.25, sun_step_deg=1.0).describe()["sun_step_deg"] == 1.0
     with pytest.raises(InvalidParameterError, match="sun_step_deg"):
         MultipleScatteringSky(tau=0.25, sun_step_deg=0.0)
+
+
+@pytest.mark.parametrize("tau", [2.0, 1e3, 1e6, 5e-4])
+def test_tau_outside_the_verified_range_is_refused(tau):
+    """Outside tau 1e-3..1 (tables 0.02-1, single-scattering limit below) the engine set-up is
+    not verified; at 1e3-1e6 it returns wrong radiances (a 2e-3 plateau, 4e-25): refused
+    with a specific error naming the value, by the sky and by the engine adapter."""
+    from skysim.rt_sasktran import TauOutsideVerifiedRangeError, transmitted_stokes_cases
+    with pytest.raises(TauOutsideVerifiedRangeError, match=f"tau={tau!r}"):
+        MultipleScatteringSky(tau=tau)
+    with pytest.raises(TauOutsideVerifiedRangeError, match="taus="):
+        transmitted_stokes_cases([0.1, tau], [0.0, 0.0], 0.5, [0.5], [0.0])
+    assert issubclass(TauOutsideVerifiedRangeError, InvalidParameterError)
