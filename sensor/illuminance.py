@@ -51,7 +51,9 @@ is the sum of two parts:
   partial polarization lost over 1.25-3 m in clear reef water);
 - the light *scattered in the water* from the refracted sun (at zenith angle
   ``asin(cos(h)/n)``), polarized by single scattering as in the model of Lerner, Sabbah,
-  Erlick & Shashar [8]_ (refraction at the surface + Rayleigh single scattering)::
+  Erlick & Shashar [8]_ (refraction at the surface + Rayleigh single scattering; in clear
+  oceanic water the measured DoP and AoP "are largely determined by an in-water
+  single-scattering model", You et al. [11]_)::
 
       d_w(Theta) = P_max sin^2(Theta) / (1 + cos^2(Theta)),   E-vector normal to the
       plane through the view direction and the refracted sun,
@@ -73,7 +75,7 @@ depth.
 The first-order model ``d(z) = d(0-) exp(-(c - K_d) z)`` (polarized part attenuated with the
 beam attenuation ``c``, scattered light unpolarized) is the transmitted part alone; it holds
 for a directly viewed polarized source (the measurement of [7]_), not for the ambient light
-field, whose DoP it drives to zero within metres; it is no longer used.
+field, whose DoP it would drive to zero within metres.
 
 Water types (:data:`WATER_TYPES`): Jerlov's oceanic type I (``clear_ocean``), coastal type 3
 (``coastal``) and coastal type 9 (``turbid``) [6]_ for ``K_d``; ``P_max`` and ``kappa_p`` in
@@ -111,6 +113,9 @@ References
 .. [10] A. Ibrahim, A. Gilerson, T. Harmel et al., "The relationship between upwelling
    underwater polarization and attenuation/absorption ratio", Opt. Express
    20(23):25662-25680 (2012), doi:10.1364/OE.20.025662 (DoP falls as c/a rises).
+.. [11] Y. You, A. Tonizzo, A. A. Gilerson et al., "Measurements and simulations of
+   polarization states of underwater light in clear oceanic waters", Appl. Opt.
+   50(24):4873-4893 (2011), doi:10.1364/AO.50.004873.
 """
 
 from __future__ import annotations
@@ -155,37 +160,37 @@ class OutsideSnellWindowError(InvalidParameterError):
 DEFAULT_WAVELENGTH_NM = 480.0
 """Default wavelength [nm] of the water optics: the blue band of the sensor."""
 
-JERLOV_WAVELENGTHS_NM = np.arange(350.0, 701.0, 25.0)
+_JERLOV_TABLE_XXVII = """
+        350   375   400   425   450   475   500   525   550   575   600   625   650   675   700
+I       6.2   3.8   2.8   2.2   1.9   1.8   2.7   4.3   6.3   8.9  23.5  30.5  36    42    56
+IA      7.8   5.2   3.8   3.1   2.6   2.5   3.2   4.8   6.7   9.4  24    31    37    43    57
+IB     10     6.6   5.1   4.2   3.6   3.3   4.2   5.4   7.2   9.9  24.5  31.5  37.5  43.5  58
+II     17.5  12.2   9.6   8.1   6.8   6.2   7.0   7.6   8.9  11.5  26    33.5  40    46.5  61
+III    32    22    18.5  16    13.5  11.6  11.5  11.6  12    14.8  29.5  37.5  44.5  52    66
+1     120    80    51    36    25    17    14    13    12    15    30    37    45    51    65
+3     170   110    78    54    39    29    22    20    19    21    33    40    46    56    71
+5     230   160   110    78    56    43    36    31    30    33    40    48    54    65    80
+7     300   210   160   120    89    71    58    49    46    46    48    54    63    78    92
+9     390   300   240   190   160   123    99    78    63    58    60    65    76    92   110
+"""
+"""Jerlov (1976), Table XXVII, p. 135 [6]_, in the table's unit (100 K_d [1/m]); the 310 nm
+column is left out."""
+
+
+def _parse_jerlov_table(text: str) -> tuple[np.ndarray, dict]:
+    lines = text.strip().splitlines()
+    return (np.array(lines[0].split(), dtype=float),
+            {row.split()[0]: np.array(row.split()[1:], dtype=float) / 100.0
+             for row in lines[1:]})
+
+
+JERLOV_WAVELENGTHS_NM, JERLOV_KD_PER_M = _parse_jerlov_table(_JERLOV_TABLE_XXVII)
 """Wavelengths [nm] of :data:`JERLOV_KD_PER_M` (Jerlov 1976, Table XXVII; its 310 nm column
 is left out)."""
-
-JERLOV_KD_PER_M = {
-    #        350    375    400    425    450    475    500    525    550    575
-    #        600    625    650    675    700 nm
-    "I":   (0.062, 0.038, 0.028, 0.022, 0.019, 0.018, 0.027, 0.043, 0.063, 0.089,
-            0.235, 0.305, 0.36, 0.42, 0.56),
-    "IA":  (0.078, 0.052, 0.038, 0.031, 0.026, 0.025, 0.032, 0.048, 0.067, 0.094,
-            0.24, 0.31, 0.37, 0.43, 0.57),
-    "IB":  (0.10, 0.066, 0.051, 0.042, 0.036, 0.033, 0.042, 0.054, 0.072, 0.099,
-            0.245, 0.315, 0.375, 0.435, 0.58),
-    "II":  (0.175, 0.122, 0.096, 0.081, 0.068, 0.062, 0.070, 0.076, 0.089, 0.115,
-            0.26, 0.335, 0.40, 0.465, 0.61),
-    "III": (0.32, 0.22, 0.185, 0.16, 0.135, 0.116, 0.115, 0.116, 0.12, 0.148,
-            0.295, 0.375, 0.445, 0.52, 0.66),
-    "1":   (1.2, 0.8, 0.51, 0.36, 0.25, 0.17, 0.14, 0.13, 0.12, 0.15,
-            0.30, 0.37, 0.45, 0.51, 0.65),
-    "3":   (1.7, 1.1, 0.78, 0.54, 0.39, 0.29, 0.22, 0.20, 0.19, 0.21,
-            0.33, 0.40, 0.46, 0.56, 0.71),
-    "5":   (2.3, 1.6, 1.1, 0.78, 0.56, 0.43, 0.36, 0.31, 0.30, 0.33,
-            0.40, 0.48, 0.54, 0.65, 0.80),
-    "7":   (3.0, 2.1, 1.6, 1.2, 0.89, 0.71, 0.58, 0.49, 0.46, 0.46,
-            0.48, 0.54, 0.63, 0.78, 0.92),
-    "9":   (3.9, 3.0, 2.4, 1.9, 1.6, 1.23, 0.99, 0.78, 0.63, 0.58,
-            0.60, 0.65, 0.76, 0.92, 1.10),
-}
 """Downward irradiance attenuation coefficient ``K_d`` [1/m] of Jerlov's water types
 (oceanic I, IA, IB, II, III; coastal 1, 3, 5, 7, 9) at :data:`JERLOV_WAVELENGTHS_NM`:
-Jerlov (1976), Table XXVII, p. 135 [6]_ (the table's 100 x K_d in 1/m divided by 100).
+Jerlov (1976), Table XXVII, p. 135 [6]_ (the table's 100 x K_d in 1/m divided by 100), as
+arrays.
 Transcribed from two independent public reproductions of the table, which agree in every
 entry except type I at 400 nm (0.028 here, 0.027 in the other)."""
 
