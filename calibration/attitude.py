@@ -22,8 +22,10 @@ which in a Rayleigh sky is perpendicular to the sun direction. Per update k:
    when the measured E-vector equals the predicted one, with the same sensitivity to a
    rotation of ``e_i`` in the focal plane as the Rayleigh form. For the Rayleigh sky
    ``E_i`` is normal to ``s``, so ``c_i = s`` and both forms coincide. ``c_i`` is evaluated
-   at the current estimate and held fixed in the Jacobian (exact for the Rayleigh sky; the
-   change of a real sky's E-vector with the view direction enters at second order).
+   at the current estimate and held fixed in the Jacobian: the term left out is the change of
+   ``s . E_i`` with the view direction, zero for the Rayleigh sky and small where the sky's
+   departure from it varies slowly; it changes the step, not the solution (the residuals
+   still vanish at the true attitude, tested).
 3. **Objective** ``F(Q) = 1/2 ||e(Q)||^2``, gradient ``grad F = J^T e`` with the analytic
    Jacobian ``J = de/dQ`` (4 quaternion components; :func:`rotate_to_body`), projected onto
    the tangent space of the unit sphere (its radial part only rescales ``Q``).
@@ -82,8 +84,8 @@ from .installation import (
 )
 
 __all__ = ["NonUnitQuaternionError", "STEP_METHODS", "check_unit_quaternion", "rotate_to_body",
-           "error_vector", "model_references", "objective", "tangent_gradient", "dynamic_step", "gradient_step",
-           "madgwick_beta", "e_vectors_from_readings", "AttitudeEstimate", "estimate_attitude",
+           "error_vector", "model_references", "objective", "tangent_gradient", "dynamic_step",
+           "gradient_step", "madgwick_beta", "e_vectors_from_readings", "AttitudeEstimate", "estimate_attitude",
            "attitude_error_deg"]
 
 STEP_METHODS = ("dynamic", "fixed", "gyro")

@@ -279,7 +279,8 @@ class MultipleScatteringSky(Sky):
         Lambertian ground albedo in [0, 1].
     wavelength_nm : float, optional
         Wavelength [nm] in :data:`WAVELENGTH_RANGE_NM`: ``tau`` then follows from
-        :func:`bodhaine_optical_thickness` at ``pressure_hPa``, ``latitude_deg``, ``altitude_m``.
+        :func:`bodhaine_optical_thickness` at ``pressure_hPa``, ``latitude_deg``, ``altitude_m``
+        (at sea level it exceeds the verified range below 314 nm).
     pressure_hPa : float
         Surface pressure [hPa] (only with ``wavelength_nm``).
     latitude_deg, altitude_m : float
