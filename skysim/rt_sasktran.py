@@ -61,9 +61,12 @@ __all__ = [
     "MU_MIN",
     "EngineSettings",
     "SasktranUnavailableError",
+    "TABLE_TAU_RANGE",
+    "TauBeyondTablesWarning",
     "TauOutsideVerifiedRangeError",
     "VERIFIED_TAU_RANGE",
     "check_verified_tau",
+    "tau_check",
     "rayleigh_depolarization_factor",
     "require_sasktran2",
     "transmitted_stokes",
@@ -77,16 +80,27 @@ MU_MAX = 1.0 - 1.0e-6
 """Largest view cosine passed to the engine (exactly mu = 1 gives wrong Q, U): 0.08 deg off zenith."""
 
 
-VERIFIED_TAU_RANGE = (1.0e-3, 1.0)
-"""Optical thicknesses for which this engine set-up is verified: 0.02-1 against the Natraj et
-al. (2009) tables (DoLP to 1e-3, tests/test_multiple.py), down to 1e-3 against the closed-form
-single-scattering limit. Beyond 1 nothing checks it, and it fails silently: at tau = 1e3-1e4
-the radiance sits on a plateau near 2e-3, at 1e6 it is 4e-25."""
+TABLE_TAU_RANGE = (1.0e-3, 1.0)
+"""Optical thicknesses at which this engine set-up is checked against references: 0.02-1
+against the Natraj et al. (2009) tables (DoLP to 1e-3, I to 1.4e-3; tests/test_multiple.py),
+down to 1e-3 against the closed-form single-scattering limit."""
+
+VERIFIED_TAU_RANGE = (1.0e-3, 3.0)
+"""Optical thicknesses the engine accepts: :data:`TABLE_TAU_RANGE`, and beyond it up to 3
+where the set-up is checked by convergence only (against 401 levels and 64 streams, sun
+cosines 0.1-1: I within 2e-3, DoLP within 4e-4 at tau = 3; the quadrature error grows as
+tau, 5e-3 at tau = 5 and 1.7e-2 at tau = 10, and the set-up fails silently further out: a
+radiance plateau near 2e-3 for tau = 1e3-1e4, I = 4e-25 at tau = 1e6)."""
 
 
 class TauOutsideVerifiedRangeError(InvalidParameterError):
     """The optical thickness lies outside :data:`VERIFIED_TAU_RANGE`, where the engine set-up
     is not verified (and is known to return wrong radiances for very thick slabs)."""
+
+
+class TauBeyondTablesWarning(UserWarning):
+    """The optical thickness lies beyond the published tables (above 1): the engine set-up is
+    checked there by convergence only (:data:`VERIFIED_TAU_RANGE`)."""
 
 
 def check_verified_tau(name: str, tau) -> np.ndarray:
@@ -98,11 +112,18 @@ def check_verified_tau(name: str, tau) -> np.ndarray:
     bad = (t < lo) | (t > hi)
     if bad.any():
         raise TauOutsideVerifiedRangeError(
-            f"{name}={float(np.asarray(t).ravel()[np.flatnonzero(bad.ravel())[0]])!r} lies outside "
-            f"[{lo:g}, {hi:g}], the range in which the multiple-scattering engine set-up is "
-            "verified (tables for 0.02-1, the single-scattering limit below); a Rayleigh "
-            "atmosphere at sea level has tau 0.0086 at 1000 nm and 1 at 314 nm")
+            f"{name}={float(np.asarray(t).ravel()[np.flatnonzero(bad.ravel())[0]])!r} lies "
+            f"outside [{lo:g}, {hi:g}], the range in which the multiple-scattering engine "
+            "set-up is verified (tables for 0.02-1, the single-scattering limit below, "
+            "convergence up to 3); a Rayleigh atmosphere at sea level has tau 0.0086 at 1000 "
+            "nm and 1 at 314 nm")
     return t
+
+
+def tau_check(tau: float) -> str:
+    """How the engine set-up is checked at ``tau``: ``"tables"`` (:data:`TABLE_TAU_RANGE`)
+    or ``"convergence"`` (beyond the tables, inside :data:`VERIFIED_TAU_RANGE`)."""
+    return "tables" if TABLE_TAU_RANGE[0] <= tau <= TABLE_TAU_RANGE[1] else "convergence"
 
 
 class SasktranUnavailableError(ImportError):
