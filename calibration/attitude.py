@@ -329,7 +329,8 @@ class AttitudeEstimate:
     ----------
     quat : (S, K, 4) body-to-ENU quaternions (x, y, z, w)
     t_s : (K,) update times since the start [s]
-    objective : (S, K) ``F`` after the update
+    objective : (S, K) ``F`` after the update (measured-vs-predicted form: with the reference
+        vectors of the update)
     step_rad : (S, K) rotation applied by the correction [rad]
     method : str
     """
@@ -434,8 +435,8 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
         if method != "gyro":
             e, J = _residuals(q, up[:, k], e_m[:, k], ref)
             q, steps[:, k] = gradient_step(q, e, J, method, step_len)
-            if sky is not None:
-                ref = model_references(q, axes, sky, sun[k])
+        # F after the update, with the update's reference vectors (one sky evaluation per
+        # update; the same as at the new attitude for the Rayleigh sky)
         F[:, k] = objective(_residuals(q, up[:, k], e_m[:, k], ref, jacobian=False))
         quat[:, k] = q
     return AttitudeEstimate(quat, np.arange(K) * every / fs, F, steps, method)
