@@ -239,9 +239,9 @@ def multiple_scattering_runs(trials: int, rng, sc: Scenario) -> pd.DataFrame:
 
     One row per (tau, form): mean over seeds of the per-seed mean yaw/pitch/roll error over
     the second half of the run (the bias, [deg]), of the per-seed RMS total error over the
-    whole run and its second half [deg]; ``e_departure_*_deg``: the angle between the
-    sky's E-vector and the Rayleigh "normal to the sun" plane at the units (noise free,
-    median and maximum over units and samples with DoP >= min_dop).
+    whole run and its second half [deg]; ``aop_departure_*_deg``: the angle in each unit's
+    focal plane between the sky's E-vector and the Rayleigh one, normal to the sun (noise
+    free, median and maximum over units and samples with DoP >= min_dop).
     """
     from scipy.spatial.transform import Rotation
 
@@ -273,7 +273,10 @@ def multiple_scattering_runs(trials: int, rng, sc: Scenario) -> pd.DataFrame:
         obs = sensor.observe(sky, truth, data.sun_enu)
         R_b = truth.as_matrix()
         s_b = np.einsum("kji,kj->ki", R_b, data.sun_enu)               # sun in the body frame
-        dep = np.degrees(np.arcsin(np.abs(np.einsum("kmi,ki->km", obs.e_vector_sensor, s_b))))
+        e_rayleigh = np.cross(sensor.view_directions_sensor()[None], s_b[:, None, :])
+        e_rayleigh /= np.linalg.norm(e_rayleigh, axis=-1, keepdims=True)
+        dep = np.degrees(np.arccos(np.clip(np.abs(np.einsum(
+            "kmi,kmi->km", obs.e_vector_sensor, e_rayleigh)), 0.0, 1.0)))
         dep = dep[obs.dop >= sc.min_dop]
         q0 = (truth[0] * Rotation.from_rotvec(
             rng.normal(0.0, np.radians(sc.initial_error_deg), (trials, 3)))).as_quat()
@@ -286,8 +289,8 @@ def multiple_scattering_runs(trials: int, rng, sc: Scenario) -> pd.DataFrame:
             err = attitude_error_deg(est, truth)
             half = err["total"].shape[1] // 2
             rows.append({"tau": tau, "albedo": sc.ms_albedo, "form": form,
-                         "e_departure_median_deg": float(np.median(dep)),
-                         "e_departure_max_deg": float(dep.max()),
+                         "aop_departure_median_deg": float(np.median(dep)),
+                         "aop_departure_max_deg": float(dep.max()),
                          **{f"{k}_bias_deg": float(np.mean(np.mean(err[k][:, half:], axis=1)))
                             for k in ("yaw", "pitch", "roll")},
                          "total_rms_deg": float(np.mean(_rms(err["total"]))),
@@ -297,13 +300,13 @@ def multiple_scattering_runs(trials: int, rng, sc: Scenario) -> pd.DataFrame:
 
 def format_ms_table(ms: pd.DataFrame) -> str:
     """The multiple-scattering rows as markdown."""
-    lines = [("| τ | error vector | E departure from ⟂ sun, median / max [deg] | yaw bias [deg] "
+    lines = [("| τ | error vector | AoP departure from E ⟂ sun, median / max [deg] | yaw bias [deg] "
               "| pitch bias [deg] | roll bias [deg] | total RMS [deg] | total RMS, 2nd half "
               "[deg] |"), "|---|---|---|---|---|---|---|---|"]
     names = {"perpendicular": "E ⟂ sun (Rayleigh form)", "model": "measured vs predicted"}
     for r in ms.itertuples():
-        lines.append(f"| {r.tau:g} | {names[r.form]} | {r.e_departure_median_deg:.2f} / "
-                     f"{r.e_departure_max_deg:.1f} | {r.yaw_bias_deg:+.4f} | "
+        lines.append(f"| {r.tau:g} | {names[r.form]} | {r.aop_departure_median_deg:.2f} / "
+                     f"{r.aop_departure_max_deg:.1f} | {r.yaw_bias_deg:+.4f} | "
                      f"{r.pitch_bias_deg:+.4f} | {r.roll_bias_deg:+.4f} | "
                      f"{r.total_rms_deg:.4f} | {r.total_rms_second_half_deg:.4f} |")
     return "\n".join(lines)

@@ -99,7 +99,7 @@ def test_multiple_scattering_sky_biases_the_rayleigh_form_and_not_the_model_form
     from experiments.jin2020 import multiple_scattering_runs
     sc = replace(QUICK, static_s=60.0, ms_taus=(0.25,))
     r = multiple_scattering_runs(4, np.random.default_rng(5), sc).set_index("form")
-    assert r.loc["perpendicular", "e_departure_max_deg"] > 1.0
+    assert r.loc["perpendicular", "aop_departure_max_deg"] > 1.0
     assert abs(r.loc["perpendicular", "roll_bias_deg"]) > 0.3
     for k in ("yaw_bias_deg", "pitch_bias_deg", "roll_bias_deg"):
         assert abs(r.loc["model", k]) < 0.05, k
