@@ -131,9 +131,9 @@ def test_fresnel_special_angles_and_stokes():
 
 def test_jerlov_kd_against_table_xxvii():
     """K_d of Jerlov (1976), Table XXVII, p. 135 (values x 100 in 1/m in the table): the
-    entries at 475 and 500 nm and the linear interpolation at 480 and 490 nm quoted by an
-    independent audit (clear ocean I: 0.018, 0.020, 0.023; coastal 3: 0.29, 0.276, 0.248;
-    coastal 9: 1.23, 1.18, 1.09). Tolerance: the table's last printed digit."""
+    entries at 475 and 500 nm and their linear interpolation at 480 and 490 nm, worked by
+    hand (clear ocean I: 0.018, 0.020, 0.023; coastal 3: 0.29, 0.276, 0.248; coastal 9: 1.23,
+    1.18, 1.09). Tolerance: the last printed digit."""
     for jt, (k475, k500, k480, k490) in {"I": (0.018, 0.027, 0.020, 0.023),
                                          "3": (0.29, 0.22, 0.276, 0.248),
                                          "9": (1.23, 0.99, 1.18, 1.09)}.items():
