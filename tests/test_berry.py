@@ -108,7 +108,7 @@ def test_continuous_when_babinet_crosses_the_zenith():
 
 
 def test_dop_mapping_paper_vs_rayleigh_and_validation():
-    """|w| = 0.5 gives the paper's DoP 0.5 and the Rayleigh-limit mapping 0.5/1.5 = 1/3
+    """|w| = 0.5 gives the paper's DoP 0.5 and the Rayleigh-limit mapping 0.5/1.5 = 1/3;
     an unknown mapping is refused with the valid names."""
     # a view 45 deg from the sun on the Rayleigh sky: |w| = sin^2 45 = 0.5
     d_p, _ = berry_polarization(45.0, 0.0, 90.0 - 1e-9, 0.0, 0.0)
