@@ -13,6 +13,19 @@ which in a Rayleigh sky is perpendicular to the sun direction. Per update k:
    is zero exactly when the measured E-vector equals the Rayleigh prediction
    ``v_i x R^T s`` (the E-vector lies in the unit's focal plane, perpendicular to its axis v_i),
    and is insensitive to the E-vector's arbitrary sign.
+   *Measured-vs-predicted form* (``sky=`` in :func:`estimate_attitude`): a real sky is not
+   Rayleigh, and its E-vectors depart from ``perpendicular to the sun`` by degrees (more
+   near the neutral points). Each unit's reference vector is then
+   ``c_i = s - (s . E_i) E_i`` with ``E_i`` the E-vector that a given
+   :class:`skysim.sky.Sky` predicts along the unit's view direction ``R(Q) v_i``
+   (:func:`model_references`), and the residual is ``lambda e_i . R(Q)^T c_i``: zero exactly
+   when the measured E-vector equals the predicted one, with the same sensitivity to a
+   rotation of ``e_i`` in the focal plane as the Rayleigh form. For the Rayleigh sky
+   ``E_i`` is normal to ``s``, so ``c_i = s`` and both forms coincide. ``c_i`` is evaluated
+   at the current estimate and held fixed in the Jacobian: the term left out is the change of
+   ``s . E_i`` with the view direction, zero for the Rayleigh sky and small where the sky's
+   departure from it varies slowly; it changes the step, not the solution (the residuals
+   still vanish at the true attitude, tested).
 3. **Objective** ``F(Q) = 1/2 ||e(Q)||^2``, gradient ``grad F = J^T e`` with the analytic
    Jacobian ``J = de/dQ`` (4 quaternion components; :func:`rotate_to_body`), projected onto
    the tangent space of the unit sphere (its radial part only rescales ``Q``).
@@ -60,7 +73,8 @@ from sensor.compound_eye import CompoundEyeSensor, attitude_angles
 from sensor.imu import check_rate
 from sensor.platform import TrajectoryTooShortError
 from skysim.exceptions import InvalidParameterError
-from skysim.geometry import wrap_deg
+from skysim.geometry import elevation_azimuth, wrap_deg
+from skysim.sky import Sky
 from skysim.validation import check_finite, check_sun_above_horizon
 
 from .installation import (
@@ -70,8 +84,8 @@ from .installation import (
 )
 
 __all__ = ["NonUnitQuaternionError", "STEP_METHODS", "check_unit_quaternion", "rotate_to_body",
-           "error_vector", "objective", "tangent_gradient", "dynamic_step", "gradient_step",
-           "madgwick_beta", "e_vectors_from_readings", "AttitudeEstimate", "estimate_attitude",
+           "error_vector", "model_references", "objective", "tangent_gradient", "dynamic_step",
+           "gradient_step", "madgwick_beta", "e_vectors_from_readings", "AttitudeEstimate", "estimate_attitude",
            "attitude_error_deg"]
 
 STEP_METHODS = ("dynamic", "fixed", "gyro")
@@ -145,7 +159,8 @@ def rotate_to_body(q, v_n, jacobian: bool = True):
 
 
 def error_vector(q, up_meas_b, e_meas_b, sun_n, valid=None,
-                 polarization_weight: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+                 polarization_weight: float = 1.0,
+                 reference_n=None) -> tuple[np.ndarray, np.ndarray]:
     """Error vector ``e(Q)`` (..., 3 + m) and its Jacobian (..., 3 + m, 4) (module doc, step 2).
 
     Parameters
@@ -157,9 +172,38 @@ def error_vector(q, up_meas_b, e_meas_b, sun_n, valid=None,
     valid : (..., m) bool, optional; invalid units contribute a zero residual and Jacobian
     polarization_weight : float
         ``lambda``, weight of the polarization residuals against the gravity residuals.
+    reference_n : (..., m, 3), optional
+        Per-unit ENU vectors each measured E-vector should be normal to
+        (:func:`model_references`: the measured-vs-predicted form); default the sun for
+        every unit (the Rayleigh form ``E perpendicular to the sun``).
     """
     a, e_m = _prepare_measurements(up_meas_b, e_meas_b, valid, polarization_weight)
-    return _residuals(np.asarray(q, float), a, e_m, np.asarray(sun_n, float))
+    ref = np.asarray(sun_n, float) if reference_n is None else np.asarray(reference_n, float)
+    return _residuals(np.asarray(q, float), a, e_m, ref)
+
+
+def model_references(q, view_axes_b, sky: Sky, sun_n) -> np.ndarray:
+    """Reference vectors ``c_i = s - (s . E_i) E_i`` (..., m, 3) of the measured-vs-predicted
+    error vector (module doc, step 2).
+
+    Parameters
+    ----------
+    q : (..., 4) attitude quaternions (body-to-ENU) at which the sky is predicted
+    view_axes_b : (m, 3) unit optical axes in the body frame
+    sky : skysim.sky.Sky
+        The sky model that predicts ``E_i`` along ``R(q) v_i``; view directions below the
+        horizon are evaluated at the horizon (such a unit sees no sky and is invalid anyway).
+    sun_n : (..., 3) ephemeris sun unit vector in ENU
+    """
+    q = np.asarray(q, float)
+    conj = q * np.array([-1.0, -1.0, -1.0, 1.0])     # R(conj)^T = R(q): body -> ENU
+    d = rotate_to_body(conj[..., None, :], np.asarray(view_axes_b, float), jacobian=False)
+    el, az = elevation_azimuth(d)
+    s = np.asarray(sun_n, float)
+    s_el, s_az = elevation_azimuth(s)
+    E = sky.field(np.clip(el, 0.0, 90.0), az, s_el[..., None], s_az[..., None]).e_vector
+    s = np.broadcast_to(s[..., None, :], E.shape)
+    return s - np.sum(s * E, axis=-1, keepdims=True) * E
 
 
 def _prepare_measurements(up_meas_b, e_meas_b, valid, weight):
@@ -171,17 +215,26 @@ def _prepare_measurements(up_meas_b, e_meas_b, valid, weight):
     return a, np.where(ok[..., None], np.nan_to_num(e_m), 0.0) * weight
 
 
-def _residuals(q, a, e_m, sun, jacobian: bool = True):
-    """e(Q) (and J) for prepared measurements; up and sun rotated in one call."""
-    ref = np.stack(np.broadcast_arrays(np.array([0.0, 0.0, 1.0]), sun), axis=-2)  # (..., 2, 3)
-    out = rotate_to_body(q[..., None, :], ref, jacobian)
+def _residuals(q, a, e_m, ref, jacobian: bool = True):
+    """e(Q) (and J) for prepared measurements; ``ref`` is the sun (..., 3) or per-unit
+    reference vectors (..., m, 3); up and references rotated in one call."""
+    up = np.array([0.0, 0.0, 1.0])
+    per_unit = ref.ndim == e_m.ndim
+    if per_unit:
+        lead = np.broadcast_shapes(ref.shape[:-2], q.shape[:-1])
+        refs = np.concatenate([np.broadcast_to(up, lead + (1, 3)),
+                               np.broadcast_to(ref, lead + ref.shape[-2:])], axis=-2)
+    else:
+        refs = np.stack(np.broadcast_arrays(up, ref), axis=-2)          # (..., 2, 3)
+    out = rotate_to_body(q[..., None, :], refs, jacobian)
     v_b = out[0] if jacobian else out
-    r = np.concatenate([v_b[..., 0, :] - a, np.einsum("...mi,...i->...m", e_m, v_b[..., 1, :])],
-                       axis=-1)
+    pol = v_b[..., 1:, :] if per_unit else v_b[..., 1:2, :]
+    r = np.concatenate([v_b[..., 0, :] - a, np.einsum("...mi,...mi->...m", e_m, pol)], axis=-1)
     if not jacobian:
         return r
     J = out[1]
-    J_pol = np.einsum("...mi,...ij->...mj", e_m, J[..., 1, :, :])
+    J_ref = J[..., 1:, :, :] if per_unit else J[..., 1:2, :, :]
+    J_pol = np.einsum("...mi,...mij->...mj", e_m, J_ref)
     return r, np.concatenate([J[..., 0, :, :], J_pol], axis=-2)
 
 
@@ -276,7 +329,8 @@ class AttitudeEstimate:
     ----------
     quat : (S, K, 4) body-to-ENU quaternions (x, y, z, w)
     t_s : (K,) update times since the start [s]
-    objective : (S, K) ``F`` after the update
+    objective : (S, K) ``F`` after the update (measured-vs-predicted form: with the reference
+        vectors of the update)
     step_rad : (S, K) rotation applied by the correction [rad]
     method : str
     """
@@ -311,7 +365,8 @@ def _interval_increments(gyro_deg_s, dt, every: int, n_updates: int) -> Rotation
 def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate_hz: float,
                       polarization_every: int, method: str = "dynamic",
                       beta: float | None = None, valid=None,
-                      polarization_weight: float = 1.0) -> AttitudeEstimate:
+                      polarization_weight: float = 1.0, sky: Sky | None = None,
+                      view_axes_b=None) -> AttitudeEstimate:
     """Run the estimator over S trials at once (module doc, steps 1-4).
 
     Parameters
@@ -324,10 +379,18 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
     method : {"dynamic", "fixed", "gyro"}
     beta : float, optional
         Fixed-step gain [1/s] (required for ``"fixed"``; see :func:`madgwick_beta`).
+    sky : skysim.sky.Sky, optional
+        Use the measured-vs-predicted error vector with this sky's E-vectors
+        (:func:`model_references`); None (default): the Rayleigh form, E normal to the sun.
+    view_axes_b : (m, 3), optional
+        Unit optical axes in the body frame (required with ``sky``; e.g.
+        ``CompoundEyeSensor.view_directions_sensor()``).
 
     Raises
     ------
     NonUnitQuaternionError, InvalidRateError, SunBelowHorizonError, TrajectoryTooShortError
+    InvalidParameterError
+        If ``sky`` is given without ``view_axes_b`` (or with the wrong number of axes).
     """
     if method not in STEP_METHODS:
         raise ValueError(f"unknown method {method!r}; valid: {', '.join(STEP_METHODS)}")
@@ -352,6 +415,13 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
         raise InvalidParameterError(f"method 'fixed' needs a gain beta >= 0 [1/s]; got "
                                     f"{beta!r} (see madgwick_beta)")
     step_len = (beta or 0.0) * every / fs
+    if sky is not None:
+        axes = None if view_axes_b is None else np.asarray(view_axes_b, float)
+        if axes is None or axes.shape != (e_meas.shape[2], 3):
+            raise InvalidParameterError(
+                f"the measured-vs-predicted error vector (sky=...) needs view_axes_b of shape "
+                f"({e_meas.shape[2]}, 3), one optical axis per unit in the body frame; got "
+                f"{None if axes is None else axes.shape}")
     up, e_m = _prepare_measurements(accel[:, ::every][:, :K], e_meas, valid, polarization_weight)
     incr = _interval_increments(gyro, 1.0 / fs, every, K)
     incr = incr.as_quat().reshape(S, K - 1, 4)
@@ -361,10 +431,13 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
     for k in range(K):                          # the filter recursion (sequential in time)
         if k:
             q = (Rotation.from_quat(q) * Rotation.from_quat(incr[:, k - 1])).as_quat()
+        ref = sun[k] if sky is None else model_references(q, axes, sky, sun[k])
         if method != "gyro":
-            e, J = _residuals(q, up[:, k], e_m[:, k], sun[k])
+            e, J = _residuals(q, up[:, k], e_m[:, k], ref)
             q, steps[:, k] = gradient_step(q, e, J, method, step_len)
-        F[:, k] = objective(_residuals(q, up[:, k], e_m[:, k], sun[k], jacobian=False))
+        # F after the update, with the update's reference vectors (one sky evaluation per
+        # update; the same as at the new attitude for the Rayleigh sky)
+        F[:, k] = objective(_residuals(q, up[:, k], e_m[:, k], ref, jacobian=False))
         quat[:, k] = q
     return AttitudeEstimate(quat, np.arange(K) * every / fs, F, steps, method)
 

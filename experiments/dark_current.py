@@ -24,7 +24,8 @@ extinction ratios, log-amplifier gain and offset errors; channel noise U(0.25, 0
   :attr:`Config.sun_elevation_deg`) seen at the zenith from depths where the Beer-Lambert
   illuminance falls from the surface value to ~1 lx, in the water types of
   :data:`sensor.illuminance.WATER_TYPES` (:func:`sensor.illuminance.underwater_light`:
-  Fresnel transmission, ``K_d`` attenuation, DoP loss ``exp(-(c - K_d) z)``).
+  Fresnel transmission, ``K_d`` of Jerlov's Table XXVII at 480 nm, the transmitted sky's
+  polarization mixed with the in-water single scattering of the refracted sun).
 
 Reported: heading-error 3 sigma (3 x RMS about zero) and DoP RMS error vs illuminance for (a)
 (pair 1-2 and the best pair per trial and level), (b), (b0), (c), (cw); per level the median
@@ -89,9 +90,10 @@ class Config:
     water_types : names in sensor.illuminance.WATER_TYPES.
     depth_illuminance_lx : zenith lux equivalents under water that fix depths
         ``z = ln(E(0-)/E) / K_d`` of each water type (surface down to 1 lx) ...
-    depth_dop_factors : ... and the DoP factors ``exp(-(c - K_d) z)`` that fix more depths;
-        depths beyond either the last illuminance or the last DoP factor are dropped (no
-        heading left to measure).
+    depth_transmitted_fractions : ... and the transmitted skylight's shares
+        ``exp(-kappa_p z)`` that fix more depths (the transition from the sky's to the
+        in-water polarization); depths beyond the last illuminance are dropped.
+    wavelength_nm : wavelength of ``K_d`` (the blue band of the sensor).
     """
 
     cal_levels_lx: tuple = (1.0, 2.0, 5.0, 10.0, 30.0, 100.0, 1000.0)
@@ -108,7 +110,8 @@ class Config:
     sky_dmax: float = 0.8
     water_types: tuple = ("clear_ocean", "coastal", "turbid")
     depth_illuminance_lx: tuple = (1e4, 1e3, 1e2, 30.0, 10.0, 3.0, 1.0)
-    depth_dop_factors: tuple = (0.5, 0.2, 0.1, 0.05, 0.02)
+    depth_transmitted_fractions: tuple = (0.5, 0.2, 0.05)
+    wavelength_nm: float = 480.0
 
 
 def _three_sigma(err, axis=-1):
@@ -129,15 +132,16 @@ def underwater_conditions(cfg: Config) -> pd.DataFrame:
     rows = []
     for name in cfg.water_types:
         w = WATER_TYPES[name]
-        kd = w.diffuse_attenuation_per_m
-        kp = w.beam_attenuation_per_m - kd
-        e0 = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, 0.0, name)
+        kd = float(w.diffuse_attenuation_per_m(cfg.wavelength_nm))
+        e0 = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, 0.0, name,
+                              wavelength_nm=cfg.wavelength_nm)
         target = np.asarray(cfg.depth_illuminance_lx)
         z_e = np.log(e0.illuminance_lx / target[target < e0.illuminance_lx]) / kd
-        z_d = -np.log(np.asarray(cfg.depth_dop_factors)) / kp
-        z = np.unique(np.concatenate([[0.0], z_e, z_d]))
-        z = z[z <= min(z_e.max(), z_d.max()) * (1 + 1e-9)]
-        light = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, z, name)
+        z_f = -np.log(np.asarray(cfg.depth_transmitted_fractions)) / w.polarization_decay_per_m
+        z = np.unique(np.concatenate([[0.0], z_e, z_f]))
+        z = z[z <= z_e.max() * (1 + 1e-9)]
+        light = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, z, name,
+                                 wavelength_nm=cfg.wavelength_nm)
         rows += [{"water": name, "depth_m": zi, "illuminance_lx": ei, "dop": di}
                  for zi, ei, di in zip(z, light.illuminance_lx, light.dop)]
     return pd.DataFrame(rows)

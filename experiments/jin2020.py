@@ -28,9 +28,17 @@ the outcome): the compound-eye sensor of :mod:`sensor.compound_eye` (zenith unit
 (:class:`sensor.imu.ImuSpec` defaults), a 1-deg coarse initial alignment, and Madgwick's rule
 for the fixed step's gain.
 
+4. **Multiple-scattering sky** (static run): the readings are simulated under the
+   multiple-scattering sky of :mod:`skysim.multiple` (optical thickness
+   :attr:`Scenario.ms_taus`), whose E-vectors depart from "perpendicular to the sun" by
+   degrees, and the dynamic-step filter runs with both error vectors: the Rayleigh form
+   (E normal to the sun) and the measured-vs-predicted form with the same sky
+   (:func:`calibration.attitude.model_references`). Reported per form: the mean yaw, pitch
+   and roll error over the second half of the run (the bias) and the RMS total error.
+
 Outputs in ``results/jin2020/``: ``sun_positions.csv``/``.md``, ``errors.csv`` (RMS per seed,
 run and method), ``table.md``, ``summary.json``, ``timeseries_<run>.csv`` (+ JSON sidecar) of
-seed 0, and figures ``fig3_static.png``, ``fig4_dynamic.png``, ``fig5_errors.png``.
+seed 0, ``multiple_scattering.csv``/``.md``, and figures ``fig3_static.png``, ``fig4_dynamic.png``, ``fig5_errors.png``.
 """
 
 from __future__ import annotations
@@ -48,7 +56,7 @@ from skysim.sun import Site
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",
-           "register_reproduce", "register"]
+           "register_reproduce", "register", "multiple_scattering_runs", "format_ms_table"]
 
 SITE = Site(38.88, 121.53, 0.0, name="Dalian University of Technology")
 """The paper's site (about 38.88 N, 121.53 E; height not stated, 0 m)."""
@@ -118,6 +126,10 @@ class Scenario:
         the same for every method.
     min_dop : units with a lower measured DoP are not used (near the sun).
     dynamic_amplitude_deg, dynamic_period_s : (yaw, pitch, roll) sinusoids of the dynamic run.
+    ms_taus, ms_albedo : optical thicknesses and ground albedo of the multiple-scattering
+        static runs (Rayleigh optical thickness 0.1 near 530 nm, 0.25 near 430 nm; black
+        ground as in the Natraj tables' first case); ms_sun_step_deg : sun-elevation node
+        step of that sky (one engine run per node, linear in between).
     """
 
     reading: str = "apparent_solar"
@@ -136,6 +148,9 @@ class Scenario:
     dynamic_amplitude_deg: tuple = (90.0, 15.0, 20.0)
     dynamic_period_s: tuple = (40.0, 12.0, 9.0)
     imu: dict = field(default_factory=dict)
+    ms_taus: tuple = (0.1, 0.25)
+    ms_albedo: float = 0.0
+    ms_sun_step_deg: float = 1.0
 
 
 SCENARIO = Scenario()
@@ -179,12 +194,11 @@ def _simulate(kind: str, trials: int, rng, sc: Scenario) -> dict:
         estimate_attitude,
     )
     from sensor.compound_eye import PhotodiodeModel, patent_configuration
-    from sensor.platform import dynamic_trajectory, sample_run, static_trajectory
+    from sensor.platform import dynamic_trajectory, sample_run
     from skysim.sky import RayleighSky
 
     if kind == "static":
-        start = _clock_time(sc.static_time, sc.reading)
-        traj = static_trajectory(start, sc.static_s, sc.imu_rate_hz, *sc.static_attitude_deg)
+        start, traj = _static_trajectory(sc)
     else:
         start = _clock_time(sc.dynamic_time, sc.reading)
         traj = dynamic_trajectory(start, sc.dynamic_s, sc.imu_rate_hz, sc.dynamic_yaw0_deg,
@@ -209,17 +223,114 @@ def _simulate(kind: str, trials: int, rng, sc: Scenario) -> dict:
     return out
 
 
+def _static_trajectory(sc: Scenario):
+    from sensor.platform import static_trajectory
+    start = _clock_time(sc.static_time, sc.reading)
+    return start, static_trajectory(start, sc.static_s, sc.imu_rate_hz, *sc.static_attitude_deg)
+
+
+ERROR_FORMS = ("perpendicular", "model")
+"""Error vectors of the multiple-scattering runs: ``perpendicular`` (E normal to the sun,
+the Rayleigh form) and ``model`` (measured vs the sky's predicted E-vector)."""
+
+
+def multiple_scattering_runs(trials: int, rng, sc: Scenario) -> pd.DataFrame:
+    """Static run under the multiple-scattering sky, dynamic step, both error vectors.
+
+    One row per (tau, form): mean over seeds of the per-seed mean yaw/pitch/roll error over
+    the second half of the run (the bias, [deg]), of the per-seed RMS total error over the
+    whole run and its second half [deg]; ``aop_departure_*_deg``: the angle in each unit's
+    focal plane between the sky's E-vector and the Rayleigh one, normal to the sun (noise
+    free, median and maximum over units and samples with DoP >= min_dop).
+    """
+    from scipy.spatial.transform import Rotation
+
+    from calibration.attitude import attitude_error_deg, e_vectors_from_readings, estimate_attitude
+    from sensor.compound_eye import PhotodiodeModel, patent_configuration
+    from sensor.platform import sample_run, sun_vector
+    from skysim.multiple import MultipleScatteringSky
+
+    from skysim.geometry import elevation_azimuth
+    from skysim.sky import RayleighSky
+
+    start, traj = _static_trajectory(sc)
+    rows = []
+    for tau in sc.ms_taus:
+        sky = MultipleScatteringSky(tau=tau, albedo=sc.ms_albedo,
+                                    sun_step_deg=sc.ms_sun_step_deg)
+        # equal signal-to-noise: the zenith unit reads the same counts under this sky as under
+        # the Rayleigh sky of the main runs (the multiple-scattering I is in flux units)
+        sun_el, sun_az = elevation_azimuth(sun_vector([traj.times[0]], SITE)[0])
+        gain = float(RayleighSky(sc.dmax).field(90.0, 0.0, sun_el, sun_az).I[0]
+                     / sky.field(90.0, 0.0, sun_el, sun_az).I[0])
+        sensor = patent_configuration(photodiode=PhotodiodeModel(
+            counts_per_radiance=PhotodiodeModel.counts_per_radiance * gain,
+            noise_counts=sc.noise_counts))
+        data = sample_run(traj, sensor, sky, SITE, _imu_spec(sc), rng, trials,
+                          sc.polarization_every)
+        e_b, valid = e_vectors_from_readings(data.readings, sensor, sc.min_dop)
+        truth = traj.attitude[data.pol_index]
+        obs = sensor.observe(sky, truth, data.sun_enu)
+        R_b = truth.as_matrix()
+        s_b = np.einsum("kji,kj->ki", R_b, data.sun_enu)               # sun in the body frame
+        e_rayleigh = np.cross(sensor.view_directions_sensor()[None], s_b[:, None, :])
+        e_rayleigh /= np.linalg.norm(e_rayleigh, axis=-1, keepdims=True)
+        dep = np.degrees(np.arccos(np.clip(np.abs(np.einsum(
+            "kmi,kmi->km", obs.e_vector_sensor, e_rayleigh)), 0.0, 1.0)))
+        dep = dep[obs.dop >= sc.min_dop]
+        q0 = (truth[0] * Rotation.from_rotvec(
+            rng.normal(0.0, np.radians(sc.initial_error_deg), (trials, 3)))).as_quat()
+        for form in ERROR_FORMS:
+            kw = {} if form == "perpendicular" else {
+                "sky": sky, "view_axes_b": sensor.view_directions_sensor()}
+            est = estimate_attitude(data.gyro_deg_s, data.accel_mps2, e_b, data.sun_enu, q0,
+                                    sc.imu_rate_hz, sc.polarization_every, "dynamic",
+                                    valid=valid, **kw)
+            err = attitude_error_deg(est, truth)
+            half = err["total"].shape[1] // 2
+            rows.append({"tau": tau, "albedo": sc.ms_albedo, "form": form,
+                         "aop_departure_median_deg": float(np.median(dep)),
+                         "aop_departure_max_deg": float(dep.max()),
+                         **{f"{k}_bias_deg": float(np.mean(np.mean(err[k][:, half:], axis=1)))
+                            for k in ("yaw", "pitch", "roll")},
+                         "total_rms_deg": float(np.mean(_rms(err["total"]))),
+                         "total_rms_second_half_deg": float(np.mean(_rms(err["total"][:, half:])))})
+    return pd.DataFrame(rows)
+
+
+def format_ms_table(ms: pd.DataFrame) -> str:
+    """The multiple-scattering rows as markdown."""
+    lines = [("| τ | error vector | AoP departure from E ⟂ sun, median / max [deg] | yaw bias [deg] "
+              "| pitch bias [deg] | roll bias [deg] | total RMS [deg] | total RMS, 2nd half "
+              "[deg] |"), "|---|---|---|---|---|---|---|---|"]
+    names = {"perpendicular": "E ⟂ sun (Rayleigh form)", "model": "measured vs predicted"}
+    for r in ms.itertuples():
+        lines.append(f"| {r.tau:g} | {names[r.form]} | {r.aop_departure_median_deg:.2f} / "
+                     f"{r.aop_departure_max_deg:.1f} | {r.yaw_bias_deg:+.4f} | "
+                     f"{r.pitch_bias_deg:+.4f} | {r.roll_bias_deg:+.4f} | "
+                     f"{r.total_rms_deg:.4f} | {r.total_rms_second_half_deg:.4f} |")
+    return "\n".join(lines)
+
+
 def _rms(x, axis=-1):
     return np.sqrt(np.mean(np.square(x), axis=axis))
 
 
 def run(trials: int = 20, seed: int = 2020, out=None, scenario: Scenario = SCENARIO,
-        figures: bool = True) -> dict:
-    """Both runs for ``trials`` seeds; returns tables and a summary, writes them to ``out``."""
+        figures: bool = True, multiple_scattering: bool | None = None) -> dict:
+    """Both runs for ``trials`` seeds (and the multiple-scattering static runs: None runs them
+    when the ``rt`` extra, sasktran2, is installed); returns tables and a summary, writes
+    them to ``out``."""
+    if multiple_scattering is None:
+        import importlib.util
+        multiple_scattering = importlib.util.find_spec("sasktran2") is not None
     t0 = time.perf_counter()
     seq = np.random.SeedSequence(seed)
+    children = seq.spawn(3)
     runs = {kind: _simulate(kind, trials, np.random.default_rng(child), scenario)
-            for kind, child in zip(("static", "dynamic"), seq.spawn(2))}
+            for kind, child in zip(("static", "dynamic"), children[:2])}
+    ms = (multiple_scattering_runs(trials, np.random.default_rng(children[2]), scenario)
+          if multiple_scattering else None)
     rows = []
     for kind, r in runs.items():
         for m in METHODS:
@@ -235,8 +346,11 @@ def run(trials: int = 20, seed: int = 2020, out=None, scenario: Scenario = SCENA
                "total_rms_second_half_deg"]].mean()
              .reset_index())
     summary = _summary(errors, runs, trials, seed, scenario, time.perf_counter() - t0)
+    if ms is not None:
+        summary["multiple_scattering"] = ms.to_dict(orient="records")
     sun = sun_discrepancy_table()
-    result = {"sun": sun, "errors": errors, "table": table, "summary": summary, "runs": runs}
+    result = {"sun": sun, "errors": errors, "table": table, "summary": summary, "runs": runs,
+              "multiple_scattering": ms}
     if out is not None:
         _write(Path(out), result, figures, seed, scenario)
     return result
@@ -333,6 +447,12 @@ def _write(out: Path, result: dict, figures: bool, seed: int, sc: Scenario) -> N
         (out / "sun_positions.md", lambda tmp: tmp.write_text(format_sun_table(sun) + "\n")),
         (out / "errors.csv", lambda tmp: errors.to_csv(tmp, index=False)),
         (out / "table.md", lambda tmp: tmp.write_text(format_table(result["table"]) + "\n"))])
+    ms = result.get("multiple_scattering")
+    if ms is not None:
+        atomic_write_many([
+            (out / "multiple_scattering.csv", lambda tmp: ms.to_csv(tmp, index=False)),
+            (out / "multiple_scattering.md",
+             lambda tmp: tmp.write_text(format_ms_table(ms) + "\n"))])
     write_json_atomic(out / "summary.json", result["summary"])
     for kind, r in result["runs"].items():
         ts = _timeseries(r)
@@ -413,6 +533,9 @@ def _main(trials: int, seed: int, out, quick: bool) -> int:
           f"{c['sign_test_p']:.2g}); static run: below gyro-only "
           f"in {c['static_run_seeds_dynamic_below_gyro']} (dynamic) and "
           f"{c['static_run_seeds_fixed_below_gyro']} (fixed) of {trials}")
+    if result["multiple_scattering"] is not None:
+        print("\nStatic run under the multiple-scattering sky (dynamic step), mean over seeds")
+        print(format_ms_table(result["multiple_scattering"]))
     print(f"accepted: {s['accepted']}; {s['elapsed_s']:.1f} s; wrote {out}/")
     return 0
 

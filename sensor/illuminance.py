@@ -33,24 +33,53 @@ air gap behind a flat window (radiance ``/ n^2`` [3]_), so the lux equivalent is
 times the Fresnel transmittance. With depth ``z`` [m] the light is attenuated by
 Beer-Lambert's law with the diffuse attenuation coefficient ``K_d`` [1/m] [3]_::
 
-    E(z) = E(0-) exp(-K_d z)
+    E(z) = E(0-) exp(-K_d(lambda) z)
 
 (the zenith radiance decays with the radiance attenuation coefficient, which equals ``K_d``
-in the asymptotic regime and is close to it above [3]_). The *polarized* part
-``(Q, U)`` is modelled as the unscattered transmitted skylight, attenuated with the beam
-attenuation coefficient ``c`` [1/m] (scattered light taken as unpolarized), so the degree
-of polarization falls as::
+in the asymptotic regime and is close to it above [3]_). ``K_d(lambda)`` is Jerlov's Table
+XXVII [6]_ (:data:`JERLOV_KD_PER_M`, 350-700 nm in 25 nm steps, linear interpolation in
+wavelength: :func:`jerlov_kd`); the wavelength is an input (default 480 nm, the blue band
+of the sensor).
 
-    d(z) = d(0-) exp(-(c - K_d) z)                         (:func:`depolarization_factor`)
+**Polarization under water** (:func:`underwater_polarization`). The light seen looking up
+is the sum of two parts:
 
-a first-order model of the decrease of underwater DoP with depth and turbidity observed by
-Ivanoff & Waterman [4]_ and within Snell's window by Cronin & Shashar [5]_; it ignores the
-in-water single-scattering polarization (which, away from the refracted sun, keeps the DoP of
-deep clear water at ~0.1-0.3 [4]_), so it is a lower bound on the DoP at depth.
+- the *transmitted skylight* (the compressed sky pattern of Snell's window after the Fresnel
+  surface), whose share of the radiance falls with depth as ``f(z) = exp(-kappa_p z)``
+  (:func:`transmitted_fraction`), with ``kappa_p`` [1/m] the decay rate of the polarization
+  of a directly viewed source measured by Shashar, Sabbah & Cronin [7]_ (half of the
+  partial polarization lost over 1.25-3 m in clear reef water);
+- the light *scattered in the water* from the refracted sun (at zenith angle
+  ``asin(cos(h)/n)``), polarized by single scattering as in the model of Lerner, Sabbah,
+  Erlick & Shashar [8]_ (refraction at the surface + Rayleigh single scattering; in clear
+  oceanic water the measured DoP and AoP "are largely determined by an in-water
+  single-scattering model", You et al. [11]_)::
 
-Water types (:data:`WATER_TYPES`): representative ``K_d`` and ``c`` near 480 nm (the blue
-band of the sensor) for Jerlov's oceanic type I (clear ocean), coastal type 3 (coastal) and
-coastal type 9 (turbid) [6]_, [7]_.
+      d_w(Theta) = P_max sin^2(Theta) / (1 + cos^2(Theta)),   E-vector normal to the
+      plane through the view direction and the refracted sun,
+
+  with ``Theta`` the angle between the view and the refracted sun, ``P_max`` per water type.
+
+The polarized parts add as Stokes vectors (per unit radiance)::
+
+    (q + i u)(z) = f(z) (q + i u)_sky + (1 - f(z)) d_w exp(2 i chi_w)
+
+so at the surface the DoP is that of the transmitted sky and at depth it tends to the
+in-water single-scattering value, which does not fall with depth (the in-water light field
+re-polarizes itself): Ivanoff & Waterman [4]_ and Cronin & Shashar [5]_ report DoP of
+~0.1-0.3 at several metres and more; the coastal measurements of Tonizzo et al. [9]_ peak near
+100 deg scattering angle and never exceed 0.4 (tested against both). For a zenith view both
+parts have the E-vector normal to the solar meridian, so the heading information survives
+depth.
+
+The first-order model ``d(z) = d(0-) exp(-(c - K_d) z)`` (polarized part attenuated with the
+beam attenuation ``c``, scattered light unpolarized) is the transmitted part alone; it holds
+for a directly viewed polarized source (the measurement of [7]_), not for the ambient light
+field, whose DoP it would drive to zero within metres.
+
+Water types (:data:`WATER_TYPES`): Jerlov's oceanic type I (``clear_ocean``), coastal type 3
+(``coastal``) and coastal type 9 (``turbid``) [6]_ for ``K_d``; ``P_max`` and ``kappa_p`` in
+:class:`WaterType`.
 
 References
 ----------
@@ -68,11 +97,25 @@ References
 .. [5] T. W. Cronin, N. Shashar, "The linearly polarized light field in clear, tropical marine
    waters: spatial and temporal variation of light intensity, degree of polarization and
    e-vector angle", J. Exp. Biol. 204:2461-2467 (2001).
-.. [6] N. G. Jerlov, Marine Optics, Elsevier Oceanography Series 14 (1976), ch. 10 (water
-   types, ``K_d`` of the types I-III and coastal 1-9).
-.. [7] M. G. Solonenko, C. D. Mobley, "Inherent optical properties of Jerlov water types",
-   Appl. Opt. 54(17):5392-5401 (2015), doi:10.1364/AO.54.005392 (``a``, ``b``, ``c`` of the
-   types).
+.. [6] N. G. Jerlov, Marine Optics, 2nd ed., Elsevier Oceanography Series 14 (1976),
+   Table XXVII p. 135 (downward irradiance attenuation coefficient of the water types
+   I-III and coastal 1-9, 310-700 nm).
+.. [7] N. Shashar, S. Sabbah, T. W. Cronin, "Transmission of linearly polarized light in
+   seawater: implications for polarization signaling", J. Exp. Biol. 207:3619-3628 (2004),
+   doi:10.1242/jeb.01187 (partial polarization halves over 1.25-3 m in clear reef water).
+.. [8] A. Lerner, S. Sabbah, C. Erlick, N. Shashar, "Navigation by light polarization in
+   clear and turbid waters", Phil. Trans. R. Soc. B 366:671-679 (2011),
+   doi:10.1098/rstb.2010.0189 (refraction + Rayleigh single-scattering model, measured at
+   2 m and 5 m).
+.. [9] A. Tonizzo, J. Zhou, A. Gilerson et al., "Polarized light in coastal waters:
+   hyperspectral and multiangular analysis", Opt. Express 17(7):5666-5683 (2009),
+   doi:10.1364/OE.17.005666 (maximum DoP <= 0.4, near 100 deg scattering angle).
+.. [10] A. Ibrahim, A. Gilerson, T. Harmel et al., "The relationship between upwelling
+   underwater polarization and attenuation/absorption ratio", Opt. Express
+   20(23):25662-25680 (2012), doi:10.1364/OE.20.025662 (DoP falls as c/a rises).
+.. [11] Y. You, A. Tonizzo, A. A. Gilerson et al., "Measurements and simulations of
+   polarization states of underwater light in clear oceanic waters", Appl. Opt.
+   50(24):4873-4893 (2011), doi:10.1364/AO.50.004873.
 """
 
 from __future__ import annotations
@@ -83,15 +126,18 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
-from skysim.sky import Sky
-from skysim.validation import check_in_range, check_sun_above_horizon
+from skysim.sky import RayleighSky, Sky
+from skysim.validation import check_dop, check_in_range, check_sun_above_horizon
 
 __all__ = ["OutsideSnellWindowError", "SOLAR_ILLUMINANCE_CONSTANT_LX",
            "CLEAR_SKY_EXTINCTION", "CLEAR_SKY_DIFFUSE_LX", "REFRACTIVE_INDEX_SEAWATER",
            "WaterType", "WATER_TYPES", "ClearSkyIlluminance", "IncidentLight",
            "clear_sky_illuminance_lx", "hemispheric_integral", "sky_light", "air_zenith_deg",
            "snell_window_half_angle_deg", "fresnel_transmittance", "fresnel_transmit_stokes",
-           "beer_lambert", "depolarization_factor", "water_type", "underwater_light"]
+           "beer_lambert", "JERLOV_WAVELENGTHS_NM", "JERLOV_KD_PER_M", "jerlov_kd",
+           "refracted_sun_elevation_deg", "transmitted_fraction", "in_water_polarization",
+           "underwater_polarization", "water_type", "underwater_light",
+           "DEFAULT_WAVELENGTH_NM"]
 
 SOLAR_ILLUMINANCE_CONSTANT_LX = 127_500.0
 """Solar illuminance constant ``E_sc`` [lx] of the IES model [1]_."""
@@ -111,43 +157,134 @@ class OutsideSnellWindowError(InvalidParameterError):
     below. Keep the underwater view zenith angle below ``asin(1/n)`` (48.3 deg for n = 1.34)."""
 
 
+DEFAULT_WAVELENGTH_NM = 480.0
+"""Default wavelength [nm] of the water optics: the blue band of the sensor."""
+
+_JERLOV_TABLE_XXVII = """
+        350   375   400   425   450   475   500   525   550   575   600   625   650   675   700
+I       6.2   3.8   2.8   2.2   1.9   1.8   2.7   4.3   6.3   8.9  23.5  30.5  36    42    56
+IA      7.8   5.2   3.8   3.1   2.6   2.5   3.2   4.8   6.7   9.4  24    31    37    43    57
+IB     10     6.6   5.1   4.2   3.6   3.3   4.2   5.4   7.2   9.9  24.5  31.5  37.5  43.5  58
+II     17.5  12.2   9.6   8.1   6.8   6.2   7.0   7.6   8.9  11.5  26    33.5  40    46.5  61
+III    32    22    18.5  16    13.5  11.6  11.5  11.6  12    14.8  29.5  37.5  44.5  52    66
+1     120    80    51    36    25    17    14    13    12    15    30    37    45    51    65
+3     170   110    78    54    39    29    22    20    19    21    33    40    46    56    71
+5     230   160   110    78    56    43    36    31    30    33    40    48    54    65    80
+7     300   210   160   120    89    71    58    49    46    46    48    54    63    78    92
+9     390   300   240   190   160   123    99    78    63    58    60    65    76    92   110
+"""
+"""Jerlov (1976), Table XXVII, p. 135 [6]_, in the table's unit (100 K_d [1/m]); the 310 nm
+column is left out."""
+
+
+def _parse_jerlov_table(text: str) -> tuple[np.ndarray, dict]:
+    lines = text.strip().splitlines()
+    return (np.array(lines[0].split(), dtype=float),
+            {row.split()[0]: np.array(row.split()[1:], dtype=float) / 100.0
+             for row in lines[1:]})
+
+
+JERLOV_WAVELENGTHS_NM, JERLOV_KD_PER_M = _parse_jerlov_table(_JERLOV_TABLE_XXVII)
+"""Wavelengths [nm] of :data:`JERLOV_KD_PER_M` (Jerlov 1976, Table XXVII; its 310 nm column
+is left out)."""
+"""Downward irradiance attenuation coefficient ``K_d`` [1/m] of Jerlov's water types
+(oceanic I, IA, IB, II, III; coastal 1, 3, 5, 7, 9) at :data:`JERLOV_WAVELENGTHS_NM`:
+Jerlov (1976), Table XXVII, p. 135 [6]_ (the table's 100 x K_d in 1/m divided by 100), as
+arrays.
+Transcribed from two independent public reproductions of the table, which agree in every
+entry except type I at 400 nm (0.028 here, 0.027 in the other)."""
+
+
+def jerlov_kd(jerlov_type: str, wavelength_nm=DEFAULT_WAVELENGTH_NM) -> np.ndarray:
+    """``K_d`` [1/m] of a Jerlov water type at ``wavelength_nm`` [nm] (linear interpolation of
+    Table XXVII [6]_ in wavelength).
+
+    Parameters
+    ----------
+    jerlov_type : str
+        One of ``I, IA, IB, II, III`` (oceanic) or ``1, 3, 5, 7, 9`` (coastal).
+    wavelength_nm : array-like
+        In [350, 700] nm.
+
+    Raises
+    ------
+    InvalidParameterError
+        For an unknown type or a wavelength outside the table.
+    """
+    if jerlov_type not in JERLOV_KD_PER_M:
+        raise InvalidParameterError(
+            f"unknown Jerlov water type {jerlov_type!r}; use one of "
+            f"{', '.join(JERLOV_KD_PER_M)}")
+    lam = check_in_range("wavelength_nm", wavelength_nm, JERLOV_WAVELENGTHS_NM[0],
+                         JERLOV_WAVELENGTHS_NM[-1],
+                         hint="Jerlov's Table XXVII covers 350-700 nm (and 310 nm)")
+    return np.interp(lam, JERLOV_WAVELENGTHS_NM, np.asarray(JERLOV_KD_PER_M[jerlov_type]))
+
+
 @dataclass(frozen=True)
 class WaterType:
-    """Optical properties of a water body near 480 nm.
+    """Optical properties of a water body.
 
     Attributes
     ----------
     name : str
-    diffuse_attenuation_per_m : float
-        ``K_d`` [1/m] (downwelling irradiance).
-    beam_attenuation_per_m : float
-        ``c = a + b`` [1/m] (absorption plus scattering), ``>= K_d``.
+    jerlov_type : str
+        Key of :data:`JERLOV_KD_PER_M`: ``K_d(lambda)`` comes from Jerlov's table.
+    max_dop : float
+        ``P_max`` in (0, 1): degree of polarization of the light scattered once in the water
+        at 90 deg from the refracted sun (module docstring).
+    polarization_decay_per_m : float
+        ``kappa_p`` [1/m] > 0: decay rate of the transmitted skylight's share of the light
+        (:func:`transmitted_fraction`).
     reference : str
     """
 
     name: str
-    diffuse_attenuation_per_m: float
-    beam_attenuation_per_m: float
+    jerlov_type: str
+    max_dop: float
+    polarization_decay_per_m: float
     reference: str = ""
 
     def __post_init__(self):
-        kd = float(check_in_range("diffuse_attenuation_per_m", self.diffuse_attenuation_per_m,
-                                  0.0, np.inf, low_open=True))
-        c = float(check_in_range(
-            "beam_attenuation_per_m", self.beam_attenuation_per_m, kd, np.inf,
-            hint="the beam attenuation c = a + b is never below K_d (scattered light only "
-                 "adds to the diffuse field)"))
-        object.__setattr__(self, "diffuse_attenuation_per_m", kd)
-        object.__setattr__(self, "beam_attenuation_per_m", c)
+        jerlov_kd(self.jerlov_type)  # validates the type
+        object.__setattr__(self, "max_dop", float(check_dop("max_dop", self.max_dop)))
+        object.__setattr__(self, "polarization_decay_per_m", float(check_in_range(
+            "polarization_decay_per_m", self.polarization_decay_per_m, 0.0, np.inf,
+            low_open=True, hint="decay rate [1/m] of the transmitted skylight's share")))
+
+    def diffuse_attenuation_per_m(self, wavelength_nm=DEFAULT_WAVELENGTH_NM) -> np.ndarray:
+        """``K_d`` [1/m] at ``wavelength_nm`` [nm] (:func:`jerlov_kd`)."""
+        return jerlov_kd(self.jerlov_type, wavelength_nm)
+
+
+_KAPPA_CLEAR = float(np.log(2.0) / np.sqrt(1.25 * 3.0))
+"""``kappa_p`` [1/m] of clear water: half the polarization lost over 1.25-3 m in clear reef
+water [7]_ (geometric mean of the range, 1.94 m)."""
+
+
+def _kappa_scaled(jerlov_type: str) -> float:
+    """``kappa_p`` of a more turbid type: the clear-water value scaled by the ratio of ``K_d``
+    at 480 nm to that of type I (scattering and ``K_d`` both grow with the particle load;
+    an assumption, stated in :data:`WATER_TYPES`)."""
+    return _KAPPA_CLEAR * float(jerlov_kd(jerlov_type) / jerlov_kd("I"))
 
 
 WATER_TYPES = {
-    "clear_ocean": WaterType("clear_ocean", 0.03, 0.05,
-                             "Jerlov oceanic type I at 475-490 nm [6]_, [7]_"),
-    "coastal": WaterType("coastal", 0.2, 1.0, "Jerlov coastal type 3 at 475-490 nm [6]_, [7]_"),
-    "turbid": WaterType("turbid", 1.0, 4.0, "Jerlov coastal type 9 at 475-490 nm [6]_, [7]_"),
+    "clear_ocean": WaterType(
+        "clear_ocean", "I", 0.45, _KAPPA_CLEAR,
+        "Jerlov oceanic type I [6]_; kappa_p from clear reef water [7]_"),
+    "coastal": WaterType(
+        "coastal", "3", 0.35, _kappa_scaled("3"),
+        "Jerlov coastal type 3 [6]_; P_max below the coastal maximum 0.4 of [9]_"),
+    "turbid": WaterType(
+        "turbid", "9", 0.25, _kappa_scaled("9"),
+        "Jerlov coastal type 9 [6]_"),
 }
-"""Representative water types (order-of-magnitude values of the cited tables)."""
+"""The three water types of the experiments. ``K_d``: Jerlov's table [6]_. ``P_max``: coastal
+0.35, inside the measured maxima of coastal water (<= 0.4 [9]_); clear ocean 0.45 and turbid
+0.25 follow the ordering of [10]_ (DoP falls as scattering grows against absorption).
+``kappa_p``: clear ocean from [7]_; coastal and turbid scaled by their ``K_d`` at 480 nm
+(0.276/0.0198 and 1.18/0.0198 of type I), an assumption."""
 
 
 @dataclass(frozen=True)
@@ -347,11 +484,56 @@ def beer_lambert(surface_value, depth_m, attenuation_per_m) -> np.ndarray:
     return np.asarray(surface_value, dtype=float) * np.exp(-k * z)
 
 
-def depolarization_factor(depth_m, water: WaterType) -> np.ndarray:
-    """``d(z) / d(0-) = exp(-(c - K_d) z)``: unscattered (polarized) skylight decays with the
-    beam attenuation ``c``, total light with ``K_d`` (module docstring, [3]_-[5]_)."""
-    return beer_lambert(1.0, depth_m, water.beam_attenuation_per_m
-                        - water.diffuse_attenuation_per_m)
+def refracted_sun_elevation_deg(sun_elevation_deg, n=REFRACTIVE_INDEX_SEAWATER):
+    """Elevation [deg] of the sun seen from under a flat surface: zenith angle
+    ``asin(cos(h) / n)`` (Snell [2]_); always inside Snell's window."""
+    h = check_in_range("sun_elevation_deg", sun_elevation_deg, -90.0, 90.0)
+    n = check_in_range("n", n, 1.0, np.inf)
+    return 90.0 - np.degrees(np.arcsin(np.cos(np.radians(h)) / n))
+
+
+def transmitted_fraction(depth_m, water) -> np.ndarray:
+    """``f(z) = exp(-kappa_p z)``: share of the transmitted skylight in the light at depth
+    ``z`` [m] (module docstring, [7]_)."""
+    return beer_lambert(1.0, depth_m, water_type(water).polarization_decay_per_m)
+
+
+def in_water_polarization(water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
+                          sun_azimuth_deg, water="clear_ocean", *,
+                          n=REFRACTIVE_INDEX_SEAWATER) -> tuple[np.ndarray, np.ndarray]:
+    """DoP and AoP [deg] of the light scattered once in the water from the refracted sun
+    (Lerner et al. [8]_): ``P_max sin^2 Theta / (1 + cos^2 Theta)``, E-vector normal to the
+    plane of the view and the refracted sun; AoP in the local-meridian basis of the upward
+    view (as in air, docs/conventions.md).
+
+    Returns
+    -------
+    dop, aop_deg : ndarray
+    """
+    w = water_type(water)
+    tw = check_in_range("water_zenith_deg", water_zenith_deg, 0.0, 90.0,
+                        hint="zenith angle of an upward view under water")
+    sun_w = refracted_sun_elevation_deg(sun_elevation_deg, n)
+    f = RayleighSky(w.max_dop).field(90.0 - tw, view_azimuth_deg, sun_w, sun_azimuth_deg)
+    return f.dop, f.aop_deg
+
+
+def underwater_polarization(transmitted_dop, transmitted_aop_deg, depth_m, water_zenith_deg,
+                            view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,
+                            water="clear_ocean", *, n=REFRACTIVE_INDEX_SEAWATER):
+    """DoP and AoP [deg] at depth: ``f (q + i u)_sky + (1 - f) d_w exp(2 i chi_w)`` (module
+    docstring) from the transmitted skylight's DoP and AoP just below the surface.
+
+    Returns
+    -------
+    dop, aop_deg : ndarray
+    """
+    f = transmitted_fraction(depth_m, water)
+    d_w, chi_w = in_water_polarization(water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
+                                       sun_azimuth_deg, water, n=n)
+    p = (f * np.asarray(transmitted_dop, float) * np.exp(2j * np.radians(transmitted_aop_deg))
+         + (1.0 - f) * d_w * np.exp(2j * np.radians(chi_w)))
+    return np.abs(p), wrap_axial_deg(0.5 * np.degrees(np.angle(p)))
 
 
 def water_type(water) -> WaterType:
@@ -366,13 +548,15 @@ def water_type(water) -> WaterType:
 
 def underwater_light(sky: Sky, water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
                      sun_azimuth_deg, depth_m, water="clear_ocean", *,
-                     n=REFRACTIVE_INDEX_SEAWATER, day_of_year=None) -> IncidentLight:
+                     n=REFRACTIVE_INDEX_SEAWATER, day_of_year=None,
+                     wavelength_nm=DEFAULT_WAVELENGTH_NM) -> IncidentLight:
     """Lux equivalent, AoP and DoP seen by an upward-looking sensor at ``depth_m`` [m].
 
     Snell's window maps the underwater view to the sky at :func:`air_zenith_deg`; the Stokes
     vector of :func:`sky_light` there is transmitted by :func:`fresnel_transmit_stokes`, its
-    intensity attenuated with ``K_d`` and its polarized part with ``c`` (module docstring).
-    All inputs broadcast.
+    intensity attenuated with ``K_d(wavelength_nm)`` of Jerlov's table and its polarization
+    mixed with the in-water single scattering (:func:`underwater_polarization`; module
+    docstring). All inputs broadcast.
 
     Parameters
     ----------
@@ -387,12 +571,15 @@ def underwater_light(sky: Sky, water_zenith_deg, view_azimuth_deg, sun_elevation
         See :data:`WATER_TYPES`.
     n : float
         Refractive index of the water.
+    wavelength_nm : float
+        Wavelength [nm] of ``K_d``, in [350, 700].
 
     Raises
     ------
     OutsideSnellWindowError, SunBelowHorizonError, InvalidParameterError
     """
     w = water_type(water)
+    kd = w.diffuse_attenuation_per_m(wavelength_nm)
     theta_a = air_zenith_deg(water_zenith_deg, n)
     air = sky_light(sky, 90.0 - theta_a, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,
                     day_of_year=day_of_year)
@@ -400,7 +587,9 @@ def underwater_light(sky: Sky, water_zenith_deg, view_azimuth_deg, sun_elevation
     I, Q, U = fresnel_transmit_stokes(air.illuminance_lx, air.illuminance_lx * air.dop
                                       * np.cos(two), air.illuminance_lx * air.dop * np.sin(two),
                                       theta_a, n)
-    I_z = beer_lambert(I, depth_m, w.diffuse_attenuation_per_m)
-    pol = beer_lambert(np.hypot(Q, U), depth_m, w.beam_attenuation_per_m)
-    aop = wrap_axial_deg(0.5 * np.degrees(np.arctan2(U, Q)))
-    return IncidentLight(*np.broadcast_arrays(I_z, aop, pol / I_z))
+    I_z = beer_lambert(I, depth_m, kd)
+    dop, aop = underwater_polarization(np.hypot(Q, U) / I,
+                                       0.5 * np.degrees(np.arctan2(U, Q)), depth_m,
+                                       water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
+                                       sun_azimuth_deg, w, n=n)
+    return IncidentLight(*np.broadcast_arrays(I_z, aop, dop))

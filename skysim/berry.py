@@ -17,12 +17,19 @@ x east and y north),
 with the singularities a distance ``delta / 2`` either side of the sun along its vertical and
 the anti-sun pair antipodal to them (``zeta_Ara = -1 / conj(zeta_Bre)``,
 ``zeta_4 = -1 / conj(zeta_Bab)``). The polarization direction makes the plane angle
-``alpha = arg(w exp(-2 i beta_sun)) / 2`` (the factor makes the pattern turn with the sun);
-the degree of polarization is ``d_max |w| / (2 - |w|)``, which for ``delta = 0`` is exactly the
-Rayleigh ``d_max sin^2 g / (1 + cos^2 g)`` since then ``|w| = sin^2 g``.
+``alpha = arg(w exp(-2 i beta_sun)) / 2`` (the factor makes the pattern turn with the sun).
 
-Left out: the horizon depolarization factor of [1]_, sect. 4 (the model's DoP is Rayleigh-like
-away from the singularities); the radiance ``I`` is the single-scattering relative radiance
+Degree of polarization (:data:`DOP_MAPPINGS`, ``dop_mapping=``):
+
+- ``"paper"`` (default): ``d_max |w|``, the paper's reading of ``|w|`` as the (unnormalised)
+  degree of polarization [1]_, sect. 3; for ``delta = 0`` it is ``d_max sin^2 g``;
+- ``"rayleigh"``: ``d_max |w| / (2 - |w|)``, which for ``delta = 0`` is exactly the Rayleigh
+  ``d_max sin^2 g / (1 + cos^2 g)`` since then ``|w| = sin^2 g`` (the form of some public
+  implementations of the model). Both have the same zeros (the neutral points), the same
+  maximum ``d_max`` (at ``|w| = 1``) and the same AoP.
+
+Left out: the horizon depolarization of the later work on the model (no primary formula was
+available to this project); the radiance ``I`` is the single-scattering relative radiance
 ``(3/4)(1 + cos^2 g)`` of :mod:`skysim.rayleigh` (the model describes polarization only).
 
 References
@@ -40,7 +47,18 @@ from .geometry import wrap_axial_deg
 from .sky import Sky
 from .validation import check_dop, check_in_range
 
-__all__ = ["BerrySky", "berry_polarization", "berry_w", "singularities", "stereographic"]
+__all__ = ["BerrySky", "DOP_MAPPINGS", "berry_polarization", "berry_w", "singularities",
+           "stereographic"]
+
+DOP_MAPPINGS = ("paper", "rayleigh")
+"""Maps from ``|w|`` to DoP: ``paper`` ``d_max |w|`` ([1]_, sect. 3), ``rayleigh``
+``d_max |w| / (2 - |w|)`` (exactly Rayleigh for coincident singularities)."""
+
+
+def _check_mapping(dop_mapping: str) -> str:
+    if dop_mapping not in DOP_MAPPINGS:
+        raise ValueError(f"unknown dop_mapping {dop_mapping!r}; valid: {', '.join(DOP_MAPPINGS)}")
+    return dop_mapping
 
 
 def stereographic(elevation_deg, azimuth_deg) -> np.ndarray:
@@ -89,7 +107,8 @@ def berry_w(zeta, sun_elevation_deg, sun_azimuth_deg, delta_deg) -> np.ndarray:
 
 
 def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
-                       sun_azimuth_deg, delta_deg, dmax=1.0) -> tuple[np.ndarray, np.ndarray]:
+                       sun_azimuth_deg, delta_deg, dmax=1.0,
+                       dop_mapping: str = "paper") -> tuple[np.ndarray, np.ndarray]:
     """Degree of polarization and AoP [deg] of the Berry-Dennis-Lee sky.
 
     Parameters
@@ -101,6 +120,8 @@ def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
         the anti-sun); 0 gives the Rayleigh sky.
     dmax : float
         Maximum degree of polarization.
+    dop_mapping : {"paper", "rayleigh"}
+        ``d_max |w|`` (the paper) or ``d_max |w| / (2 - |w|)`` (module docstring).
 
     Returns
     -------
@@ -119,7 +140,9 @@ def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     # at the zenith the "meridian" is that of the stated view azimuth, as everywhere in skysim
     aop = wrap_axial_deg(alpha - meridian)
     m = np.clip(np.abs(w), 0.0, 1.0)
-    return dmax * m / (2.0 - m), aop
+    if _check_mapping(dop_mapping) == "rayleigh":
+        m = m / (2.0 - m)
+    return dmax * m, aop
 
 
 class BerrySky(Sky):
@@ -136,6 +159,8 @@ class BerrySky(Sky):
         albedo (``experiments.physical_sky.berry_delta_from`` turns them into delta).
     dmax : float
         Maximum degree of polarization, in (0, 1].
+    dop_mapping : {"paper", "rayleigh"}
+        ``|w|`` to DoP (module docstring); default the paper's ``d_max |w|``.
 
     Notes
     -----
@@ -144,19 +169,22 @@ class BerrySky(Sky):
 
     name = "berry"
 
-    def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0):
+    def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0, dop_mapping: str = "paper"):
         self.delta_deg = float(check_in_range("delta_deg", delta_deg, 0.0, 90.0, high_open=True,
                                               hint="neutral points lie 0-45 deg from the sun"))
         if dmax != 1.0:
             check_dop("dmax", dmax)
         self.dmax = float(dmax)
+        self.dop_mapping = _check_mapping(dop_mapping)
 
     def _stokes(self, vel, vaz, sel, saz):
-        dop, aop = berry_polarization(vel, vaz, sel, saz, self.delta_deg, self.dmax)
+        dop, aop = berry_polarization(vel, vaz, sel, saz, self.delta_deg, self.dmax,
+                                       self.dop_mapping)
         intensity = rayleigh.relative_radiance(rayleigh.scattering_angle_deg(vel, vaz, sel, saz))
         chi = np.radians(aop)
         return intensity, intensity * dop * np.cos(2 * chi), intensity * dop * np.sin(2 * chi)
 
     def describe(self) -> dict:
         return {"model": self.name, "delta_deg": self.delta_deg, "dmax": self.dmax,
+                "dop_mapping": self.dop_mapping,
                 "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}

@@ -39,12 +39,14 @@ References
 from __future__ import annotations
 
 import functools
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
 
 from .exceptions import InvalidParameterError
-from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, transmitted_stokes
+from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, TauBeyondTablesWarning,
+                          check_verified_tau, tau_check, transmitted_stokes)
 from .sky import Sky
 from .validation import check_in_range
 
@@ -271,12 +273,18 @@ class MultipleScatteringSky(Sky):
     Parameters
     ----------
     tau : float, optional
-        Rayleigh optical thickness (> 0). Give either ``tau`` or ``wavelength_nm``.
+        Rayleigh optical thickness in :data:`skysim.rt_sasktran.VERIFIED_TAU_RANGE` (1e-3 to
+        3; outside it :class:`~skysim.rt_sasktran.TauOutsideVerifiedRangeError`). Above 1
+        (beyond the published tables, checked by convergence only) a
+        :class:`~skysim.rt_sasktran.TauBeyondTablesWarning`, and ``describe()["tau_check"]``
+        says ``"convergence"`` instead of ``"tables"``.
+        Give either ``tau`` or ``wavelength_nm``.
     albedo : float
         Lambertian ground albedo in [0, 1].
     wavelength_nm : float, optional
         Wavelength [nm] in :data:`WAVELENGTH_RANGE_NM`: ``tau`` then follows from
-        :func:`bodhaine_optical_thickness` at ``pressure_hPa``, ``latitude_deg``, ``altitude_m``.
+        :func:`bodhaine_optical_thickness` at ``pressure_hPa``, ``latitude_deg``, ``altitude_m``
+        (at sea level tau exceeds 1 below 314 nm; 2.7 at 250 nm).
     pressure_hPa : float
         Surface pressure [hPa] (only with ``wavelength_nm``).
     latitude_deg, altitude_m : float
@@ -318,9 +326,12 @@ class MultipleScatteringSky(Sky):
         if tau is None:
             tau = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa, latitude_deg,
                                                    altitude_m))
-        self.tau = float(check_in_range("tau", tau, 0.0, np.inf, low_open=True,
-                                        hint="optical thickness must be > 0 (tau = 0 has no "
-                                             "diffuse sky); Rayleigh at 550 nm: ~0.097"))
+        self.tau = float(check_verified_tau("tau", tau))
+        if tau_check(self.tau) == "convergence":
+            warnings.warn("an optical thickness above 1 lies beyond the published tables: the "
+                          "multiple-scattering sky is checked there by convergence only "
+                          "(radiance within 2e-3 at tau = 3); describe() records it",
+                          TauBeyondTablesWarning, stacklevel=2)
         self.albedo = float(check_in_range("albedo", albedo, 0.0, 1.0,
                                            hint="Lambertian ground albedo is a fraction"))
         self.wavelength_nm = None if wavelength_nm is None else float(wavelength_nm)
@@ -371,7 +382,8 @@ class MultipleScatteringSky(Sky):
         return tuple((1.0 - w) * x + w * y for x, y in zip(a, b))
 
     def describe(self) -> dict:
-        return {"model": self.name, "tau": self.tau, "albedo": self.albedo,
+        return {"model": self.name, "tau": self.tau, "tau_check": tau_check(self.tau),
+                "albedo": self.albedo,
                 "wavelength_nm": self.wavelength_nm,
                 "pressure_hPa": self.pressure_hPa if self.wavelength_nm else None,
                 "depolarization_ratio": self.depolarization_ratio,

@@ -16,6 +16,24 @@ to the scattering plane, "negative" polarization). The neutral points are the ze
 :mod:`skysim.multiple` (``Q(theta, 0) = Q_0 + Q_1 + Q_2`` towards the sun,
 ``Q(theta, 180) = Q_0 - Q_1 + Q_2`` away from it).
 
+**High sun.** Babinet and Brewster then lie a few degrees from the sun, near the zenith,
+where the spline's nodes are ~6 deg apart; and Babinet passes the zenith once it is closer
+to it than the sun is. For suns above :data:`DENSE_SCAN_ELEVATION_DEG` (or when the spline
+finds no point beside the sun) the two are found on a dense engine scan of ``Q`` along the
+solar vertical (:data:`DENSE_SCAN_STEP_DEG` steps, across the zenith; ``Q`` is continuous
+there since the meridian basis turns by 180 deg), refined by Brent's method on a cubic
+spline of the scan. A Babinet point past the zenith is reported with an elevation above
+90 deg (measured along the solar vertical through the zenith: ``180 - e`` above the
+anti-solar horizon).
+
+Higher still, the two approach each other on the vertical, meet, and leave it as a mirror
+pair on either side (both index +1/2, so the total index +1 about the sun is kept; Berry et
+al. [2]_ describe such off-meridian pairs): ``Q`` then keeps its sign along the whole
+vertical. The pair is found as the zero of ``(Q, U)`` on a dense engine grid beside the sun
+(view zenith x relative azimuth, :func:`_off_meridian_pair`), refined on a bicubic spline of
+the grid; it is reported with both elevations equal and the relative azimuth
+``near_sun_azimuth_offset_deg`` (the pair at +-offset from the sun's azimuth).
+
 References
 ----------
 .. [1] K. L. Coulson, *Polarization and Intensity of Light in the Atmosphere*, A. Deepak
@@ -26,14 +44,23 @@ References
 
 from __future__ import annotations
 
-from dataclasses import asdict, dataclass
+from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
-__all__ = ["NeutralPoints", "neutral_points", "neutral_points_from_modes"]
+__all__ = ["NeutralPoints", "neutral_points", "neutral_points_from_modes",
+           "DENSE_SCAN_ELEVATION_DEG", "DENSE_SCAN_STEP_DEG", "NEUTRAL_DOP"]
+
+DENSE_SCAN_ELEVATION_DEG = 60.0
+"""Sun elevation [deg] above which Babinet and Brewster come from the dense meridian scan."""
+DENSE_SCAN_STEP_DEG = 0.25
+"""Step [deg] of the dense scan along the solar vertical (+-30 deg around the sun)."""
+NEUTRAL_DOP = 1e-4
+"""Largest DoLP accepted at an off-meridian zero of ``(Q, U)`` (the refined zero of the
+spline; where the minimum stays above it, no pair is reported)."""
 
 
 @dataclass(frozen=True)
@@ -41,8 +68,12 @@ class NeutralPoints:
     """Elevations [deg] of the three classical neutral points on the solar meridian.
 
     A point that lies below the horizon (not visible from the ground) is ``nan`` and its
-    ``*_visible`` flag is False; distances are angular distances [deg] from the sun (Babinet,
-    Brewster) or from the anti-solar point (Arago).
+    ``*_visible`` flag is False; a Babinet elevation above 90 deg lies past the zenith on the
+    solar vertical (module docstring); distances are angular distances [deg] from the sun
+    (Babinet, Brewster; signed along the vertical, great-circle for an off-meridian pair) or
+    from the anti-solar point (Arago). ``near_sun_azimuth_offset_deg`` is 0 while Babinet and
+    Brewster lie on the solar vertical and the pair's relative azimuth (+-) once a high sun
+    has pushed them off it (module docstring).
     """
 
     sun_elevation_deg: float
@@ -51,13 +82,24 @@ class NeutralPoints:
     babinet_elevation_deg: float
     brewster_elevation_deg: float
     arago_elevation_deg: float
+    near_sun_azimuth_offset_deg: float = 0.0
+
+    def _pair_distance(self) -> float:
+        from .geometry import direction_vector
+        d = (direction_vector(self.babinet_elevation_deg, self.near_sun_azimuth_offset_deg)
+             @ direction_vector(self.sun_elevation_deg, 0.0))
+        return float(np.degrees(np.arccos(np.clip(d, -1.0, 1.0))))
 
     @property
     def babinet_distance_deg(self) -> float:
+        if self.near_sun_azimuth_offset_deg:
+            return self._pair_distance()
         return self.babinet_elevation_deg - self.sun_elevation_deg
 
     @property
     def brewster_distance_deg(self) -> float:
+        if self.near_sun_azimuth_offset_deg:
+            return self._pair_distance()
         return self.sun_elevation_deg - self.brewster_elevation_deg
 
     @property
@@ -87,11 +129,15 @@ class NeutralPoints:
         """``{label: (elevation_deg, azimuth_deg)}`` of the visible points (for plots)."""
         out = {}
         anti = (sun_azimuth_deg + 180.0) % 360.0
-        for label, el, az in [("Babinet", self.babinet_elevation_deg, sun_azimuth_deg),
-                              ("Brewster", self.brewster_elevation_deg, sun_azimuth_deg),
+        off = self.near_sun_azimuth_offset_deg
+        for label, el, az in [("Babinet", self.babinet_elevation_deg,
+                               (sun_azimuth_deg + off) % 360.0),
+                              ("Brewster", self.brewster_elevation_deg,
+                               (sun_azimuth_deg - off) % 360.0),
                               ("Arago", self.arago_elevation_deg, anti)]:
             if np.isfinite(el):
-                out[label] = (float(el), float(az))
+                out[label] = ((float(el), float(az)) if el <= 90.0
+                              else (float(180.0 - el), float(anti)))
         return out
 
 
@@ -108,6 +154,68 @@ def _zeros_on_half_meridian(modes, sign: float, step_deg: float = 0.05) -> np.nd
     idx = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
     roots = [brentq(lambda t: float(q(t)[0]), theta[i], theta[i + 1], xtol=1e-6) for i in idx]
     return 90.0 - np.asarray(roots, dtype=float)
+
+
+def _dense_near_sun(sky, sun_elevation_deg: float) -> tuple[float, float]:
+    """Babinet and Brewster elevations [deg] from a dense engine scan of Q along the solar
+    vertical (module docstring, "High sun")."""
+    from scipy.interpolate import CubicSpline
+    from scipy.optimize import brentq
+
+    from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes
+    theta_sun = 90.0 - float(sun_elevation_deg)
+    # signed zenith angle x along the vertical: x > 0 towards the sun, x < 0 beyond the zenith
+    x = np.arange(theta_sun - 30.0, min(theta_sun + 30.0, 90.0) + 1e-9, DENSE_SCAN_STEP_DEG)
+    mu = np.clip(np.cos(np.radians(np.abs(x))), MU_MIN, MU_MAX)
+    x = np.sign(x) * np.degrees(np.arccos(mu))          # the angles the engine traces
+    phi = np.where(x >= 0.0, 0.0, 180.0)
+    _, Q, _ = transmitted_stokes(sky.tau, sky.albedo, float(np.sin(np.radians(sun_elevation_deg))),
+                                 mu, phi, depolarization_ratio=sky.depolarization_ratio,
+                                 settings=sky.settings)
+    x, keep = np.unique(x, return_index=True)
+    q = CubicSpline(x, Q[keep])
+    idx = np.flatnonzero(np.sign(Q[keep][:-1]) * np.sign(Q[keep][1:]) < 0)
+    roots = np.array([brentq(q, x[i], x[i + 1], xtol=1e-6) for i in idx])
+    above, below = roots[roots < theta_sun], roots[roots > theta_sun]
+    babinet = 90.0 - float(above.max()) if above.size else np.nan
+    brewster = 90.0 - float(below.min()) if below.size else np.nan
+    return babinet, (brewster if brewster >= 0.0 else np.nan)
+
+
+def _off_meridian_pair(sky, sun_elevation_deg: float, half_width_deg: float = 4.0,
+                       step_deg: float = 0.25, azimuth_step_deg: float = 5.0):
+    """``(elevation, relative azimuth)`` [deg] of the near-sun pair off the solar vertical, or
+    ``(nan, nan)``: zero of ``(Q, U)`` on an engine grid of view zenith angles within
+    ``half_width_deg`` of the sun times relative azimuths 0-180 deg (one half: the pair is
+    mirror symmetric), refined on bicubic splines of ``Q/I`` and ``U/I`` from the grid's DoLP
+    minimum off the vertical."""
+    from scipy.interpolate import RectBivariateSpline
+    from scipy.optimize import minimize
+
+    from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes
+    theta_sun = 90.0 - float(sun_elevation_deg)
+    th = np.arange(max(theta_sun - half_width_deg, step_deg), theta_sun + half_width_deg + 1e-9,
+                   step_deg)
+    ph = np.arange(0.0, 180.0 + 1e-9, azimuth_step_deg)
+    T, P = np.meshgrid(th, ph, indexing="ij")
+    mu = np.clip(np.cos(np.radians(T)), MU_MIN, MU_MAX)
+    I, Q, U = transmitted_stokes(sky.tau, sky.albedo, float(np.sin(np.radians(sun_elevation_deg))),
+                                 mu, P, depolarization_ratio=sky.depolarization_ratio,
+                                 settings=sky.settings)
+    q, u = RectBivariateSpline(th, ph, Q / I), RectBivariateSpline(th, ph, U / I)
+    dop = np.hypot(Q, U) / I
+    inner = (P > 0.0) & (P < 180.0) & (T > th[0]) & (T < th[-1])
+    k = np.unravel_index(np.argmin(np.where(inner, dop, np.inf)), dop.shape)
+
+    def f(v):
+        return float(q(v[0], v[1])[0, 0] ** 2 + u(v[0], v[1])[0, 0] ** 2)
+
+    res = minimize(f, [T[k], P[k]], method="Nelder-Mead",
+                   options={"xatol": 1e-5, "fatol": 1e-16, "maxiter": 2000})
+    t, p = res.x
+    if (np.sqrt(res.fun) > NEUTRAL_DOP or not th[0] < t < th[-1] or not 0.0 < p < 180.0):
+        return np.nan, np.nan
+    return 90.0 - float(t), float(p)
 
 
 def neutral_points_from_modes(modes, sun_elevation_deg: float, tau: float = np.nan,
@@ -133,6 +241,8 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     ----------
     sun_elevation_deg : float
         Sun elevation [deg] in (0, 89.5] (at the zenith the solar meridian is undefined).
+        Above :data:`DENSE_SCAN_ELEVATION_DEG` one more engine call (the dense scan), and one
+        more (~1000 rays) when Babinet and Brewster have left the solar vertical.
     tau, albedo : float
         Rayleigh optical thickness and Lambertian ground albedo.
     **sky_kwargs
@@ -151,4 +261,12 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     if not np.isfinite(tau):
         raise InvalidParameterError(f"tau must be finite; got {tau!r}")
     sky = MultipleScatteringSky(tau=tau, albedo=albedo, **sky_kwargs)
-    return neutral_points_from_modes(sky.modes(sun), sun, sky.tau, sky.albedo)
+    n = neutral_points_from_modes(sky.modes(sun), sun, sky.tau, sky.albedo)
+    if sun > DENSE_SCAN_ELEVATION_DEG or not (n.babinet_visible and n.brewster_visible):
+        babinet, brewster = _dense_near_sun(sky, sun)
+        n = replace(n, babinet_elevation_deg=babinet, brewster_elevation_deg=brewster)
+        if not (n.babinet_visible or n.brewster_visible):
+            el, off = _off_meridian_pair(sky, sun)
+            n = replace(n, babinet_elevation_deg=el, brewster_elevation_deg=el,
+                        near_sun_azimuth_offset_deg=0.0 if np.isnan(off) else off)
+    return n

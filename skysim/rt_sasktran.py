@@ -61,6 +61,12 @@ __all__ = [
     "MU_MIN",
     "EngineSettings",
     "SasktranUnavailableError",
+    "TABLE_TAU_RANGE",
+    "TauBeyondTablesWarning",
+    "TauOutsideVerifiedRangeError",
+    "VERIFIED_TAU_RANGE",
+    "check_verified_tau",
+    "tau_check",
     "rayleigh_depolarization_factor",
     "require_sasktran2",
     "transmitted_stokes",
@@ -72,6 +78,52 @@ MU_MIN = 1.0e-4
 
 MU_MAX = 1.0 - 1.0e-6
 """Largest view cosine passed to the engine (exactly mu = 1 gives wrong Q, U): 0.08 deg off zenith."""
+
+
+TABLE_TAU_RANGE = (1.0e-3, 1.0)
+"""Optical thicknesses at which this engine set-up is checked against references: 0.02-1
+against the Natraj et al. (2009) tables (DoLP to 1e-3, I to 1.4e-3; tests/test_multiple.py),
+down to 1e-3 against the closed-form single-scattering limit."""
+
+VERIFIED_TAU_RANGE = (1.0e-3, 3.0)
+"""Optical thicknesses the engine accepts: :data:`TABLE_TAU_RANGE`, and beyond it up to 3
+where the set-up is checked by convergence only (against 401 levels and 64 streams, sun
+cosines 0.1-1: I within 2e-3, DoLP within 4e-4 at tau = 3; the quadrature error grows as
+tau, 5e-3 at tau = 5 and 1.7e-2 at tau = 10, and the set-up fails silently further out: a
+radiance plateau near 2e-3 for tau = 1e3-1e4, I = 4e-25 at tau = 1e6)."""
+
+
+class TauOutsideVerifiedRangeError(InvalidParameterError):
+    """The optical thickness lies outside :data:`VERIFIED_TAU_RANGE`, where the engine set-up
+    is not verified (and is known to return wrong radiances for very thick slabs)."""
+
+
+class TauBeyondTablesWarning(UserWarning):
+    """The optical thickness lies beyond the published tables (above 1): the engine set-up is
+    checked there by convergence only (:data:`VERIFIED_TAU_RANGE`)."""
+
+
+def check_verified_tau(name: str, tau) -> np.ndarray:
+    """Return ``tau`` as a float array; raise :class:`TauOutsideVerifiedRangeError` outside
+    :data:`VERIFIED_TAU_RANGE` (and ``InvalidParameterError`` for tau <= 0 or not finite)."""
+    t = check_in_range(name, tau, 0.0, np.inf, low_open=True,
+                       hint="optical thickness > 0 (tau = 0 has no diffuse sky)")
+    lo, hi = VERIFIED_TAU_RANGE
+    bad = (t < lo) | (t > hi)
+    if bad.any():
+        raise TauOutsideVerifiedRangeError(
+            f"{name}={float(np.asarray(t).ravel()[np.flatnonzero(bad.ravel())[0]])!r} lies "
+            f"outside [{lo:g}, {hi:g}], the range in which the multiple-scattering engine "
+            "set-up is verified (tables for 0.02-1, the single-scattering limit below, "
+            "convergence up to 3); a Rayleigh atmosphere at sea level has tau 0.0086 at 1000 "
+            "nm and 1 at 314 nm")
+    return t
+
+
+def tau_check(tau: float) -> str:
+    """How the engine set-up is checked at ``tau``: ``"tables"`` (:data:`TABLE_TAU_RANGE`)
+    or ``"convergence"`` (beyond the tables, inside :data:`VERIFIED_TAU_RANGE`)."""
+    return "tables" if TABLE_TAU_RANGE[0] <= tau <= TABLE_TAU_RANGE[1] else "convergence"
 
 
 class SasktranUnavailableError(ImportError):
@@ -235,11 +287,15 @@ def transmitted_stokes_cases(taus, albedos, mu0: float, mu, phi_deg, *,
     -------
     ndarray (m, n, 3)
         ``I, Q, U`` of each case and direction (skysim basis, incident flux ``pi``).
+
+    Raises
+    ------
+    TauOutsideVerifiedRangeError
+        For a tau outside :data:`VERIFIED_TAU_RANGE`.
     """
     taus, albedos = np.broadcast_arrays(np.atleast_1d(np.asarray(taus, float)),
                                         np.atleast_1d(np.asarray(albedos, float)))
-    check_in_range("taus", taus, 0.0, np.inf, low_open=True,
-                   hint="optical thickness > 0 (tau = 0 has no diffuse sky)")
+    check_verified_tau("taus", taus)
     check_in_range("albedos", albedos, 0.0, 1.0)
     mu0 = float(check_in_range("mu0", mu0, 0.0, 1.0, low_open=True,
                                hint="the sun must be above the horizon"))

@@ -17,11 +17,15 @@ from skysim.sky import make_sky
        saz=st.floats(0, 360), dmax=st.floats(0.1, 1.0))
 def test_delta_zero_is_the_rayleigh_sky(el, az, sel, saz, dmax):
     """[1] sect. 3: with coincident singularities w reduces to the Rayleigh pattern,
-    |w| = sin^2 g, so DoP = dmax sin^2 g/(1 + cos^2 g) and the AoP is the closed form of
-    skysim.rayleigh (checks the stereographic frame and the AoP reference/sense)."""
+    |w| = sin^2 g: the paper's DoP is dmax sin^2 g, the "rayleigh" mapping gives
+    dmax sin^2 g/(1 + cos^2 g), and the AoP is the closed form of skysim.rayleigh (checks the
+    stereographic frame and the AoP reference/sense)."""
     g = rayleigh.scattering_angle_deg(el, az, sel, saz)
     dop, aop = berry_polarization(el, az, sel, saz, 0.0, dmax)
-    assert dop == pytest.approx(float(rayleigh.degree_of_polarization(g, dmax)), abs=1e-9)
+    assert dop == pytest.approx(dmax * np.sin(np.radians(g)) ** 2, abs=1e-9)
+    dop_r, aop_r = berry_polarization(el, az, sel, saz, 0.0, dmax, "rayleigh")
+    assert dop_r == pytest.approx(float(rayleigh.degree_of_polarization(g, dmax)), abs=1e-9)
+    assert aop_r == aop
     if 1.0 < g < 179.0:  # the AoP is undefined at the sun and anti-sun
         ref = rayleigh.angle_of_polarization_deg(el, az, sel, saz)
         assert abs(float(wrap_axial_deg(aop - ref))) < 1e-6
@@ -65,7 +69,7 @@ def test_berry_sky_interface_and_bad_input():
     f = sky.field(np.array([30.0, 60.0]), np.array([0.0, 200.0]), 20.0, 90.0)
     assert np.all((f.dop >= 0) & (f.dop <= 0.7))
     assert sky.describe() == {"model": "berry", "delta_deg": 30.0, "dmax": 0.7,
-                              "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}
+                              "dop_mapping": "paper", "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}
     with pytest.raises(InvalidParameterError, match="delta_deg"):
         BerrySky(delta_deg=-1.0)
     with pytest.raises(InvalidParameterError, match="dmax"):
@@ -101,3 +105,15 @@ def test_continuous_when_babinet_crosses_the_zenith():
         np.testing.assert_allclose(a[0], b[0], atol=1e-4)
         np.testing.assert_allclose(wrap_axial_deg(a[1] - b[1]), 0.0, atol=0.01)
     assert singularities(70.0, 0.0, 40.0)["fourth"] == np.inf
+
+
+def test_dop_mapping_paper_vs_rayleigh_and_validation():
+    """|w| = 0.5 gives the paper's DoP 0.5 and the Rayleigh-limit mapping 0.5/1.5 = 1/3;
+    an unknown mapping is refused with the valid names."""
+    # a view 45 deg from the sun on the Rayleigh sky: |w| = sin^2 45 = 0.5
+    d_p, _ = berry_polarization(45.0, 0.0, 90.0 - 1e-9, 0.0, 0.0)
+    d_r, _ = berry_polarization(45.0, 0.0, 90.0 - 1e-9, 0.0, 0.0, 1.0, "rayleigh")
+    np.testing.assert_allclose([d_p, d_r], [0.5, 1.0 / 3.0], atol=1e-9)
+    assert BerrySky(dop_mapping="rayleigh").describe()["dop_mapping"] == "rayleigh"
+    with pytest.raises(ValueError, match="valid: paper, rayleigh"):
+        BerrySky(dop_mapping="linear")

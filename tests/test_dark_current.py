@@ -230,10 +230,13 @@ def test_cli_quick(tmp_path):
         assert (tmp_path / name).exists(), name
     w = r["by_depth"]
     # surface: the polarized skylight gives a sub-degree heading; at the deepest level of
-    # every water type (DoP ~0.01) the heading error is at least ten times larger
+    # every water type (1 lx, and the in-water DoP 0.07-0.12 instead of the sky's 0.48:
+    # heading noise ~ 1/(I d)) the heading error is at least five times larger (observed
+    # 9-16x over 100 trials); the DoP never falls below the in-water single-scattering value
     for _, g in w.groupby("water"):
         assert g.heading_3sigma_cw_deg.iloc[0] < 1.0
-        assert g.heading_3sigma_cw_deg.iloc[-1] > 10 * g.heading_3sigma_cw_deg.iloc[0]
+        assert g.heading_3sigma_cw_deg.iloc[-1] > 5 * g.heading_3sigma_cw_deg.iloc[0]
+        assert g.dop.min() > 0.05
     t = r["by_level"]
     low = t[t.illuminance_lx <= 2.2]
     # at ~1-2 lx the dark current dominates: the 2014 model's heading error is many times

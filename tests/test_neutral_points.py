@@ -30,8 +30,10 @@ def table_zeros(reference_dir, tau, albedo, mu0, phi):
 
 
 @pytest.mark.parametrize("tau, albedo, mu0", [(0.25, 0.0, 0.4), (1.0, 0.25, 0.1),
-                                              (0.02, 0.0, 0.4)])
+                                              (0.02, 0.0, 0.4), (0.25, 0.25, 0.92)])
 def test_neutral_points_match_the_tables(reference_dir, tau, albedo, mu0):
+    """Table zeros within 0.1 deg; mu0 = 0.92 (sun at 66.9 deg) exercises the dense scan
+    along the solar vertical used for a high sun (observed 0.013 deg)."""
     pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
     sun = float(np.degrees(np.arcsin(mu0)))
     n = neutral_points(sun, tau, albedo)
@@ -69,3 +71,27 @@ def test_invisible_points_are_flagged_not_guessed():
     n = NeutralPoints(5.0, 0.25, 0.0, 28.0, float("nan"), 20.0)
     assert n.babinet_visible and n.arago_visible and not n.brewster_visible
     assert set(n.marks(0.0)) == {"Babinet", "Arago"} and n.marks(0.0)["Arago"] == (20.0, 180.0)
+
+
+@pytest.mark.parametrize("sun_el", [80.0, 86.0, 89.0])
+def test_neutral_points_beside_a_high_sun(sun_el):
+    """Sun at 80-89 deg (tau 0.25): Babinet and Brewster are found beside the sun (within 4
+    deg) and are not flagged "not visible": at 80 deg on the solar vertical (Q changes sign
+    there), higher up as the mirror pair they become off the vertical (Q keeps its sign along
+    it). Independent check: a direct engine call at each reported point gives DoLP < 1e-4
+    (against 2e-3 at the zenith and ~1e-2 10 deg from the sun at 86 deg)."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    from skysim.rt_sasktran import transmitted_stokes
+    n = neutral_points(sun_el, 0.25)
+    assert n.babinet_visible and n.brewster_visible
+    assert 0 < abs(n.babinet_distance_deg) <= 4.0 and 0 < abs(n.brewster_distance_deg) <= 4.0
+    assert n.babinet_elevation_deg >= n.brewster_elevation_deg
+    assert (n.near_sun_azimuth_offset_deg == 0.0) == (sun_el == 80.0)
+    off = n.near_sun_azimuth_offset_deg
+    theta = 90.0 - np.array([n.babinet_elevation_deg, n.brewster_elevation_deg])
+    phi = np.where(theta >= 0, np.array([off, -off]), 180.0)
+    I, Q, U = transmitted_stokes(0.25, 0.0, np.sin(np.radians(sun_el)),
+                                 np.cos(np.radians(np.abs(theta))), phi)
+    assert np.all(np.hypot(Q, U) / I < 1e-4), np.hypot(Q, U) / I
+    marks = n.marks(100.0)
+    assert marks["Babinet"][1] == pytest.approx((100.0 + off) % 360.0)

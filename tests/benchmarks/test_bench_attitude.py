@@ -78,3 +78,17 @@ def test_estimator_one_trial_updates_at_100hz(benchmark):
     est = benchmark.pedantic(_estimate, args=(args, valid, "dynamic", 1), rounds=1,
                              iterations=1)
     assert est.quat.shape == (1, 40001, 4)
+
+
+@pytest.mark.benchmark(group="attitude estimator, 400 s at 100 Hz")
+def test_estimator_20_trials_measured_vs_predicted(benchmark, data20):
+    """The measured-vs-predicted error vector: the sky's E-vector at every unit, trial and
+    update (two sky evaluations per update); ratio against the 20-trial Rayleigh form."""
+    args, valid = data20
+    benchmark.extra_info.update(items=20, real_time_s=20 * DURATION_S)
+    axes = patent_configuration().view_directions_sensor()
+    est = benchmark.pedantic(
+        lambda: estimate_attitude(*args, RATE_HZ, 10, "dynamic", valid=valid,
+                                  sky=RayleighSky(0.7), view_axes_b=axes),
+        rounds=3, iterations=1)
+    assert est.quat.shape == (20, 4001, 4)
