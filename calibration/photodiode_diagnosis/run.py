@@ -37,6 +37,11 @@ turning once in ~400 samples moves ~1 deg per sample, far finer than the sky's p
 pattern varies, so thinning loses only noise averaging; held-out gaps use every sample."""
 
 
+EFFECT_MAX_ITER = 12
+"""Iterations of a candidate's fit (it starts from the fold's base fit and its best coarse
+start, so its descent is short); a fit stopped here is reported ``converged: false``."""
+
+
 def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
     k = max(1, int(np.ceil(inst.n / target)))
     return inst if k == 1 else inst.subset(np.arange(0, inst.n, k))
@@ -302,6 +307,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     heads = {k: np.full(work.n, np.nan) for k in res}
     w_ho = np.zeros(shape, bool)
     fold_params = {e.name: [] for e in cand}
+    fold_converged = {e.name: [] for e in cand}
     unavailable, decoders = {}, {}
     for e in cand:
         try:
@@ -324,8 +330,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                 continue
             fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
             start = _start_effect(fe, btr.theta, ftr, e, sigma)
-            fr = fit(fe, start, sigma=sigma, max_iter=max_iter)
+            fr = fit(fe, start, sigma=sigma, max_iter=EFFECT_MAX_ITER)
             fold_params[e.name].append(fr.theta[fe.layout.effect])
+            fold_converged[e.name].append(bool(fr.converged))
             feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
             teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             res[e.name][ho] = re
@@ -346,6 +353,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         rows.append({"effect": e.name, "gap_after": gc, "shrink": 1 - gc / g0,
                      "score": float(score), "k": e.k, "excess_removed": float(frac),
                      "explained": bool(frac >= EXCESS_FRACTION and score < 0),
+                     "converged": all(fold_converged[e.name]),
                      "params": {n: {"value": float(np.mean(P[:, j])),
                                     "fold_spread": float(np.std(P[:, j])), "unit": un}
                                 for j, (n, un) in enumerate(zip(e.names, e.units))}})
