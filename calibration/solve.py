@@ -25,7 +25,8 @@ from skysim.geometry import wrap_axial_deg
 from .exceptions import ConvergenceError
 from .model import channel_jacobian
 
-__all__ = ["PAIRS", "pair_index", "solve_pair", "solve_pair_compensated", "heading_error_deg"]
+__all__ = ["PAIRS", "pair_index", "solve_pair", "solve_pairs", "solve_pair_compensated",
+           "heading_error_deg"]
 
 PAIRS = ((1, 2), (1, 3), (2, 3))
 """Channel pairs of the paper (1-based channel numbers: U1 = 60 deg, U2 = 0, U3 = 120)."""
@@ -50,17 +51,76 @@ def solve_pair(U, pair=(1, 2), gain: float = GAIN) -> tuple[np.ndarray, np.ndarr
         Which two channels to use.
     gain : float
         Amplifier gain [V/decade].
+
+    Returns
+    -------
+    (phi_deg, dop) : arrays of shape ``U.shape[:-1]``.
     """
-    i, j = pair_index(pair)
+    phi, d = solve_pairs(U, (pair,), gain)
+    return phi[..., 0], d[..., 0]
+
+
+SOLVE_BLOCK = 16384
+"""Samples per block of :func:`solve_pairs`: its temporaries stay in a core's L2 cache."""
+
+
+def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal-model polarization azimuth [deg, in [-90, 90)] and DoP from several pairs at once.
+
+    Each channel's log ratio is inverted once (eq. 5 of [1]_) and shared by the pairs; each
+    pair then solves the linear system of eqs. (7)-(8) for ``C = d cos 2phi`` and
+    ``S = d sin 2phi`` and takes ``phi = atan2(S, C) / 2`` (eq. 9 with the 90-degree ambiguity
+    resolved by ``d > 0``). Samples are processed in blocks of :data:`SOLVE_BLOCK` so that the
+    temporaries stay in cache; the result equals :func:`solve_pair` pair by pair.
+
+    Parameters
+    ----------
+    U : array (..., 3)
+        Channel outputs U1, U2, U3 [V].
+    pairs : sequence of (int, int)
+        Channel pairs (default: the paper's three, :data:`PAIRS`).
+    gain : float
+        Amplifier gain [V/decade].
+
+    Returns
+    -------
+    (phi_deg, dop) : arrays of shape ``U.shape[:-1] + (len(pairs),)``, pair ``k`` in
+    ``[..., k]``.
+    """
     U = np.asarray(U, dtype=float)
-    p_i = np.tanh(U[..., i] * np.log(10.0) / (2.0 * gain))
-    p_j = np.tanh(U[..., j] * np.log(10.0) / (2.0 * gain))
-    ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
-    det = np.sin(ai - aj)
-    C = (p_j * np.sin(ai) - p_i * np.sin(aj)) / det
-    S = (p_j * np.cos(ai) - p_i * np.cos(aj)) / det
-    phi = wrap_axial_deg(0.5 * np.degrees(np.arctan2(S, C)))
-    return phi, np.hypot(C, S)
+    if U.shape[-1:] != (3,):
+        raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
+    # C = c_i p_i + c_j p_j and S = s_i p_i + s_j p_j (Cramer's rule on eqs. 7-8)
+    coefs = []
+    for pair in pairs:
+        i, j = pair_index(pair)
+        ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
+        det = np.sin(ai - aj)
+        coefs.append((i, j, -np.sin(aj) / det, np.sin(ai) / det, -np.cos(aj) / det,
+                      np.cos(ai) / det))
+    flat = U.reshape(-1, 3)
+    n = flat.shape[0]
+    phi = np.empty((len(coefs), n))
+    dop = np.empty((len(coefs), n))
+    scale = np.log(10.0) / (2.0 * gain)
+    half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
+    for start in range(0, n, SOLVE_BLOCK):
+        stop = min(start + SOLVE_BLOCK, n)
+        p = np.multiply(flat[start:stop].T, scale, order="C")   # (3, block), contiguous rows
+        np.tanh(p, out=p)
+        c_buf, s_buf, work = np.empty((3, stop - start))
+        for k, (i, j, ci, cj, si, sj) in enumerate(coefs):
+            c = _combine(p[i], ci, p[j], cj, c_buf, work)
+            s = _combine(p[i], si, p[j], sj, s_buf, work)
+            np.arctan2(s, c, out=work)
+            ph = np.multiply(work, half_deg, out=phi[k, start:stop])
+            # atan2 lies in [-180, 180], phi in [-90, 90]: +90 (S = +0, C < 0) is -90
+            np.copyto(ph, -90.0, where=ph >= 90.0)
+            d = np.multiply(c, c, out=dop[k, start:stop])
+            d += np.multiply(s, s, out=work)
+            np.sqrt(d, out=d)                      # d = hypot(C, S) (|C|, |S| <= ~2)
+    shape = U.shape[:-1] + (len(coefs),)
+    return np.moveaxis(phi, 0, -1).reshape(shape), np.moveaxis(dop, 0, -1).reshape(shape)
 
 
 def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float = GAIN,
@@ -121,6 +181,22 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
             f"compensated heading solve did not converge in {max_iter} iterations "
             f"(last step {step:.3g} deg)", last_step=step, iterations=max_iter)
     return wrap_axial_deg(phi), d
+
+
+def _combine(x, a, y, b, out, work):
+    """``a x + b y`` into ``out``, skipping exact zero and unit coefficients (the paper's
+    channel angles make several of them so: pair (1, 2) has ``C = p_2``)."""
+    terms = [(v, c) for v, c in ((x, a), (y, b)) if c != 0.0]
+    if not terms:
+        out[...] = 0.0
+        return out
+    if len(terms) == 1 and terms[0][1] == 1.0:
+        return terms[0][0]
+    (v0, c0), *rest = terms
+    np.multiply(v0, c0, out=out)
+    for v, c in rest:
+        out += np.multiply(v, c, out=work)
+    return out
 
 
 def heading_error_deg(phi_estimated_deg, phi_reference_deg) -> np.ndarray:
