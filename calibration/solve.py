@@ -98,7 +98,10 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
         det = np.sin(ai - aj)
         coefs.append((i, j, -np.sin(aj) / det, np.sin(ai) / det, -np.cos(aj) / det,
                       np.cos(ai) / det))
+    used = sorted({ch for i, j, *_ in coefs for ch in (i, j)})   # invert only these channels
+    coefs = [(used.index(i), used.index(j), *c) for i, j, *c in coefs]
     flat = U.reshape(-1, 3)
+    flat = flat if len(used) == 3 else flat[:, used]
     n = flat.shape[0]
     phi = np.empty((len(coefs), n))
     dop = np.empty((len(coefs), n))
@@ -106,19 +109,21 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
     for start in range(0, n, SOLVE_BLOCK):
         stop = min(start + SOLVE_BLOCK, n)
-        p = np.multiply(flat[start:stop].T, scale, order="C")   # (3, block), contiguous rows
+        p = np.multiply(flat[start:stop].T, scale, order="C")   # (channel, block) rows
         np.tanh(p, out=p)
-        c_buf, s_buf, work = np.empty((3, stop - start))
+        c_buf, s_buf, work, d_buf = np.empty((4, stop - start))
         for k, (i, j, ci, cj, si, sj) in enumerate(coefs):
+            # every step in the cache-sized buffers; each output row is written once
             c = _combine(p[i], ci, p[j], cj, c_buf, work)
             s = _combine(p[i], si, p[j], sj, s_buf, work)
             np.arctan2(s, c, out=work)
-            ph = np.multiply(work, half_deg, out=phi[k, start:stop])
+            work *= half_deg
             # atan2 lies in [-180, 180], phi in [-90, 90]: +90 (S = +0, C < 0) is -90
-            np.copyto(ph, -90.0, where=ph >= 90.0)
-            d = np.multiply(c, c, out=dop[k, start:stop])
-            d += np.multiply(s, s, out=work)
-            np.sqrt(d, out=d)                      # d = hypot(C, S) (|C|, |S| <= ~2)
+            np.copyto(work, -90.0, where=work >= 90.0)
+            phi[k, start:stop] = work
+            np.multiply(c, c, out=d_buf)
+            d_buf += np.multiply(s, s, out=work)
+            np.sqrt(d_buf, out=dop[k, start:stop])  # d = hypot(C, S) (|C|, |S| <= ~2)
     shape = U.shape[:-1] + (len(coefs),)
     return np.moveaxis(phi, 0, -1).reshape(shape), np.moveaxis(dop, 0, -1).reshape(shape)
 
