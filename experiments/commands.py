@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register", "sky_grid", "AOP_CONVENTION"]
+__all__ = ["register", "sky_grid", "view_directions", "AOP_CONVENTION"]
 
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
@@ -23,6 +23,19 @@ def sky_grid(step_deg: float = 2.0):
     az = np.arange(0.0, 360.0, step_deg)
     E, A = np.meshgrid(el, az, indexing="ij")
     return E.ravel(), A.ravel()
+
+
+def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
+    """View directions [deg] from a CSV with columns elevation_deg, azimuth_deg, or else the
+    default full-sky grid (:func:`sky_grid`)."""
+    if not directions_csv:
+        return sky_grid(grid_step_deg)
+    import pandas as pd
+    d = pd.read_csv(directions_csv)
+    missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
+    if missing:
+        raise ValueError(f"{directions_csv}: missing column(s) {sorted(missing)}")
+    return d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
 
 
 def _sky(args) -> int:
@@ -48,14 +61,7 @@ def _sky(args) -> int:
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
         sun_info = {"site": site.to_dict(), "time": args.time, "elevation_deg": sun_el,
                     "azimuth_deg": sun_az}
-    if args.directions:
-        d = pd.read_csv(args.directions)
-        missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
-        if missing:
-            raise ValueError(f"{args.directions}: missing column(s) {sorted(missing)}")
-        el, az = d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
-    else:
-        el, az = sky_grid(args.grid_step)
+    el, az = view_directions(args.directions, args.grid_step)
     params = {k: getattr(args, k) for k in ("dmax", "tau", "albedo", "wavelength_nm",
                                               "delta_deg", "pressure_hPa")
               if getattr(args, k, None) is not None}

@@ -175,7 +175,7 @@ def _sky_series(args) -> int:
     from skysim.sky import make_sky
     from skysim.sun import Site, sun_position
 
-    from .commands import sky_grid
+    from .commands import view_directions
 
     site = Site(args.lat, args.lon, args.alt)
     if args.periods is None and args.end is None:
@@ -189,14 +189,7 @@ def _sky_series(args) -> int:
         day = sel > 0.0
         print(f"{int((~day).sum())} of {len(times)} times have the sun down; left out")
         times, sel, saz = times[day], sel[day], saz[day]
-    if args.directions:
-        d = pd.read_csv(args.directions)
-        missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
-        if missing:
-            raise ValueError(f"{args.directions}: missing column(s) {sorted(missing)}")
-        el, az = d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
-    else:
-        el, az = sky_grid(args.grid_step)
+    el, az = view_directions(args.directions, args.grid_step)
     params = {"dmax": args.dmax} if args.dmax is not None else {}
     if args.float32:
         if args.model != "rayleigh":

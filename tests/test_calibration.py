@@ -15,6 +15,7 @@ from sensor.daq import Daq
 from sensor.errors import OpponentErrors
 from sensor.opponent import OpponentSensor, channel_outputs
 from skysim.sky import RayleighSky
+from written_out import pair_by_cramer  # tests/written_out.py
 
 ERR = OpponentErrors(misalignment_deg=(0.6, -0.4, 0.9, 0.2, -0.7, 0.3),
                      transmittance=(0.012, -0.008, 0.02))
@@ -178,20 +179,6 @@ def test_batched_lsm_flags_or_names_the_failing_element():
         fit_pairs(phis, us, (1, 2), 0.5, on_failure="ignore")
 
 
-def _pair_by_cramer(U, pair, gain=0.5):
-    """Eqs. (5)-(9) of Yang et al. 2014 written out for one pair (the reference for the
-    blocked all-pairs solve): invert both channels, Cramer's rule for C, S, atan2, hypot."""
-    from sensor.opponent import CHANNEL_ANGLES_DEG
-    i, j = pair[0] - 1, pair[1] - 1
-    p_i = np.tanh(U[..., i] * np.log(10.0) / (2.0 * gain))
-    p_j = np.tanh(U[..., j] * np.log(10.0) / (2.0 * gain))
-    ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
-    det = np.sin(ai - aj)
-    c = (p_j * np.sin(ai) - p_i * np.sin(aj)) / det
-    s = (p_j * np.cos(ai) - p_i * np.cos(aj)) / det
-    return heading_error_deg(0.5 * np.degrees(np.arctan2(s, c)), 0.0), np.hypot(c, s)
-
-
 def test_solve_pairs_equals_each_pair_written_out():
     """All pairs at once, in cache-sized blocks (more than one block here), equal the per-pair
     formulas to 1e-12 deg / 1e-12 in d, with phi in [-90, 90) (+90 -> -90)."""
@@ -204,7 +191,7 @@ def test_solve_pairs_equals_each_pair_written_out():
     got_phi, got_d = solve_pairs(u)
     assert got_phi.shape == (n, 3) and got_d.shape == (n, 3)
     for k, pair in enumerate(PAIRS):
-        ref_phi, ref_d = _pair_by_cramer(u, pair)
+        ref_phi, ref_d = pair_by_cramer(u, pair)
         assert np.max(np.abs(heading_error_deg(got_phi[:, k], ref_phi))) < 1e-12
         np.testing.assert_allclose(got_d[:, k], ref_d, rtol=0, atol=1e-12)
     assert np.all((got_phi >= -90.0) & (got_phi < 90.0))

@@ -20,11 +20,12 @@ import numpy as np
 import pytest
 
 from calibration.solve import PAIRS, solve_pairs
-from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN, channel_outputs
+from sensor.opponent import channel_outputs
 from skysim.series import iter_sky_series
 from skysim.sky import RayleighSky
 
 from importtime import command_import_s  # tests/benchmarks/importtime.py
+from written_out import pair_by_cramer    # tests/written_out.py
 
 N_SIDE = 316                      # 316^2 = 99,856 directions
 _E, _A = np.meshgrid(np.linspace(0.0, 90.0, N_SIDE),
@@ -142,20 +143,9 @@ N_SAMPLES = 1_000_000
 _U = channel_outputs(np.random.default_rng(1).uniform(-90, 90, N_SAMPLES), 0.5)
 
 
-def textbook_three_pairs(U, gain=GAIN):
-    """Eqs. (5)-(9) of Yang et al. 2014 written out per pair: invert both channels, solve for
-    C and S, atan2, wrap, hypot."""
-    out = []
-    for i, j in ((a - 1, b - 1) for a, b in PAIRS):
-        p_i = np.tanh(U[..., i] * np.log(10.0) / (2.0 * gain))
-        p_j = np.tanh(U[..., j] * np.log(10.0) / (2.0 * gain))
-        ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
-        det = np.sin(ai - aj)
-        c = (p_j * np.sin(ai) - p_i * np.sin(aj)) / det
-        s = (p_j * np.cos(ai) - p_i * np.cos(aj)) / det
-        out.append((np.mod(0.5 * np.degrees(np.arctan2(s, c)) + 90.0, 180.0) - 90.0,
-                    np.hypot(c, s)))
-    return out
+def textbook_three_pairs(U):
+    """Eqs. (5)-(9) of Yang et al. 2014 written out, pair after pair."""
+    return [pair_by_cramer(U, pair) for pair in PAIRS]
 
 
 @pytest.mark.benchmark(group="heading solve three pairs")
