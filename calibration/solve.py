@@ -107,11 +107,12 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     dop = np.empty((len(coefs), n))
     scale = np.log(10.0) / (2.0 * gain)
     half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
+    buffers = np.empty((4, min(SOLVE_BLOCK, n)))
     for start in range(0, n, SOLVE_BLOCK):
         stop = min(start + SOLVE_BLOCK, n)
         p = np.multiply(flat[start:stop].T, scale, order="C")   # (channel, block) rows
         np.tanh(p, out=p)
-        c_buf, s_buf, work, d_buf = np.empty((4, stop - start))
+        c_buf, s_buf, work, d_buf = buffers[:, :stop - start]
         for k, (i, j, ci, cj, si, sj) in enumerate(coefs):
             # every step in the cache-sized buffers; each output row is written once
             c = _combine(p[i], ci, p[j], cj, c_buf, work)
