@@ -17,6 +17,8 @@ References
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
@@ -90,21 +92,12 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     U = np.asarray(U, dtype=float)
     if U.shape[-1:] != (3,):
         raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
-    # C = c_i p_i + c_j p_j and S = s_i p_i + s_j p_j (Cramer's rule on eqs. 7-8)
-    coefs = []
-    for pair in pairs:
-        i, j = pair_index(pair)
-        ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
-        det = np.sin(ai - aj)
-        coefs.append((i, j, -np.sin(aj) / det, np.sin(ai) / det, -np.cos(aj) / det,
-                      np.cos(ai) / det))
-    used = sorted({ch for i, j, *_ in coefs for ch in (i, j)})   # invert only these channels
-    coefs = [(used.index(i), used.index(j), *c) for i, j, *c in coefs]
+    used, terms = _pair_coefficients(tuple(pair_index(pair) for pair in pairs))
     flat = U.reshape(-1, 3)
     flat = flat if len(used) == 3 else flat[:, used]
     n = flat.shape[0]
-    phi = np.empty((len(coefs), n))
-    dop = np.empty((len(coefs), n))
+    phi = np.empty((len(terms), n))
+    dop = np.empty((len(terms), n))
     scale = np.log(10.0) / (2.0 * gain)
     half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
     buffers = np.empty((4, min(SOLVE_BLOCK, n)))
@@ -113,10 +106,10 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
         p = np.multiply(flat[start:stop].T, scale, order="C")   # (channel, block) rows
         np.tanh(p, out=p)
         c_buf, s_buf, work, d_buf = buffers[:, :stop - start]
-        for k, (i, j, ci, cj, si, sj) in enumerate(coefs):
+        for k, (c_terms, s_terms) in enumerate(terms):
             # every step in the cache-sized buffers; each output row is written once
-            c = _combine(p[i], ci, p[j], cj, c_buf, work)
-            s = _combine(p[i], si, p[j], sj, s_buf, work)
+            c = _combine(p, c_terms, c_buf, work)
+            s = _combine(p, s_terms, s_buf, work)
             np.arctan2(s, c, out=work)
             work *= half_deg
             # atan2 lies in [-180, 180], phi in [-90, 90]: +90 (S = +0, C < 0) is -90
@@ -125,8 +118,8 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
             np.multiply(c, c, out=d_buf)
             d_buf += np.multiply(s, s, out=work)
             np.sqrt(d_buf, out=dop[k, start:stop])  # d = hypot(C, S) (|C|, |S| <= ~2)
-    shape = U.shape[:-1] + (len(coefs),)
-    return np.moveaxis(phi, 0, -1).reshape(shape), np.moveaxis(dop, 0, -1).reshape(shape)
+    shape = U.shape[:-1] + (len(terms),)
+    return phi.T.reshape(shape), dop.T.reshape(shape)
 
 
 def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float = GAIN,
@@ -189,19 +182,36 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
     return wrap_axial_deg(phi), d
 
 
-def _combine(x, a, y, b, out, work):
-    """``a x + b y`` into ``out``, skipping exact zero and unit coefficients (the paper's
-    channel angles make several of them so: pair (1, 2) has ``C = p_2``)."""
-    terms = [(v, c) for v, c in ((x, a), (y, b)) if c != 0.0]
+@functools.lru_cache(maxsize=64)
+def _pair_coefficients(pairs: tuple) -> tuple[list, list]:
+    """Channels to invert and, per pair, the terms ``((row, coefficient), ...)`` of
+    ``C = c_i p_i + c_j p_j`` and of ``S = s_i p_i + s_j p_j`` (Cramer's rule on eqs. 7-8),
+    without the exact zeros (the paper's angles make several: pair (1, 2) has ``C = p_2``)."""
+    used = sorted({ch for pair in pairs for ch in pair})   # invert only these channels
+    terms = []
+    for i, j in pairs:
+        ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
+        det = np.sin(ai - aj)
+        rows = (used.index(i), used.index(j))
+        c = tuple((r, float(k)) for r, k in zip(rows, (-np.sin(aj) / det, np.sin(ai) / det))
+                  if k != 0.0)
+        s = tuple((r, float(k)) for r, k in zip(rows, (-np.cos(aj) / det, np.cos(ai) / det))
+                  if k != 0.0)
+        terms.append((c, s))
+    return used, terms
+
+
+def _combine(p, terms, out, work):
+    """``sum(k p[row])`` over ``terms`` into ``out`` (a row of ``p`` itself for ``1 p[row]``)."""
     if not terms:
         out[...] = 0.0
         return out
     if len(terms) == 1 and terms[0][1] == 1.0:
-        return terms[0][0]
-    (v0, c0), *rest = terms
-    np.multiply(v0, c0, out=out)
-    for v, c in rest:
-        out += np.multiply(v, c, out=work)
+        return p[terms[0][0]]
+    (r0, k0), *rest = terms
+    np.multiply(p[r0], k0, out=out)
+    for r, k in rest:
+        out += np.multiply(p[r], k, out=work)
     return out
 
 
