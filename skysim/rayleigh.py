@@ -121,8 +121,8 @@ def meridian_components(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     """Components ``(a, b)`` of the unnormalised E-vector ``v x s`` on ``(e_el, e_az)``.
 
     With ``Delta = view azimuth - sun azimuth``, elevations ``h`` (view) and ``h_s`` (sun):
-    ``a = cos h_s sin Delta`` and ``b = cos h sin h_s - sin h cos h_s cos Delta`` [1]_; the
-    AoP is ``atan2(b, a)`` (axial) and ``a^2 + b^2 = sin^2 gamma``. Written with the sun's
+    ``a = cos h_s sin Delta`` and ``b = cos h sin h_s - sin h cos h_s cos Delta`` (the E-vector
+    of single scattering is perpendicular to the scattering plane [1]_); the AoP is ``atan2(b, a)`` (axial) and ``a^2 + b^2 = sin^2 gamma``. Written with the sun's
     ENU vector ``(s_x, s_y, s_z)``: ``a = s_y sin A - s_x cos A``,
     ``b = s_z cos h - sin h (s_x sin A + s_y cos A)`` (``A`` the view azimuth), so the
     direction trigonometry is computed on the view arrays as given and the sun's on the sun
@@ -147,7 +147,8 @@ def meridian_components(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     csa, ssa = cos_sin_deg(sun_azimuth_deg)
     sx, sy, sz = ((cs * ssa).astype(dtype), (cs * csa).astype(dtype), sun_z.astype(dtype))
     shape = np.broadcast_shapes(ce.shape, ca.shape, sx.shape, sy.shape)
-    # full-shape buffers reused in place: fresh large arrays cost page faults on every call
+    # three full-shape buffers reused in place: every fresh large array costs memory traffic
+    # (and page faults when the allocator has returned its memory)
     a = np.multiply(sa, sy, out=np.empty(shape, dtype))
     work = np.multiply(ca, sx, out=np.empty(shape, dtype))
     a -= work
@@ -177,7 +178,7 @@ def polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
         Directions [deg] (broadcast together; not validated here, see
         :meth:`skysim.sky.Sky.field`).
     dmax : float
-        Maximum degree of polarization.
+        Maximum degree of polarization, in (0, 1].
     dtype : numpy dtype
         ``float64`` (default; agrees with the vector formulation to ~1e-15) or ``float32``
         (about 3x faster again; errors within :data:`FLOAT32_AOP_ERROR_DEG` and
@@ -187,6 +188,7 @@ def polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     -------
     dict with ``I``, ``Q``, ``U``, ``dop`` and ``aop_deg`` arrays of the broadcast shape.
     """
+    dmax = float(check_in_range("dmax", dmax, 0.0, 1.0, low_open=True))
     a, b = meridian_components(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
                                sun_azimuth_deg, dtype)
     q = np.multiply(a, a, out=np.empty_like(a))
