@@ -139,6 +139,18 @@ def test_sky_series_1000_suns_10000_directions(benchmark):
     benchmark.pedantic(stream, rounds=5, iterations=1)
 
 
+@pytest.mark.benchmark(group="sky series written to netCDF")
+def test_sky_series_write_netcdf_200_suns(benchmark, tmp_path):
+    """200 suns x 10,000 directions written block by block to netCDF (5 x 16 MB)."""
+    pytest.importorskip("h5netcdf", reason="h5netcdf (extra skysim[series]) not installed")
+    from experiments.sky_series import write_sky_series
+    sky = RayleighSky(DMAX)
+    benchmark.extra_info.update(items=200 * N_DIRS)
+    benchmark.pedantic(write_sky_series, args=(tmp_path / "s.nc", sky, SERIES_EL, SERIES_AZ,
+                                               SERIES_SUN_EL[:200], SERIES_SUN_AZ[:200]),
+                       rounds=3, iterations=1)
+
+
 N_SAMPLES = 1_000_000
 _U = channel_outputs(np.random.default_rng(1).uniform(-90, 90, N_SAMPLES), 0.5)
 
