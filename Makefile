@@ -20,7 +20,7 @@ $(VENV)/.installed-run: pyproject.toml | $(BIN)/python
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(PIP) install --quiet -e '.[test,rt,sweep]'
+	$(PIP) install --quiet -e '.[test,rt,sweep,series]'
 	@touch $@ $(VENV)/.installed-run
 
 venv: $(VENV)/.installed-run

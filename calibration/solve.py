@@ -17,6 +17,8 @@ References
 
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
@@ -25,7 +27,8 @@ from skysim.geometry import wrap_axial_deg
 from .exceptions import ConvergenceError
 from .model import channel_jacobian
 
-__all__ = ["PAIRS", "pair_index", "solve_pair", "solve_pair_compensated", "heading_error_deg"]
+__all__ = ["PAIRS", "pair_index", "solve_pair", "solve_pairs", "solve_pair_compensated",
+           "heading_error_deg"]
 
 PAIRS = ((1, 2), (1, 3), (2, 3))
 """Channel pairs of the paper (1-based channel numbers: U1 = 60 deg, U2 = 0, U3 = 120)."""
@@ -50,17 +53,73 @@ def solve_pair(U, pair=(1, 2), gain: float = GAIN) -> tuple[np.ndarray, np.ndarr
         Which two channels to use.
     gain : float
         Amplifier gain [V/decade].
+
+    Returns
+    -------
+    (phi_deg, dop) : arrays of shape ``U.shape[:-1]``.
     """
-    i, j = pair_index(pair)
+    phi, d = solve_pairs(U, (pair,), gain)
+    return phi[..., 0], d[..., 0]
+
+
+SOLVE_BLOCK = 16384
+"""Samples per block of :func:`solve_pairs`: its temporaries stay in a core's L2 cache."""
+
+
+def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndarray]:
+    """Ideal-model polarization azimuth [deg, in [-90, 90)] and DoP from several pairs at once.
+
+    Each channel's log ratio is inverted once (eq. 5 of [1]_) and shared by the pairs; each
+    pair then solves the linear system of eqs. (7)-(8) for ``C = d cos 2phi`` and
+    ``S = d sin 2phi`` and takes ``phi = atan2(S, C) / 2`` (eq. 9 with the 90-degree ambiguity
+    resolved by ``d > 0``). Samples are processed in blocks of :data:`SOLVE_BLOCK` so that the
+    temporaries stay in cache; the result equals :func:`solve_pair` pair by pair.
+
+    Parameters
+    ----------
+    U : array (..., 3)
+        Channel outputs U1, U2, U3 [V].
+    pairs : sequence of (int, int)
+        Channel pairs (default: the paper's three, :data:`PAIRS`).
+    gain : float
+        Amplifier gain [V/decade].
+
+    Returns
+    -------
+    (phi_deg, dop) : arrays of shape ``U.shape[:-1] + (len(pairs),)``, pair ``k`` in
+    ``[..., k]``.
+    """
     U = np.asarray(U, dtype=float)
-    p_i = np.tanh(U[..., i] * np.log(10.0) / (2.0 * gain))
-    p_j = np.tanh(U[..., j] * np.log(10.0) / (2.0 * gain))
-    ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
-    det = np.sin(ai - aj)
-    C = (p_j * np.sin(ai) - p_i * np.sin(aj)) / det
-    S = (p_j * np.cos(ai) - p_i * np.cos(aj)) / det
-    phi = wrap_axial_deg(0.5 * np.degrees(np.arctan2(S, C)))
-    return phi, np.hypot(C, S)
+    if U.shape[-1:] != (3,):
+        raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
+    used, terms = _pair_coefficients(tuple(pair_index(pair) for pair in pairs))
+    flat = U.reshape(-1, 3)
+    flat = flat if len(used) == 3 else flat[:, used]
+    n = flat.shape[0]
+    phi = np.empty((len(terms), n))
+    dop = np.empty((len(terms), n))
+    scale = np.log(10.0) / (2.0 * gain)
+    half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
+    buffers = np.empty((4, min(SOLVE_BLOCK, n)))
+    for start in range(0, n, SOLVE_BLOCK):
+        stop = min(start + SOLVE_BLOCK, n)
+        p = np.multiply(flat[start:stop].T, scale, order="C")   # (channel, block) rows
+        np.tanh(p, out=p)
+        c_buf, s_buf, work, d_buf = buffers[:, :stop - start]
+        for k, (c_terms, s_terms) in enumerate(terms):
+            # every step in the cache-sized buffers; each output row is written once
+            c = _combine(p, c_terms, c_buf, work)
+            s = _combine(p, s_terms, s_buf, work)
+            np.arctan2(s, c, out=work)
+            work *= half_deg
+            # atan2 lies in [-180, 180], phi in [-90, 90]: +90 (S = +0, C < 0) is -90
+            np.copyto(work, -90.0, where=work >= 90.0)
+            phi[k, start:stop] = work
+            np.multiply(c, c, out=d_buf)
+            d_buf += np.multiply(s, s, out=work)
+            np.sqrt(d_buf, out=dop[k, start:stop])  # d = hypot(C, S) (|C|, |S| <= ~2)
+    shape = U.shape[:-1] + (len(terms),)
+    return phi.T.reshape(shape), dop.T.reshape(shape)
 
 
 def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float = GAIN,
@@ -121,6 +180,39 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
             f"compensated heading solve did not converge in {max_iter} iterations "
             f"(last step {step:.3g} deg)", last_step=step, iterations=max_iter)
     return wrap_axial_deg(phi), d
+
+
+@functools.lru_cache(maxsize=64)
+def _pair_coefficients(pairs: tuple) -> tuple[list, list]:
+    """Channels to invert and, per pair, the terms ``((row, coefficient), ...)`` of
+    ``C = c_i p_i + c_j p_j`` and of ``S = s_i p_i + s_j p_j`` (Cramer's rule on eqs. 7-8),
+    without the exact zeros (the paper's angles make several: pair (1, 2) has ``C = p_2``)."""
+    used = sorted({ch for pair in pairs for ch in pair})   # invert only these channels
+    terms = []
+    for i, j in pairs:
+        ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
+        det = np.sin(ai - aj)
+        rows = (used.index(i), used.index(j))
+        c = tuple((r, float(k)) for r, k in zip(rows, (-np.sin(aj) / det, np.sin(ai) / det))
+                  if k != 0.0)
+        s = tuple((r, float(k)) for r, k in zip(rows, (-np.cos(aj) / det, np.cos(ai) / det))
+                  if k != 0.0)
+        terms.append((c, s))
+    return used, terms
+
+
+def _combine(p, terms, out, work):
+    """``sum(k p[row])`` over ``terms`` into ``out`` (a row of ``p`` itself for ``1 p[row]``)."""
+    if not terms:
+        out[...] = 0.0
+        return out
+    if len(terms) == 1 and terms[0][1] == 1.0:
+        return p[terms[0][0]]
+    (r0, k0), *rest = terms
+    np.multiply(p[r0], k0, out=out)
+    for r, k in rest:
+        out += np.multiply(p[r], k, out=work)
+    return out
 
 
 def heading_error_deg(phi_estimated_deg, phi_reference_deg) -> np.ndarray:

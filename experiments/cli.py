@@ -23,18 +23,16 @@ import argparse  # noqa: E402
 import importlib  # noqa: E402
 import pkgutil  # noqa: E402
 import sys  # noqa: E402
+from pathlib import Path  # noqa: E402
 
 import experiments
 
 __all__ = ["main", "build_parser"]
 
 
-def _command_modules():
-    for info in sorted(pkgutil.iter_modules(experiments.__path__), key=lambda m: m.name):
-        if info.name == "cli" or info.name.startswith("_"):
-            continue
-        mod = importlib.import_module(f"experiments.{info.name}")
-        yield mod
+def _module_names() -> list[str]:
+    return sorted(info.name for info in pkgutil.iter_modules(experiments.__path__)
+                  if info.name != "cli" and not info.name.startswith("_"))
 
 
 DEFAULT_SEED = 20140601
@@ -49,13 +47,23 @@ def _run_target(targets: dict, args) -> int:
     return func(args)
 
 
-def build_parser() -> argparse.ArgumentParser:
+def build_parser(command: str | None = "") -> argparse.ArgumentParser:
+    """The ``skysim`` parser; ``command`` (a sub-command name, or None for none) imports only
+    the modules that command needs and lists the others from a static index (fast start-up).
+    The default builds the whole parser, importing every command module."""
+    names = _module_names()
+    wanted, index = names, None
+    if command != "":
+        from ._command_index import read_index
+        index = read_index(Path(experiments.__path__[0]), names)
+        wanted = index.modules_for(command)
+        wanted = names if wanted is None else wanted
+    modules = {n: importlib.import_module(f"experiments.{n}") for n in names if n in wanted}
     parser = argparse.ArgumentParser(
         prog="skysim", description="Skylight-polarization simulator and virtual sensor testbed.")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     targets: dict = {}
-    modules = list(_command_modules())
-    for mod in modules:
+    for mod in modules.values():
         if hasattr(mod, "register_reproduce"):
             mod.register_reproduce(targets)
     rep = sub.add_parser("reproduce", help="run a published experiment's reproduction",
@@ -72,14 +80,20 @@ def build_parser() -> argparse.ArgumentParser:
                      help="folder of recorded sessions (real-sky-compass; default: the "
                           "reference recordings beside the checkout)")
     rep.set_defaults(func=lambda args: _run_target(targets, args))
-    for mod in modules:
-        if hasattr(mod, "register"):
-            mod.register(sub)
+    for name in names:
+        if name in modules:
+            if hasattr(modules[name], "register"):
+                modules[name].register(sub)
+        else:  # listed from the index, imported only when it runs
+            for cmd, (module_name, help_text) in index.commands.items():
+                if module_name == name:
+                    sub.add_parser(cmd, help=help_text)
     return parser
 
 
 def main(argv=None) -> int:
-    parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
     args = parser.parse_args(argv)
     try:
         rc = args.func(args)

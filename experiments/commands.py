@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register", "sky_grid", "AOP_CONVENTION"]
+__all__ = ["register", "sky_grid", "view_directions", "AOP_CONVENTION"]
 
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
@@ -25,14 +25,26 @@ def sky_grid(step_deg: float = 2.0):
     return E.ravel(), A.ravel()
 
 
-def _sky(args) -> int:
-    import numpy as np
+def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
+    """View directions [deg] from a CSV with columns elevation_deg, azimuth_deg, or else the
+    default full-sky grid (:func:`sky_grid`)."""
+    if not directions_csv:
+        return sky_grid(grid_step_deg)
     import pandas as pd
-    from tqdm import tqdm
+    d = pd.read_csv(directions_csv)
+    missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
+    if missing:
+        raise ValueError(f"{directions_csv}: missing column(s) {sorted(missing)}")
+    return d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
+
+
+def _sky(args) -> int:
+    # pandas, tqdm and the sun are imported only where needed: a Parquet sky map for given
+    # sun angles starts in a fraction of the time
+    import numpy as np
 
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
-    from skysim.sun import Site, sun_position
 
     if args.sun_elevation is not None:
         if args.sun_azimuth is None:
@@ -43,58 +55,72 @@ def _sky(args) -> int:
         if args.lat is None or args.lon is None or args.time is None:
             raise ValueError("give the sun as --lat --lon --time (timezone-aware ISO 8601) "
                              "or as --sun-elevation --sun-azimuth")
+        from skysim.sun import Site, sun_position
         site = Site(args.lat, args.lon, args.alt)
         pos = sun_position([args.time], site.latitude_deg, site.longitude_deg, site.altitude_m)
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
         sun_info = {"site": site.to_dict(), "time": args.time, "elevation_deg": sun_el,
                     "azimuth_deg": sun_az}
-    if args.directions:
-        d = pd.read_csv(args.directions)
-        missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
-        if missing:
-            raise ValueError(f"{args.directions}: missing column(s) {sorted(missing)}")
-        el, az = d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
-    else:
-        el, az = sky_grid(args.grid_step)
+    el, az = view_directions(args.directions, args.grid_step)
     params = {k: getattr(args, k) for k in ("dmax", "tau", "albedo", "wavelength_nm",
                                               "delta_deg", "pressure_hPa")
               if getattr(args, k, None) is not None}
     sky = make_sky(args.model, **params)
     chunk = 100_000
+    starts = range(0, el.size, chunk)
+    if el.size > chunk:
+        from tqdm import tqdm
+        starts = tqdm(starts, desc=f"sky ({args.model})", unit="chunk")
     parts = []
-    for s in tqdm(range(0, el.size, chunk), desc=f"sky ({args.model})", unit="chunk",
-                  disable=el.size <= chunk):
+    for s in starts:
         f = sky.field(el[s:s + chunk], az[s:s + chunk], sun_el, sun_az)
-        parts.append(pd.DataFrame({"elevation_deg": el[s:s + chunk],
-                                   "azimuth_deg": az[s:s + chunk], "dop": f.dop,
-                                   "aop_deg": f.aop_deg, "I": f.I, "Q": f.Q, "U": f.U}))
-    table = pd.concat(parts, ignore_index=True)
+        parts.append((f.dop, f.aop_deg, f.I, f.Q, f.U))
+    table = {"elevation_deg": el, "azimuth_deg": az} | {
+        name: np.concatenate(values) for name, values in zip(("dop", "aop_deg", "I", "Q", "U"),
+                                                           zip(*parts))}
     if args.out:
         out = Path(args.out)
         if out.suffix.lower() not in (".csv", ".parquet"):
             raise ValueError(f"--out must end in .csv or .parquet; got {out.name!r}")
         sidecar = {"schema": "skysim.skymap/1", "sky": sky.describe(), "sun": sun_info,
                    "aop_convention": AOP_CONVENTION, "n_directions": int(el.size)}
-        writer = (lambda p: table.to_csv(p, index=False)) if out.suffix.lower() == ".csv" \
-            else (lambda p: table.to_parquet(p, index=False))
+        writer = (lambda p: _frame(table).to_csv(p, index=False)) \
+            if out.suffix.lower() == ".csv" else (lambda p: _write_parquet(p, table))
         atomic_write_many([(out, writer), (sidecar_path(out),
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
-        print(f"wrote {len(table)} directions to {out}")
+        print(f"wrote {el.size} directions to {out}")
     if args.plot:
         from .polar_maps import plot_polar_maps
-        maps = {"DoP": (table.dop.to_numpy(), "viridis", (0, 1)),
-                "AoP [deg]": (table.aop_deg.to_numpy(), "twilight", (-90, 90))}
+        maps = {"DoP": (table["dop"], "viridis", (0, 1)),
+                "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
         if args.model == "multiple":  # radiance (flux pi) and the neutral points
             from skysim.neutral_points import neutral_points_from_modes
-            maps["I (flux pi)"] = (table.I.to_numpy(), "magma", None)
+            maps["I (flux pi)"] = (table["I"], "magma", None)
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
                         title=f"{args.model} sky")
         print(f"wrote {args.plot}")
     if not args.out and not args.plot:
-        print(table.describe().to_string())
+        print(_frame(table).describe().to_string())
     return 0
+
+
+def _frame(columns: dict):
+    import pandas as pd
+    return pd.DataFrame(columns)
+
+
+def _write_parquet(path, columns: dict) -> None:
+    """Float numpy columns to Parquet through pyarrow's buffers (zero-copy; ``pa.array`` would
+    import pandas, 0.3-0.5 s, only to check for pandas types)."""
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+    arrays = [pa.Array.from_buffers(pa.from_numpy_dtype(v.dtype), v.size,
+                                    [None, pa.py_buffer(np.ascontiguousarray(v))])
+              for v in columns.values()]
+    pq.write_table(pa.Table.from_arrays(arrays, names=list(columns)), path)
 
 
 def _sample(args) -> int:

@@ -1,20 +1,45 @@
 """sensor: instruments that sample a sky and produce raw signals."""
 
-from .compound_eye import (CompoundEyeSensor, Unit, patent_configuration, ring_configuration,
-                           with_random_installation_errors)
-from .daq import Daq
-from .errors import OpponentErrors
-from .illuminance import (WATER_TYPES, IncidentLight, OutsideSnellWindowError, WaterType,
-                          sky_light, underwater_light)
-from .imu import AccelSpec, GyroSpec, ImuSpec, InvalidRateError
-from .measurement import Measurement, MeasurementFormatError, read_measurement
-from .opponent import CHANNEL_ANGLES_DEG, OpponentSensor, channel_outputs
-from .photodiode import (PhotodiodeChannels, opponent_log_ratio, photodiode_signal,
-                         three_pair_outputs)
-from .photodiodes_io import (PhotodiodeData, PhotodiodeFormatError, read_photodiodes,
-                             write_photodiodes)
-from .platform import (TrajectoryTooShortError, dynamic_trajectory, sample_run,
-                       static_trajectory)
+from skysim._lazy import lazy_namespace
+
+_EXPORTS = {
+    "CompoundEyeSensor": ".compound_eye",
+    "Unit": ".compound_eye",
+    "patent_configuration": ".compound_eye",
+    "ring_configuration": ".compound_eye",
+    "with_random_installation_errors": ".compound_eye",
+    "Daq": ".daq",
+    "OpponentErrors": ".errors",
+    "WATER_TYPES": ".illuminance",
+    "IncidentLight": ".illuminance",
+    "OutsideSnellWindowError": ".illuminance",
+    "WaterType": ".illuminance",
+    "sky_light": ".illuminance",
+    "underwater_light": ".illuminance",
+    "AccelSpec": ".imu",
+    "GyroSpec": ".imu",
+    "ImuSpec": ".imu",
+    "InvalidRateError": ".imu",
+    "Measurement": ".measurement",
+    "MeasurementFormatError": ".measurement",
+    "read_measurement": ".measurement",
+    "CHANNEL_ANGLES_DEG": ".opponent",
+    "OpponentSensor": ".opponent",
+    "channel_outputs": ".opponent",
+    "PhotodiodeChannels": ".photodiode",
+    "opponent_log_ratio": ".photodiode",
+    "photodiode_signal": ".photodiode",
+    "three_pair_outputs": ".photodiode",
+    "PhotodiodeData": ".photodiodes_io",
+    "PhotodiodeFormatError": ".photodiodes_io",
+    "read_photodiodes": ".photodiodes_io",
+    "write_photodiodes": ".photodiodes_io",
+    "TrajectoryTooShortError": ".platform",
+    "dynamic_trajectory": ".platform",
+    "sample_run": ".platform",
+    "static_trajectory": ".platform",
+}
+"""Public name -> submodule defining it (imported on first access)."""
 
 __all__ = ["Daq", "OpponentErrors", "Measurement", "MeasurementFormatError",
            "read_measurement", "CHANNEL_ANGLES_DEG", "OpponentSensor", "channel_outputs",
@@ -25,3 +50,5 @@ __all__ = ["Daq", "OpponentErrors", "Measurement", "MeasurementFormatError",
            "OutsideSnellWindowError", "WaterType", "sky_light", "underwater_light",
            "AccelSpec", "GyroSpec", "ImuSpec", "InvalidRateError", "TrajectoryTooShortError",
            "dynamic_trajectory", "sample_run", "static_trajectory"]
+
+__getattr__, __dir__ = lazy_namespace(__name__, _EXPORTS)

@@ -35,7 +35,6 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
-from scipy.signal import lfilter
 
 from skysim.exceptions import InvalidParameterError
 from skysim.validation import check_finite
@@ -148,6 +147,8 @@ def gauss_markov(shape, n_samples: int, sigma: float, tau_s: float, dt_s: float,
     w = rng.standard_normal(lead + (n_samples, axes)) * sigma * np.sqrt(1.0 - a * a)
     x0 = rng.standard_normal(lead + (1, axes)) * sigma
     w[..., 0:1, :] = x0                           # x_0 drawn from the stationary law
+    from scipy.signal import lfilter  # scipy.signal costs ~0.5 s to import: only when needed
+
     return lfilter([1.0], [1.0, -a], w, axis=-2)
 
 

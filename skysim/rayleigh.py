@@ -22,7 +22,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .geometry import aop_from_e_vector, angle_between_deg, direction_vector, local_basis
+from .geometry import aop_from_e_vector, angle_between_deg, cos_sin_deg, direction_vector
 from .validation import check_in_range
 
 __all__ = [
@@ -31,8 +31,26 @@ __all__ = [
     "e_vector",
     "angle_of_polarization_deg",
     "relative_radiance",
+    "meridian_components",
+    "polarization_field",
     "stokes",
+    "FLOAT32_AOP_ERROR_DEG",
+    "FLOAT32_DOP_ERROR",
+    "FLOAT32_MIN_SCATTERING_ANGLE_DEG",
 ]
+
+FLOAT32_AOP_ERROR_DEG = 1e-3
+"""Bound on the AoP error [deg] of the float32 path (:func:`polarization_field`) against float64,
+for view directions at least :data:`FLOAT32_MIN_SCATTERING_ANGLE_DEG` from the sun and the
+anti-sun (closer to them the AoP is ill-conditioned in any precision and the DoP tends to 0)."""
+
+FLOAT32_DOP_ERROR = 1e-5
+"""Bound on the absolute DoP error of the float32 path against float64, for every direction."""
+
+FLOAT32_MIN_SCATTERING_ANGLE_DEG = 2.0
+"""Scattering-angle margin [deg] from the sun and the anti-sun beyond which the float32 AoP bound
+holds: the float32 components carry absolute errors up to ~5e-7, so the AoP error grows like
+``5e-7 / sin(gamma)`` rad towards them (7e-4 deg at 2 deg, where DoP < 6e-4 d_max)."""
 
 
 def scattering_angle_deg(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
@@ -98,25 +116,113 @@ def relative_radiance(scattering_angle_deg) -> np.ndarray:
     return 0.75 * (1.0 + np.cos(g) ** 2)
 
 
+def meridian_components(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                        sun_azimuth_deg, dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """Components ``(a, b)`` of the unnormalised E-vector ``v x s`` on ``(e_el, e_az)``.
+
+    With ``Delta = view azimuth - sun azimuth``, elevations ``h`` (view) and ``h_s`` (sun):
+    ``a = cos h_s sin Delta`` and ``b = cos h sin h_s - sin h cos h_s cos Delta`` (the E-vector
+    of single scattering is perpendicular to the scattering plane [1]_); the AoP is ``atan2(b, a)`` (axial) and ``a^2 + b^2 = sin^2 gamma``. Written with the sun's
+    ENU vector ``(s_x, s_y, s_z)``: ``a = s_y sin A - s_x cos A``,
+    ``b = s_z cos h - sin h (s_x sin A + s_y cos A)`` (``A`` the view azimuth), so the
+    direction trigonometry is computed on the view arrays as given and the sun's on the sun
+    arrays: a ``(1, N)`` grid against ``(T, 1)`` suns costs ``N + T`` trigonometric values.
+
+    Parameters
+    ----------
+    view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg : array-like
+        Directions [deg] (broadcast together).
+    dtype : numpy dtype
+        ``float64`` or ``float32`` arithmetic.
+
+    Returns
+    -------
+    (a, b) : tuple of ndarray of the broadcast shape.
+    """
+    ce, se = cos_sin_deg(view_elevation_deg, dtype)
+    ca, sa = cos_sin_deg(view_azimuth_deg, dtype)
+    # the sun's vector in float64 whatever dtype: it is small (one per sun) or shared by the
+    # view arrays, and its rounding would otherwise dominate the float32 AoP error
+    cs, sun_z = cos_sin_deg(sun_elevation_deg)
+    csa, ssa = cos_sin_deg(sun_azimuth_deg)
+    sx, sy, sz = ((cs * ssa).astype(dtype), (cs * csa).astype(dtype), sun_z.astype(dtype))
+    shape = np.broadcast_shapes(ce.shape, ca.shape, sx.shape, sy.shape)
+    # three full-shape buffers reused in place: every fresh large array costs memory traffic
+    # (and page faults when the allocator has returned its memory)
+    a = np.multiply(sa, sy, out=np.empty(shape, dtype))
+    work = np.multiply(ca, sx, out=np.empty(shape, dtype))
+    a -= work
+    horizontal = np.multiply(ca, sy, out=work)
+    b = np.multiply(sa, sx, out=np.empty(shape, dtype))
+    horizontal += b
+    horizontal *= se
+    np.multiply(ce, sz, out=b)
+    b -= horizontal
+    return a, b
+
+
+def polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                       sun_azimuth_deg, dmax=1.0, dtype=np.float64) -> dict:
+    """Single-scattering field: ``I, Q, U``, DoP and AoP [deg] from the E-vector components.
+
+    With ``(a, b)`` from :func:`meridian_components` and ``s2 = a^2 + b^2 = sin^2 gamma``:
+    ``I = (3/4)(2 - s2)`` (= (3/4)(1 + cos^2 gamma)), ``DoP = d_max s2 / (2 - s2)`` (eq. 1 of
+    [2]_), ``Q = (3/4) d_max (a^2 - b^2)``, ``U = (3/2) d_max a b`` and
+    ``AoP = atan(b / a)`` wrapped to [-90, 90): no angle round trips and no trigonometry per
+    value other than one ``arctan``. AoP is 0 where it is undefined (at the sun and the
+    anti-sun, where DoP = 0), as ``atan2(U, Q)`` gives there.
+
+    Parameters
+    ----------
+    view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg : array-like
+        Directions [deg] (broadcast together; not validated here, see
+        :meth:`skysim.sky.Sky.field`).
+    dmax : float
+        Maximum degree of polarization, in (0, 1].
+    dtype : numpy dtype
+        ``float64`` (default; agrees with the vector formulation to ~1e-15) or ``float32``
+        (about 3x faster again; errors within :data:`FLOAT32_AOP_ERROR_DEG` and
+        :data:`FLOAT32_DOP_ERROR`).
+
+    Returns
+    -------
+    dict with ``I``, ``Q``, ``U``, ``dop`` and ``aop_deg`` arrays of the broadcast shape.
+    """
+    dmax = float(check_in_range("dmax", dmax, 0.0, 1.0, low_open=True))
+    a, b = meridian_components(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                               sun_azimuth_deg, dtype)
+    q = np.multiply(a, a, out=np.empty_like(a))
+    u = np.multiply(b, b, out=np.empty_like(a))        # b^2 for now
+    dop = np.add(q, u, out=np.empty_like(a))           # sin^2 gamma for now
+    intensity = np.subtract(2.0, dop, out=np.empty_like(a))  # 1 + cos^2 gamma for now
+    q -= u
+    q *= 0.75 * dmax
+    np.multiply(a, b, out=u)
+    u *= 1.5 * dmax
+    dop *= dmax
+    dop /= intensity
+    intensity *= 0.75
+    with np.errstate(divide="ignore", invalid="ignore"):
+        aop = np.divide(b, a, out=b)
+    np.arctan(aop, out=aop)
+    aop *= 180.0 / np.pi
+    off = ~(aop < 90.0)  # +90 (a = 0) belongs to -90; NaN (a = b = 0) is undefined
+    if off.any():
+        aop[off] = np.where(np.isnan(aop[off]), 0.0, -90.0)
+    return {"I": intensity, "Q": q, "U": u, "dop": dop, "aop_deg": aop}
+
+
 def stokes(view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,
            dmax=1.0) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Stokes ``(I, Q, U)`` of the single-scattering sky in the local-meridian basis.
 
     ``I`` is :func:`relative_radiance`; ``Q = I d cos 2 chi``, ``U = I d sin 2 chi`` with
-    ``chi`` the AoP. Shapes broadcast over all inputs.
+    ``chi`` the AoP (computed by :func:`polarization_field`). Shapes broadcast over all
+    inputs, ``dmax`` included.
     """
-    gamma = scattering_angle_deg(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
-                                 sun_azimuth_deg)
-    d = degree_of_polarization(gamma, dmax)
-    intensity = relative_radiance(gamma)
-    v, e_el, e_az = local_basis(view_elevation_deg, view_azimuth_deg)
-    s = direction_vector(sun_elevation_deg, sun_azimuth_deg)
-    e = np.cross(v, s)  # unnormalised; |e| = sin(gamma)
-    # cos 2chi and sin 2chi from the unnormalised components (well defined where d = 0 too)
-    a = np.sum(e * e_el, axis=-1)
-    b = np.sum(e * e_az, axis=-1)
-    r2 = a * a + b * b
-    with np.errstate(invalid="ignore", divide="ignore"):
-        c2 = np.where(r2 > 0, (a * a - b * b) / r2, 1.0)
-        s2 = np.where(r2 > 0, 2 * a * b / r2, 0.0)
-    return intensity, intensity * d * c2, intensity * d * s2
+    dmax = np.asarray(dmax, dtype=float)
+    f = polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                           sun_azimuth_deg, float(dmax) if dmax.ndim == 0 else 1.0)
+    if dmax.ndim == 0:
+        return f["I"], f["Q"], f["U"]
+    return f["I"], f["Q"] * dmax, f["U"] * dmax

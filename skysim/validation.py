@@ -36,6 +36,11 @@ def check_finite(name: str, values) -> np.ndarray:
 def check_in_range(name: str, values, low: float, high: float, *, low_open=False,
                    high_open=False, hint: str = "") -> np.ndarray:
     """Check ``low <= values <= high`` (bounds optionally open); return a float array."""
+    arr = np.asarray(values, dtype=float)
+    ok = arr > low if low_open else arr >= low   # NaN fails both comparisons
+    ok &= arr < high if high_open else arr <= high
+    if ok.all():
+        return arr
     arr = check_finite(name, values)
     too_low = arr <= low if low_open else arr < low
     too_high = arr >= high if high_open else arr > high

@@ -15,6 +15,7 @@ from sensor.daq import Daq
 from sensor.errors import OpponentErrors
 from sensor.opponent import OpponentSensor, channel_outputs
 from skysim.sky import RayleighSky
+from written_out import pair_by_cramer  # tests/written_out.py
 
 ERR = OpponentErrors(misalignment_deg=(0.6, -0.4, 0.9, 0.2, -0.7, 0.3),
                      transmittance=(0.012, -0.008, 0.02))
@@ -176,3 +177,34 @@ def test_batched_lsm_flags_or_names_the_failing_element():
     np.testing.assert_allclose(res.misalignment_deg[0], _truth((1, 2))[0], atol=1e-7)
     with pytest.raises(ValueError, match="on_failure"):
         fit_pairs(phis, us, (1, 2), 0.5, on_failure="ignore")
+
+
+def test_solve_pairs_equals_each_pair_written_out():
+    """All pairs at once, in cache-sized blocks (more than one block here), equal the per-pair
+    formulas to 1e-12 deg / 1e-12 in d, with phi in [-90, 90) (+90 -> -90)."""
+    from calibration.solve import SOLVE_BLOCK, solve_pairs
+    rng = np.random.default_rng(4)
+    n = 2 * SOLVE_BLOCK + 17
+    phi = rng.uniform(-90, 90, n)
+    phi[:3] = [-90.0, 0.0, 45.0]
+    u = channel_outputs(phi, rng.uniform(0.05, 0.95, n))
+    got_phi, got_d = solve_pairs(u)
+    assert got_phi.shape == (n, 3) and got_d.shape == (n, 3)
+    for k, pair in enumerate(PAIRS):
+        ref_phi, ref_d = pair_by_cramer(u, pair)
+        assert np.max(np.abs(heading_error_deg(got_phi[:, k], ref_phi))) < 1e-12
+        np.testing.assert_allclose(got_d[:, k], ref_d, rtol=0, atol=1e-12)
+    assert np.all((got_phi >= -90.0) & (got_phi < 90.0))
+    np.testing.assert_array_equal(solve_pair(u, (2, 3))[0], got_phi[:, 2])
+
+
+def test_solve_pairs_shapes_and_bad_input():
+    from calibration.solve import solve_pairs
+    u = channel_outputs(np.linspace(-80, 80, 12).reshape(3, 4), 0.5)
+    phi, d = solve_pairs(u, ((1, 2), (2, 3)))
+    assert phi.shape == (3, 4, 2) and d.shape == (3, 4, 2)
+    assert solve_pair(u[0, 0], (1, 3))[0].shape == ()
+    with pytest.raises(ValueError, match=r"\(\.\.\., 3\)"):
+        solve_pairs(np.zeros((5, 2)))
+    with pytest.raises(ValueError, match="two different channels"):
+        solve_pairs(u, ((1, 1),))

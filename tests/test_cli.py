@@ -54,7 +54,7 @@ def test_reproduce_yang2014_small(tmp_path, capsys):
 @pytest.mark.parametrize("argv,msg", [
     (["sky", "--lat", "34", "--lon", "108", "--time", "2013-05-22T17:10"], "naive"),
     (["sky", "--lat", "95", "--lon", "108", "--time", "2013-05-22T17:10Z"], "latitude"),
-    (["sky", "--sun-elevation", "-3", "--sun-azimuth", "10"], "horizon"),
+    (["sky", "--sun-elevation", "-12", "--sun-azimuth", "10"], "twilight limit"),
     (["sky", "--model", "mie", "--sun-elevation", "3", "--sun-azimuth", "10"], "valid"),
     (["calibrate", "/nonexistent.csv"], "no data file"),
 ])

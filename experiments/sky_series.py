@@ -1,0 +1,232 @@
+"""Time series of sky maps written block by block: ``skysim sky-series`` and its writers.
+
+Formats (by the output's suffix):
+
+- ``.nc``: netCDF4 (HDF5) through ``h5netcdf`` (optional extra ``skysim[series]``), dimensions
+  ``time`` x ``direction``, one chunked variable per quantity; it opens as an
+  ``xarray.Dataset`` (``xarray.open_dataset(path, engine="h5netcdf")``). Metadata in the
+  global attributes.
+- ``.parquet``: a long table, one row per (time, direction), one row group per block, with a
+  JSON sidecar (schema ``skysim.skyseries/1``).
+
+Either way the series is never held in memory: each block of suns (see
+:mod:`skysim.series`) is evaluated and written, then dropped. The file appears only when
+complete (written to a temporary file and renamed).
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+from pathlib import Path
+
+__all__ = ["SERIES_SCHEMA", "write_sky_series", "register"]
+
+SERIES_SCHEMA = "skysim.skyseries/1"
+
+_UNITS = {"dop": ("1", "degree of linear polarization"),
+          "aop_deg": ("degree", "angle of polarization from the local meridian"),
+          "I": ("1", "radiance (model units, see the sky attribute)"),
+          "Q": ("1", "Stokes Q in the local-meridian basis"),
+          "U": ("1", "Stokes U in the local-meridian basis")}
+_CHUNK_BYTES = 4 * 2**20  # netCDF chunks of ~4 MiB: whole time steps, cheap to read one
+
+
+def _metadata(sky, times, n_directions, n_suns) -> dict:
+    from skysim import __version__
+
+    from .commands import AOP_CONVENTION
+    return {"schema": SERIES_SCHEMA, "sky": sky.describe(), "aop_convention": AOP_CONVENTION,
+            "n_times": int(n_suns), "n_directions": int(n_directions),
+            "times": "given" if times is not None else "none (index of the sun positions)",
+            "generator": f"skysim {__version__}"}
+
+
+def _time_ns(times, n):
+    import numpy as np
+    import pandas as pd
+
+    from skysim.sun import as_utc_index
+    if times is None:
+        return None
+    idx = as_utc_index(pd.DatetimeIndex(times))
+    if len(idx) != n:
+        raise ValueError(f"times and sun positions differ in length: {len(idx)} vs {n}")
+    return idx.as_unit("ns").asi8.astype(np.int64)
+
+
+def _write_netcdf(tmp: Path, blocks, el, az, sel, saz, t_ns, dtype, chunk_rows, meta):
+    try:
+        import h5netcdf
+    except ImportError as exc:  # pragma: no cover - depends on the environment
+        raise RuntimeError("writing .nc needs h5netcdf: pip install 'skysim[series]' "
+                           "(or write .parquet)") from exc
+    with h5netcdf.File(tmp, "w") as f:
+        f.dimensions = {"time": sel.size, "direction": el.size}
+        for name, values, dim, units in (("elevation_deg", el, "direction", "degree"),
+                                         ("azimuth_deg", az, "direction", "degree"),
+                                         ("sun_elevation_deg", sel, "time", "degree"),
+                                         ("sun_azimuth_deg", saz, "time", "degree")):
+            v = f.create_variable(name, (dim,), "f8", data=values)
+            v.attrs["units"] = units
+        if t_ns is not None:
+            v = f.create_variable("time", ("time",), "i8", data=t_ns // 1000)
+            v.attrs["units"] = "microseconds since 1970-01-01T00:00:00+00:00"
+            v.attrs["calendar"] = "proleptic_gregorian"
+        out = {}
+        for name in _UNITS:
+            out[name] = f.create_variable(name, ("time", "direction"), dtype,
+                                          chunks=(chunk_rows, el.size))
+            out[name].attrs["units"], out[name].attrs["long_name"] = _UNITS[name]
+        for key, value in meta.items():
+            f.attrs[key] = value if isinstance(value, (str, int)) else json.dumps(value)
+        for suns, field in blocks:
+            for name, var in out.items():
+                var[suns, :] = getattr(field, name)
+
+
+def _write_parquet(tmp: Path, blocks, el, az, sel, saz, t_ns, dtype):
+    import numpy as np
+    import pyarrow as pa
+    import pyarrow.parquet as pq
+
+    arrow_float = pa.from_numpy_dtype(np.dtype(dtype))
+    columns = ([("time", pa.timestamp("ns", tz="UTC"))] if t_ns is not None else []) + [
+        ("sun_elevation_deg", pa.float64()), ("sun_azimuth_deg", pa.float64()),
+        ("elevation_deg", pa.float64()), ("azimuth_deg", pa.float64())] + [
+        (name, arrow_float) for name in _UNITS]
+    schema = pa.schema(columns)
+    with pq.ParquetWriter(tmp, schema) as writer:
+        for suns, field in blocks:
+            k = suns.stop - suns.start
+            data = {"sun_elevation_deg": np.repeat(sel[suns], el.size),
+                    "sun_azimuth_deg": np.repeat(saz[suns], el.size),
+                    "elevation_deg": np.tile(el, k), "azimuth_deg": np.tile(az, k)}
+            if t_ns is not None:
+                data["time"] = pa.array(np.repeat(t_ns[suns], el.size), schema.field("time").type)
+            for name in _UNITS:
+                data[name] = np.ascontiguousarray(getattr(field, name)).reshape(-1)
+            writer.write_table(pa.table(data, schema=schema))
+
+
+def write_sky_series(path, sky, view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+                     sun_azimuth_deg, times=None, max_block_bytes=None) -> dict:
+    """Evaluate ``sky`` for every sun and direction and write it block by block.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.nc`` (netCDF4 via h5netcdf) or ``.parquet`` (long table + JSON sidecar).
+    sky : skysim.sky.Sky
+        The sky model (``RayleighSky(dmax, dtype="float32")`` stores float32 quantities).
+    view_elevation_deg, view_azimuth_deg : array (N,)
+        View directions [deg].
+    sun_elevation_deg, sun_azimuth_deg : array (T,)
+        Sun positions [deg], one per time step.
+    times : DatetimeIndex-like (T,), optional
+        Timezone-aware times of the sun positions (stored as UTC).
+    max_block_bytes : int, optional
+        Memory budget of one block [bytes] (default
+        :data:`skysim.series.DEFAULT_MAX_BLOCK_BYTES`).
+
+    Returns
+    -------
+    dict with ``path``, ``n_times``, ``n_directions``, ``block_suns`` and ``n_blocks``.
+
+    Raises
+    ------
+    ValueError
+        For an unsupported suffix, mismatched inputs, naive times or a sun below the horizon
+        (nothing is written then).
+    """
+    import numpy as np
+
+    from skysim.io import atomic_write_many, sidecar_path
+    from skysim.series import DEFAULT_MAX_BLOCK_BYTES, iter_sky_series, suns_per_block
+
+    path = Path(path)
+    suffix = path.suffix.lower()
+    if suffix not in (".nc", ".parquet"):
+        raise ValueError(f"a sky series is written to .nc or .parquet; got {path.name!r}")
+    budget = DEFAULT_MAX_BLOCK_BYTES if max_block_bytes is None else int(max_block_bytes)
+    el, az, sel, saz = (np.asarray(a, dtype=float).reshape(-1) for a in (
+        view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg))
+    dtype = np.dtype(getattr(sky, "dtype", np.float64))
+    block = min(suns_per_block(el.size, budget, dtype.itemsize), max(sel.size, 1))
+    chunk_rows = max(1, min(block, _CHUNK_BYTES // (dtype.itemsize * max(el.size, 1))))
+    block -= block % chunk_rows  # whole chunks per block: no chunk is written twice
+    t_ns = _time_ns(times, sel.size)
+    meta = _metadata(sky, times, el.size, sel.size)
+    blocks = iter_sky_series(sky, el, az, sel, saz, budget, block_suns=block)
+    if suffix == ".nc":
+        items = [(path, lambda tmp: _write_netcdf(tmp, blocks, el, az, sel, saz, t_ns, dtype,
+                                                  chunk_rows, meta))]
+    else:
+        items = [(path, lambda tmp: _write_parquet(tmp, blocks, el, az, sel, saz, t_ns, dtype)),
+                 (sidecar_path(path), lambda tmp: tmp.write_text(json.dumps(meta, indent=2)))]
+    atomic_write_many(items)
+    return {"path": str(path), "n_times": int(sel.size), "n_directions": int(el.size),
+            "block_suns": int(block), "n_blocks": -(-sel.size // block)}
+
+
+def _sky_series(args) -> int:
+    import pandas as pd
+
+    from skysim.sky import make_sky
+    from skysim.sun import Site, sun_position
+
+    from .commands import view_directions
+
+    site = Site(args.lat, args.lon, args.alt)
+    if args.periods is None and args.end is None:
+        raise ValueError("give the times as --start with --end or --periods")
+    times = pd.date_range(start=pd.Timestamp(args.start),
+                          end=None if args.end is None else pd.Timestamp(args.end),
+                          periods=args.periods, freq=args.freq)
+    pos = sun_position(times, site.latitude_deg, site.longitude_deg, site.altitude_m)
+    sel, saz = pos.elevation_deg.to_numpy(float), pos.azimuth_deg.to_numpy(float)
+    if args.daylight_only:
+        day = sel > 0.0
+        print(f"{int((~day).sum())} of {len(times)} times have the sun down; left out")
+        times, sel, saz = times[day], sel[day], saz[day]
+    el, az = view_directions(args.directions, args.grid_step)
+    params = {"dmax": args.dmax} if args.dmax is not None else {}
+    if args.float32:
+        if args.model != "rayleigh":
+            raise ValueError("--float32 is available for --model rayleigh")
+        params["dtype"] = "float32"
+    sky = make_sky(args.model, **params)
+    info = write_sky_series(args.out, sky, el, az, sel, saz, times=times,
+                            max_block_bytes=int(args.max_memory_mb * 2**20))
+    print(f"wrote {info['n_times']} times x {info['n_directions']} directions to {args.out} "
+          f"in {info['n_blocks']} block(s) of up to {info['block_suns']} times "
+          f"(budget {args.max_memory_mb:g} MiB)")
+    return 0
+
+
+def register(sub) -> None:
+    p = sub.add_parser("sky-series", help="time series of sky maps (many suns x many "
+                       "directions), streamed to netCDF or Parquet",
+                       description="Evaluate a sky model for every time step and view "
+                                   "direction, block by block within a memory budget.",
+                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    p.add_argument("--lat", type=float, required=True, help="site latitude [deg, north +]")
+    p.add_argument("--lon", type=float, required=True, help="site longitude [deg, east +]")
+    p.add_argument("--alt", type=float, default=0.0, help="site altitude [m]")
+    p.add_argument("--start", required=True, help="timezone-aware ISO 8601 start time")
+    p.add_argument("--end", help="timezone-aware ISO 8601 end time (inclusive)")
+    p.add_argument("--periods", type=int, help="number of time steps (instead of --end)")
+    p.add_argument("--freq", default="1min", help="time step (pandas offset: 1s, 10min, ...)")
+    p.add_argument("--daylight-only", action="store_true",
+                   help="leave out the times with the sun at or below the horizon")
+    p.add_argument("--directions", help="CSV with columns elevation_deg, azimuth_deg")
+    p.add_argument("--grid-step", type=float, default=2.0, help="default grid spacing [deg]")
+    p.add_argument("--model", default="rayleigh", help="rayleigh | multiple | berry")
+    p.add_argument("--dmax", type=float, help="rayleigh/berry: maximum degree of polarization")
+    p.add_argument("--float32", action="store_true",
+                   help="rayleigh: float32 arithmetic and storage (AoP within 1e-3 deg beyond "
+                        "2 deg from the sun, DoP within 1e-5)")
+    p.add_argument("--max-memory-mb", type=float, default=256.0,
+                   help="memory budget of one block of times [MiB]")
+    p.add_argument("--out", required=True, help="output .nc (netCDF4) or .parquet")
+    p.set_defaults(func=_sky_series)
