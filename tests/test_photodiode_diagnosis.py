@@ -88,7 +88,8 @@ def test_base_model_reproduces_noise_free_readings(session):
     assert np.sqrt(np.mean(r[fwd.usable] ** 2)) < 5e-4
 
 
-@pytest.mark.parametrize("name", ["fov", "occlusion", "yaw_scale", "clock_offset", "tilt"])
+@pytest.mark.parametrize("name", ["fov", "occlusion", "yaw_scale", "clock_offset", "tilt",
+                                  "aureole"])
 def test_effects_vanish_at_null(session, name):
     inst = instrument_from_photodiodes(session)
     e = get_ring_effect(name)

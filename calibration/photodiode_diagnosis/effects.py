@@ -21,6 +21,12 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   true change (a gyro scale-factor error): ``true = y_0 + (y_rec - y_0) / factor``. Base at 1.
 - ``clock_offset`` (``clock_offset_s``): true minus recorded time, from seconds to whole-hour
   timezone errors (up to +-14 h), searched on whole and half hours before refining.
+- ``aureole`` (``amplitude``, ``scale_deg``): unpolarized light added near the sun, from
+  aerosol forward scattering (the solar aureole) and stray sunlight inside a unit, with a
+  radiance relative to the sky's of ``A exp(-psi / psi_0)`` at angular distance ``psi`` from
+  the sun (the aureole falls off roughly exponentially over its first tens of degrees,
+  Deepak & Box 1978 [3]_); the DoP becomes ``d / (1 + A exp(-psi / psi_0))``. Base at
+  ``A = 0``.
 - ``tilt`` (``pitch_deg``, ``roll_deg``): a constant tilt of the instrument on the platform
   (added to the recorded attitude), so the units' views circle the zenith as it turns. Base
   at 0.
@@ -30,6 +36,9 @@ References
 .. [1] V. Natraj, K.-F. Li, Y. L. Yung, "Rayleigh scattering in planetary atmospheres:
    corrected tables through accurate computation of X and Y functions", ApJ 691:1909 (2009),
    doi:10.1088/0004-637X/691/2/1909.
+.. [3] A. Deepak, M. A. Box, "Forward scattering corrections for optical extinction
+   measurements in aerosol media", Appl. Opt. 17(18):2900-2908 (1978),
+   doi:10.1364/AO.17.002900 (aureole radiance vs scattering angle).
 .. [2] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
    compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
    Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w (ring compass, canopy scenes).
@@ -44,7 +53,7 @@ from typing import ClassVar
 import numpy as np
 
 from sensor.compound_eye import SkySample
-from skysim.geometry import elevation_azimuth, wrap_deg
+from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 
 from ..effects import UnknownEffectError
 
@@ -52,7 +61,7 @@ __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_rin
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes"]
 
 RING_EFFECT_NAMES = ("multiple_scattering", "fov", "occlusion", "yaw_scale", "clock_offset",
-                     "tilt")
+                     "tilt", "aureole")
 
 
 class EffectUnavailableError(RuntimeError):
@@ -100,7 +109,7 @@ class RingEffect:
     def observe(self, sensor, sky, att, sun, p) -> SkySample:  # pragma: no cover - abstract
         raise NotImplementedError
 
-    def modify(self, obs: SkySample, p) -> SkySample:
+    def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
         return obs
 
     def available(self, sun_elevation_deg) -> None:
@@ -199,13 +208,8 @@ class FieldOfView(RingEffect):
         I, d, chi = integrate_stokes(rad, obs.dop.reshape(n, m, 6),
                                      obs.aop_unit_deg.reshape(n, m, 6), axis=-1)
         v = obs.view_elevation_deg.reshape(n, m, 6), obs.view_azimuth_deg.reshape(n, m, 6)
-        el, az = elevation_azimuth(np.mean(_unit_vectors(*v), axis=2))
+        el, az = elevation_azimuth(np.mean(direction_vector(*v), axis=2))
         return SkySample(I, d, chi, obs.e_vector_sensor.reshape(n, m, 6, 3)[:, :, 0], el, az)
-
-
-def _unit_vectors(el, az):
-    e, a = np.radians(el), np.radians(az)
-    return np.stack([np.cos(e) * np.sin(a), np.cos(e) * np.cos(a), np.sin(e)], axis=-1)
 
 
 def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):
@@ -228,7 +232,7 @@ class Occlusion(RingEffect):
         return [np.array([c, w, 0.6]) for c in np.arange(0.0, 360.0, 30.0)
                 for w in (60.0, 120.0, 180.0)]
 
-    def modify(self, obs: SkySample, p) -> SkySample:
+    def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
         w = occlusion_weight(obs.view_azimuth_deg, p[0], p[1])
         return replace(obs, dop=obs.dop * (1.0 - p[2] * w))
 
@@ -326,8 +330,28 @@ class MultipleScattering(RingEffect):
         return self._grid.at(float(p[0]), float(p[1]))
 
 
+class Aureole(RingEffect):
+    name = "aureole"
+    names = ("amplitude", "scale_deg")
+    units = ("1", "deg")
+    null = (0.0, 15.0)
+    lower = (0.0, 2.0)
+    upper = (50.0, 60.0)
+    prior_sd = (10.0, np.inf)
+    fd_step = (1e-3, 0.05)
+
+    def starts(self, ctx) -> list:
+        return [np.array([a, s]) for a in (0.5, 2.0) for s in (5.0, 15.0, 30.0)]
+
+    def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
+        view = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
+        cos_psi = np.clip(np.einsum("nuk,nk->nu", view, np.asarray(sun_enu, float)), -1, 1)
+        extra = p[0] * np.exp(-np.degrees(np.arccos(cos_psi)) / p[1])
+        return replace(obs, dop=obs.dop / (1.0 + extra))
+
+
 _EFFECTS = {c.name: c for c in (MultipleScattering, FieldOfView, Occlusion, YawScale,
-                                ClockOffset, Tilt)}
+                                ClockOffset, Tilt, Aureole)}
 
 
 def get_ring_effect(name: str) -> RingEffect:

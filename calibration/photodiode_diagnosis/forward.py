@@ -189,7 +189,7 @@ class Forward:
         if e is not None and e.observes:
             return e.observe(inst.sensor, sky, att, sun, pe)
         obs = inst.sensor.observe(sky, att, sun)
-        return obs if e is None else e.modify(obs, pe)
+        return obs if e is None else e.modify(obs, pe, sun)
 
     # ---------------------------------------------------------------- output stage
     def channel_model(self, theta, obs: SkySample) -> np.ndarray:

@@ -141,10 +141,11 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     if len(starts) == 1:
         return _extend(theta_base, fwd_base, fwd, starts[0])
     obs0 = fwd_base.observe(theta_base) if not effect.observes else None
+    sun = fwd.sun(fwd.inst.t_s)
     best = (np.inf, None)
     for p in starts:
         t = _extend(theta_base, fwd_base, fwd, p)
-        o = effect.modify(obs0, p) if obs0 is not None else None
+        o = effect.modify(obs0, p, sun) if obs0 is not None else None
         c = float(np.sum(fwd.residual(t, o) ** 2))
         if c < best[0]:
             best = (c, t)
