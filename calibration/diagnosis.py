@@ -160,15 +160,18 @@ class DiagnosisData:
                     "column mapping or drop the sensor from the data set")
 
     @classmethod
-    def from_arrays(cls, ctx: Context, U, saturation_V: float | None = None, source=None):
-        """Flag non-finite, saturated (``|U| >= saturation_V``) and dead (constant) readings,
-        and samples with the sun below :data:`MIN_SUN_ELEVATION_DEG` at the recorded time."""
+    def from_arrays(cls, ctx: Context, U, saturation_V=None, source=None):
+        """Flag non-finite, saturated (``|U| >= saturation_V``, or outside ``(lo, hi)`` for a
+        pair) and dead (constant) readings, and samples with the sun below
+        :data:`MIN_SUN_ELEVATION_DEG` at the recorded time."""
         U = np.asarray(U, dtype=float)
         finite = np.isfinite(U)
         sat = np.zeros(U.shape, bool)
         if saturation_V is not None:
+            lo, hi = (saturation_V if isinstance(saturation_V, tuple)
+                      else (-saturation_V, saturation_V))
             with np.errstate(invalid="ignore"):
-                sat = np.abs(U) >= saturation_V
+                sat = (U <= lo) | (U >= hi)
         dead = np.zeros(3, bool)
         if U.shape[0] >= _MIN_BLOCK_ROWS:
             dead = np.array([np.nanmax(U[:, c]) == np.nanmin(U[:, c])
@@ -197,6 +200,45 @@ def _site_of(sidecar: dict, where: str):
             f"{where}: sidecar has no 'site' (latitude_deg, longitude_deg, altitude_m); the sun "
             "position, hence the sky model, cannot be computed: add the site to the sidecar")
     return Site.from_dict(sidecar["site"])
+
+
+def _daq_saturation_V(sidecar: dict, where: str):
+    """Rails ``(lo, hi)`` [V] from the sidecar's ``sensor.daq`` (``bits``, ``range_V`` as a
+    symmetric full scale ``R`` or ``[lo, hi]``), one LSB inside each rail; None without a DAQ.
+
+    Raises
+    ------
+    MeasurementFormatError
+        For a ``daq`` block whose ``bits`` is not a whole number in 1..32 or whose
+        ``range_V`` is neither a positive number nor ``[lo, hi]`` with ``lo < hi``.
+    """
+    sensor = sidecar.get("sensor") or {}
+    daq = sensor.get("daq") if isinstance(sensor, dict) else None
+    if not daq:
+        return None
+    if not isinstance(daq, dict):
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq must be an object with "
+                                     f"'bits' and 'range_V'; got {daq!r}")
+    bits = daq.get("bits")
+    if bits is None:
+        return None
+    if isinstance(bits, bool) or not isinstance(bits, (int, float)) or bits != int(bits) \
+            or not 1 <= bits <= 32:
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq.bits must be a whole number "
+                                     f"in 1..32; got {bits!r}")
+    rng_v = daq.get("range_V", 10.0)
+    if isinstance(rng_v, (list, tuple)) and len(rng_v) == 2 and all(
+            isinstance(x, (int, float)) and not isinstance(x, bool) for x in rng_v) \
+            and rng_v[0] < rng_v[1]:
+        lo, hi = float(rng_v[0]), float(rng_v[1])
+    elif isinstance(rng_v, (int, float)) and not isinstance(rng_v, bool) and rng_v > 0:
+        lo, hi = -float(rng_v), float(rng_v)
+    else:
+        raise MeasurementFormatError(
+            f"{where}: sidecar sensor.daq.range_V must be a positive full scale [V] or "
+            f"[lo, hi] with lo < hi; got {rng_v!r}")
+    lsb = (hi - lo) / 2 ** int(bits)
+    return lo + lsb, hi - lsb
 
 
 def data_from_table(table, sidecar: dict, where: str = "measurement") -> DiagnosisData:
@@ -233,11 +275,7 @@ def data_from_table(table, sidecar: dict, where: str = "measurement") -> Diagnos
            for c in ("illuminance_lx", "temperature_C") if c in table.columns}
     ctx = Context.from_arrays(site, times, heading, block, opt.get("illuminance_lx"),
                               opt.get("temperature_C"))
-    daq = (sidecar.get("sensor") or {}).get("daq") or {}
-    sat = None
-    if daq.get("bits"):
-        rng_v = float(daq.get("range_V", 10.0))
-        sat = rng_v - 2.0 * rng_v / 2 ** int(daq["bits"])
+    sat = _daq_saturation_V(sidecar, where)
     U = np.stack([pd.to_numeric(table[c], errors="coerce").to_numpy(float)
                   for c in CHANNEL_COLUMNS], axis=1)
     return DiagnosisData.from_arrays(ctx, U, saturation_V=sat,
@@ -457,6 +495,12 @@ def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=Non
     starts = [np.r_[b0]] if effect is None else [
         np.r_[b0, effect.clip(s)] for s in ([effect0] if effect0 is not None
                                             else effect.starts())]
+    if effect is not None and effect0 is None and hasattr(effect, "coarse_starts"):
+        # screen a coarse grid (e.g. whole and half hours of a clock offset) at zero
+        # iterations and keep the best three as starts
+        grid = effect.coarse_starts(ctx, b0)
+        costs = [run(g, 0)[1] for g in grid]
+        starts = starts + [grid[i] for i in np.argsort(costs)[:3]]
     if len(starts) > 1:  # a few iterations from each start, then continue the best
         trials = [run(s, 2) for s in starts]
         best = min(trials, key=lambda t: t[1])[0]
@@ -499,7 +543,11 @@ def assign_folds(block, n_folds: int = 3) -> np.ndarray:
         raise InsufficientDataError(
             f"only {ids.size} sweep/time block in the data: a held-out split needs at least 2; "
             "record several sweeps (column 'sweep') or a longer session split into time blocks")
-    K = int(min(max(n_folds, 2), ids.size))
+    if isinstance(n_folds, bool) or int(n_folds) != n_folds or not 2 <= n_folds <= ids.size:
+        raise InsufficientDataError(
+            f"folds={n_folds!r}: need a whole number 2 <= folds <= number of sweeps/time "
+            f"blocks ({ids.size}); each fold holds out whole sweeps")
+    K = int(n_folds)
     fold_of_block = {b: i % K for i, b in enumerate(ids)}
     return np.array([fold_of_block[b] for b in block])
 
@@ -677,6 +725,13 @@ def diagnose(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, n_folds: int = 
     cands = all_effects(effects)
     ctx = data.ctx
     used = data.valid.any(axis=1)
+    if not used.any():
+        sun_el, _ = ctx.sun(ctx.t_s)
+        raise InsufficientDataError(
+            f"no usable reading in {ctx.n} samples ({data.cleaning.get('sun_below_horizon_samples', 0)}"
+            f" with the sun below {MIN_SUN_ELEVATION_DEG:g} deg at the recorded time, sun "
+            f"elevation {float(np.min(sun_el)):.1f} .. {float(np.max(sun_el)):.1f} deg): check "
+            "the times' UTC offset, the saturation level and the channels")
     heading_span = np.ptp(np.mod(ctx.heading_deg[used] - ctx.heading_deg[used][0] + 180, 360))
     if heading_span < 10.0:
         raise SingleHeadingError(

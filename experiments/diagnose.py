@@ -536,6 +536,8 @@ def _real_benchmark_cmd(args) -> int:
 
 
 def _benchmark_cmd(args) -> int:
+    if args.n < 1:
+        raise ValueError(f"--n {args.n}: the number of data sets must be at least 1")
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n

@@ -209,3 +209,41 @@ def test_blind_benchmark_small_n_fixed_seed_meets_acceptance():
     assert s["loo_unexplained_strong"] >= 0.9
     assert s["none_on_effect_free"] >= 0.9
     assert s["shrink_within_tol"] >= 0.9
+
+
+def test_timezone_error_of_hours_found_by_the_half_hour_search():
+    """Recorded times 8 h early (a timezone error): the coarse grid of whole and half hours
+    finds it; the local refinement lands within 10 min (the data set's sun moves 0.25 deg/min,
+    the fit's standard error is seconds)."""
+    from experiments.diagnose import simulate_session
+    ds = simulate_session("clock_offset", np.random.default_rng(5), params=np.array([8 * 3600.0]))
+    doc = diagnose(ds["data"], ("clock_offset", "multiple_scattering", "sun_motion"))
+    assert doc["verdict"]["effect"] == "clock_offset"
+    assert abs(doc["verdict"]["params"]["clock_offset_s"]["value"] - 8 * 3600.0) < 600.0
+
+
+@pytest.mark.parametrize("range_v, rails", [
+    ([-10, 10], (-10 + 20 / 2 ** 16, 10 - 20 / 2 ** 16)),
+    (5.0, (-5 + 10 / 2 ** 16, 5 - 10 / 2 ** 16)),
+    ([0, 10], (10 / 2 ** 16, 10 - 10 / 2 ** 16))])
+def test_daq_range_forms(range_v, rails):
+    """``range_V`` as [lo, hi] or a symmetric full scale: rails one LSB inside."""
+    from calibration.diagnosis import _daq_saturation_V
+    got = _daq_saturation_V({"sensor": {"daq": {"bits": 16, "range_V": range_v}}}, "x")
+    assert got == pytest.approx(rails, rel=1e-12)
+
+
+@pytest.mark.parametrize("daq", [{"bits": 16, "range_V": "ten"}, {"bits": "sixteen"},
+                                 {"bits": 16, "range_V": [10, -10]}, [16]])
+def test_malformed_daq_sidecar(daq):
+    from calibration.diagnosis import _daq_saturation_V
+    from sensor.measurement import MeasurementFormatError
+    with pytest.raises(MeasurementFormatError, match="daq"):
+        _daq_saturation_V({"sensor": {"daq": daq}}, "x")
+
+
+@pytest.mark.parametrize("folds", [0, 1, 100])
+def test_folds_out_of_range_refused(folds):
+    from calibration.diagnosis import InsufficientDataError, assign_folds
+    with pytest.raises(InsufficientDataError, match="folds"):
+        assign_folds(np.repeat(np.arange(6), 4), folds)

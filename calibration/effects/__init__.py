@@ -103,7 +103,7 @@ class SunTrack:
     vectors: np.ndarray
 
     @classmethod
-    def around(cls, site: Site, t_min_s: float, t_max_s: float, margin_s: float = 4 * 3600.0,
+    def around(cls, site: Site, t_min_s: float, t_max_s: float, margin_s: float = 15 * 3600.0,
                step_s: float = 60.0) -> SunTrack:
         t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
         times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)

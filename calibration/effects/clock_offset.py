@@ -37,6 +37,26 @@ class ClockOffset(Effect):
     def starts(self):
         return [np.array([x]) for x in (-3600.0, 0.0, 3600.0)]
 
+    COARSE_S: ClassVar[np.ndarray] = np.arange(-28, 29) * 1800.0
+    """Whole and half hours within +-14 h (timezone and daylight-saving errors)."""
+
+    def coarse_starts(self, ctx, base):
+        """Full parameter vectors for every offset of :attr:`COARSE_S`, the sun's azimuth change
+        carried into the common mounting term (``phi = h - sun_az``: adding the change to all
+        six mounting errors keeps the sensed angle), so that a timezone error of hours is
+        found before a local refinement (a fit started at 0 stops in a local minimum)."""
+        t_mid = float(np.mean(ctx.t_s))
+        el0, az0 = ctx.sun(np.array([t_mid]))
+        out = []
+        for dt in self.COARSE_S:
+            el, az = ctx.sun(np.array([t_mid + dt]))
+            if el[0] <= 1.0:
+                continue
+            b = np.array(base, float).copy()
+            b[:6] += float(((az[0] - az0[0]) + 180.0) % 360.0 - 180.0)
+            out.append(np.r_[b, dt])
+        return out
+
     def draw(self, rng):
         sign = rng.choice([-1.0, 1.0])
         if rng.random() < 0.5:
