@@ -89,7 +89,7 @@ def test_base_model_reproduces_noise_free_readings(session):
 
 
 @pytest.mark.parametrize("name", ["fov", "occlusion", "yaw_scale", "clock_offset", "tilt",
-                                  "aureole"])
+                                  "aureole", "stray_light"])
 def test_effects_vanish_at_null(session, name):
     inst = instrument_from_photodiodes(session)
     e = get_ring_effect(name)

@@ -27,6 +27,9 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   the sun (the aureole falls off roughly exponentially over its first tens of degrees,
   Deepak & Box 1978 [3]_); the DoP becomes ``d / (1 + A exp(-psi / psi_0))``. Base at
   ``A = 0``.
+- ``stray_light`` (``S_p`` per photodiode, ``scale_deg``): sunlight scattered inside the
+  instrument onto each photodiode, unpolarized and of its own strength, falling off with the
+  sun's distance from the unit's axis. Base at ``S = 0``.
 - ``tilt`` (``pitch_deg``, ``roll_deg``): a constant tilt of the instrument on the platform
   (added to the recorded attitude), so the units' views circle the zenith as it turns. Base
   at 0.
@@ -39,6 +42,8 @@ References
 .. [3] A. Deepak, M. A. Box, "Forward scattering corrections for optical extinction
    measurements in aerosol media", Appl. Opt. 17(18):2900-2908 (1978),
    doi:10.1364/AO.17.002900 (aureole radiance vs scattering angle).
+.. [4] R. P. Breault, "Control of stray light", in Handbook of Optics vol. I, 2nd ed.,
+   McGraw-Hill (1995), ch. 38 (point-source transmittance of baffled sensors).
 .. [2] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
    compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
    Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w (ring compass, canopy scenes).
@@ -61,7 +66,7 @@ __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_rin
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes"]
 
 RING_EFFECT_NAMES = ("multiple_scattering", "fov", "occlusion", "yaw_scale", "clock_offset",
-                     "tilt", "aureole")
+                     "tilt", "aureole", "stray_light")
 
 
 class EffectUnavailableError(RuntimeError):
@@ -81,6 +86,17 @@ class RingEffect:
     fd_step: ClassVar[tuple] = ()
     time_margin_s: ClassVar[float] = 0.0
     observes: ClassVar[bool] = False
+    output_only: ClassVar[bool] = False
+    """True when the parameters act on the readings only (no new sampling of the sky)."""
+    per_photodiode: ClassVar[int] = 0
+    """Number of leading parameters that are one per photodiode (after :meth:`bind`)."""
+
+    def bind(self, inst) -> None:
+        """Adapt the parameter list to an instrument (per-photodiode effects)."""
+
+    def additive(self, p, obs: SkySample, sun_enu, pd_unit) -> np.ndarray | None:
+        """An additive reading term (n, P) [session-median units], or None."""
+        return None
 
     @property
     def k(self) -> int:
@@ -344,14 +360,58 @@ class Aureole(RingEffect):
         return [np.array([a, s]) for a in (0.5, 2.0) for s in (5.0, 15.0, 30.0)]
 
     def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
-        view = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
-        cos_psi = np.clip(np.einsum("nuk,nk->nu", view, np.asarray(sun_enu, float)), -1, 1)
-        extra = p[0] * np.exp(-np.degrees(np.arccos(cos_psi)) / p[1])
+        extra = p[0] * np.exp(-sun_distance_deg(obs, sun_enu) / p[1])
         return replace(obs, dop=obs.dop / (1.0 + extra))
 
 
+def sun_distance_deg(obs: SkySample, sun_enu) -> np.ndarray:
+    """Angular distance [deg] (n, U) between each unit's view and the sun."""
+    view = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
+    cos_psi = np.clip(np.einsum("nuk,nk->nu", view, np.asarray(sun_enu, float)), -1.0, 1.0)
+    return np.degrees(np.arccos(cos_psi))
+
+
+class StrayLight(RingEffect):
+    """Sunlight scattered inside the instrument onto each photodiode (housing, baffles, the
+    polarizer's edge): unpolarized, reaching each photodiode with its own strength ``S_p``
+    behind no polarizer, and falling off with the sun's angular distance ``psi`` from the
+    unit's axis as ``exp(-psi / psi_0)`` (a point-source transmittance of a baffled
+    aperture falls off steeply outside its field of view, Breault 1995 [4]_). Adds
+    ``S_p exp(-psi / psi_0)`` to the reading (in units of the session's median reading).
+    Base at ``S = 0``."""
+
+    name = "stray_light"
+    units = ()
+    output_only = True
+
+    def __init__(self):
+        self.names, self.units = ("scale_deg",), ("deg",)
+        self.null, self.lower, self.upper = (15.0,), (2.0,), (90.0,)
+        self.prior_sd, self.fd_step = (np.inf,), (0.05,)
+
+    def bind(self, inst) -> None:
+        P = len(inst.columns)
+        self.per_photodiode = P
+        self.names = tuple(f"S_{c}" for c in inst.columns) + ("scale_deg",)
+        self.units = ("1",) * P + ("deg",)
+        self.null = (0.0,) * P + (15.0,)
+        self.lower = (0.0,) * P + (2.0,)
+        self.upper = (20.0,) * P + (90.0,)
+        self.prior_sd = (5.0,) * P + (np.inf,)
+        self.fd_step = (1e-4,) * P + (0.05,)
+
+    def starts(self, ctx) -> list:
+        P = self.per_photodiode
+        return [np.r_[np.full(P, 0.05), s] for s in (5.0, 15.0, 30.0)]
+
+    def additive(self, p, obs, sun_enu, pd_unit):
+        P = self.per_photodiode
+        psi = sun_distance_deg(obs, sun_enu)[:, pd_unit]
+        return np.asarray(p[:P]) * np.exp(-psi / p[P])
+
+
 _EFFECTS = {c.name: c for c in (MultipleScattering, FieldOfView, Occlusion, YawScale,
-                                ClockOffset, Tilt, Aureole)}
+                                ClockOffset, Tilt, Aureole, StrayLight)}
 
 
 def get_ring_effect(name: str) -> RingEffect:

@@ -91,8 +91,17 @@ def _groups(fwd: Forward, free: np.ndarray):
         groups.append((h, "geometry", [("all", None)]))
     else:
         groups.append((h, "geometry", [("rows", inst.sweep == k) for k in range(len(h))]))
-    for i in range(L.effect.start, L.effect.stop):
-        groups.append(([i], "geometry", [("all", None)]))
+    e = fwd.effect
+    n_pd_eff = 0 if e is None else e.per_photodiode
+    if n_pd_eff:
+        s0 = L.effect.start
+        for j in range(rank.max() + 1):
+            idx = [s0 + p for p in np.flatnonzero(rank == j)]
+            groups.append((idx, "output", [("cols", cols_of_unit[inst.pd_unit[i - s0]])
+                                           for i in idx]))
+    stage = "output" if e is not None and e.output_only else "geometry"
+    for i in range(L.effect.start + n_pd_eff, L.effect.stop):
+        groups.append(([i], stage, [("all", None)]))
     out = []
     for idx, stage, supports in groups:
         keep = [(i, s) for i, s in zip(idx, supports) if free[i]]

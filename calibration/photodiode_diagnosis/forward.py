@@ -143,6 +143,8 @@ class Forward:
         self.polarizer_sign = float(polarizer_sign)
         self.heading_override = None
         self.effect = effect
+        if effect is not None:
+            effect.bind(inst)
         k = 0 if effect is None else effect.k
         n_heading = 1 if inst.absolute_yaw else inst.n_sweeps
         self.layout = Layout(inst.readings.shape[1], inst.n_units, n_heading, k)
@@ -206,6 +208,11 @@ class Forward:
         L = self.layout
         m = self.channel_model(theta, obs)
         off = theta[L.off]
+        e = self.effect
+        if e is not None:
+            add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+            if add is not None:
+                off = off + add
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)
         mw = np.where(w, m, 0.0)
