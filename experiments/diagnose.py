@@ -446,6 +446,17 @@ def _effects_arg(text: str | None):
     return names
 
 
+def _write_diagnosis(args, doc, markdown, plot):
+    """Write ``diagnosis.json``, ``report.md`` and the figures; return the folder and text."""
+    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "diagnosis.json", doc)
+    md = markdown(doc)
+    atomic_write(out / "report.md", lambda p: p.write_text(md))
+    plot(doc, out)
+    return out, md
+
+
 def _photodiode_instrument(path) -> bool:
     """True for a ``skysim.photodiodes/1`` file that is not a one-unit three-pair sensor."""
     import json
@@ -476,12 +487,7 @@ def _diagnose_photodiodes_cmd(args) -> int:
             get_ring_effect(e)
     doc = diagnose_photodiodes(read_photodiodes(args.data), effects, n_folds=args.folds,
                                seed=args.seed, where=str(args.data))
-    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "diagnosis.json", doc)
-    md = photodiode_report_markdown(doc)
-    atomic_write(out / "report.md", lambda p: p.write_text(md))
-    plot_photodiode_diagnosis(doc, out)
+    out, md = _write_diagnosis(args, doc, photodiode_report_markdown, plot_photodiode_diagnosis)
     print(md)
     print(f"wrote {out}/diagnosis.json, report.md, residuals_by_slice.png")
     return 0
@@ -494,12 +500,7 @@ def _diagnose_cmd(args) -> int:
     effects = _effects_arg(args.effects)
     data = load_diagnosis_data(args.data)
     doc = diagnose(data, effects, n_folds=args.folds, seed=args.seed)
-    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
-    out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "diagnosis.json", doc)
-    md = diagnosis_markdown(doc)
-    atomic_write(out / "report.md", lambda p: p.write_text(md))
-    plot_diagnosis(doc, out)
+    out, _ = _write_diagnosis(args, doc, diagnosis_markdown, plot_diagnosis)
     v = doc["verdict"]
     print(f"verdict: {v['effect']} ({v['reason']})")
     print(f"gap {v['gap_before']:.3f} -> {v['gap_after']:.3f} mV (noise floor "

@@ -202,3 +202,24 @@ def test_real_session_faults():
     assert {kinds.get(c) for c in ("u7_p000", "u7_p090", "u7_p045", "u7_p135")} == {"duplicated"}
     assert kinds.get("u7") == "too_few"
     assert scr.rail is not None and 11000 < scr.rail < 11700   # the converter's own clipping
+
+
+def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
+    """`skysim diagnose FILE` on a ring instrument writes the report with the schema's keys."""
+    from experiments.cli import main
+    path = tmp_path / "ring.csv"
+    session.write(path)
+    out = tmp_path / "out"
+    assert main(["diagnose", str(path), "--effects", "yaw_scale,occlusion", "--folds", "3",
+                 "--out", str(out)]) == 0
+    doc = json.loads((out / "diagnosis.json").read_text())
+    assert doc["schema"] == "skysim.diagnosis/1" and doc["instrument"] == "photodiodes"
+    assert {"effect", "gap_before", "gap_after", "shrink", "metric", "params"} <= set(doc["verdict"])
+    assert isinstance(doc["faults"], list)
+    az = [w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"]
+    assert az and all({"label", "share", "n", "lo_deg", "hi_deg"} <= set(w) for w in az)
+    assert {w["dimension"] for w in doc["where"]} >= {"unit", "photodiode", "sweep",
+                                                       "sun_distance_deg", "motion"}
+    assert doc["heading_error"]["base_deg"] < 1.0          # noise-free compass: sub-degree
+    assert (out / "report.md").exists() and (out / "residuals_by_slice.png").exists()
+    assert main(["diagnose", str(path), "--effects", "nope"]) == 2
