@@ -4,6 +4,14 @@ Sub-commands are contributed by modules of the :mod:`experiments` package: every
 defines ``register(subparsers)`` adds its commands (and ``reproduce`` targets via
 ``register_reproduce(targets)``, a dict name -> function(args)). Modules keep heavy imports
 inside their command functions so that ``skysim --help`` stays fast.
+
+Errors have one path (:func:`main`): options are checked when parsed
+(:mod:`experiments.argtypes`); whatever a command raises for bad input (``ValueError`` and its
+subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
+``skysim CMD: error: ...`` with exit code 2, a missing optional dependency as the command
+that installs it, Ctrl-C as ``interrupted`` (exit 130) and a closed pipe (``skysim ... |
+head``) ends quietly (exit 141, as a process killed by SIGPIPE). Files are written atomically
+(:mod:`skysim.io`), so none of these leaves a half-written file.
 """
 
 from __future__ import annotations
@@ -26,7 +34,20 @@ import sys  # noqa: E402
 
 import experiments
 
-__all__ = ["main", "build_parser"]
+from experiments.argtypes import output_dir, positive_int, seed
+
+__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE"]
+
+EXIT_ERROR = 2
+"""Exit code of any error in the input (options, files, configurations), as argparse's."""
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+EXIT_BROKEN_PIPE = 141
+"""Exit code when the reader of the output went away (128 + SIGPIPE)."""
+
+OPTIONAL_EXTRAS = {"sasktran2": "rt", "SALib": "sweep", "dask": "sweep",
+                   "distributed": "sweep"}
+"""Top-level module -> the optional extra of ``pyproject.toml`` that installs it."""
 
 
 def _command_modules():
@@ -44,6 +65,8 @@ DEFAULT_SEED = 20140601
 def _run_target(targets: dict, args) -> int:
     """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
     func = targets[args.target]
+    if args.out is not None:
+        output_dir(str(args.out))
     if args.seed is None:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
     return func(args)
@@ -52,6 +75,7 @@ def _run_target(targets: dict, args) -> int:
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(
         prog="skysim", description="Skylight-polarization simulator and virtual sensor testbed.")
+    parser.add_argument("--version", action="version", version=f"skysim {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     targets: dict = {}
     modules = list(_command_modules())
@@ -61,13 +85,14 @@ def build_parser() -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="run a published experiment's reproduction",
                          description="Run a scripted reproduction; writes tables and figures.")
     rep.add_argument("target", choices=sorted(targets), help="which experiment")
-    rep.add_argument("--trials", type=int, default=None,
-                     help="Monte-Carlo trials (default: the target's own)")
-    rep.add_argument("--seed", type=int, default=None,
-                     help="master random seed (default: the target's DEFAULT_SEED)")
+    rep.add_argument("--trials", type=positive_int, default=None,
+                     help="Monte-Carlo trials, >= 1 (default: the experiment's own)")
+    rep.add_argument("--seed", type=seed, default=None,
+                     help="master random seed, >= 0 (default: the experiment's own)")
     rep.add_argument("--quick", action="store_true",
                      help="a small, fast run (few trials) for smoke tests")
-    rep.add_argument("--out", default=None, help="output folder (default results/<target>)")
+    rep.add_argument("--out", type=output_dir, default=None,
+                     help="output folder (default: results/<target>)")
     rep.set_defaults(func=lambda args: _run_target(targets, args))
     for mod in modules:
         if hasattr(mod, "register"):
@@ -75,14 +100,73 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    parser = build_parser()
-    args = parser.parse_args(argv)
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
     try:
+        return version("skysim")
+    except PackageNotFoundError:  # run from a source tree without installing
+        from skysim import __version__
+        return __version__
+
+
+def install_hint(module: str) -> str | None:
+    """How to install the optional extra that provides ``module`` into this checkout's
+    environment (never the unrelated ``skysim`` on PyPI); None if no extra provides it."""
+    from pathlib import Path
+    extra = OPTIONAL_EXTRAS.get(module.partition(".")[0])
+    if extra is None:
+        return None
+    root = Path(experiments.__file__).resolve().parents[1]
+    source = f"{root}[{extra}]" if (root / "pyproject.toml").is_file() else \
+        f"<your skysim checkout>[{extra}]"
+    return (f"this needs the optional package {module.partition('.')[0]!r} (skysim extra "
+            f"{extra!r}); install it with: {sys.executable} -m pip install -e '{source}'")
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for an error: the message, or for a bare ``OSError`` its file and reason."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc) or type(exc).__name__
+
+
+def _quiet_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so the interpreter's final flush does
+    not raise again (Python docs, "Note on SIGPIPE")."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+
+
+def main(argv=None) -> int:
+    """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
+    command = "skysim"
+    try:
+        try:
+            args = build_parser().parse_args(argv)
+        except SystemExit as exc:  # argparse: --help, --version, or a usage error (printed)
+            return exc.code if isinstance(exc.code, int) else EXIT_ERROR
+        command = f"skysim {args.command}"
         rc = args.func(args)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
-        print(f"skysim {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+    except KeyboardInterrupt:
+        print(f"\n{command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    except ModuleNotFoundError as exc:
+        hint = install_hint(exc.name or "")
+        if hint is None:
+            raise
+        print(f"{command}: error: {hint}", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError:
+        print(f"{command}: error: out of memory; use a smaller size (fewer trials, directions "
+              "or samples)", file=sys.stderr)
+        return EXIT_ERROR
+    except (ValueError, OSError, RuntimeError) as exc:
+        print(f"{command}: error: {describe_error(exc)}", file=sys.stderr)
+        return EXIT_ERROR
     return int(rc or 0)
 
 

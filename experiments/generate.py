@@ -166,7 +166,7 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     elif errors == "none":
         errors = OpponentErrors()
     elif isinstance(errors, dict):
-        errors = OpponentErrors(**errors)
+        errors = OpponentErrors.from_dict(errors, where=f"{where}: errors")
     else:
         raise GenerateConfigError(f"{where}: errors must be 'random', 'none' or a table of "
                                   f"OpponentErrors fields; got {errors!r}")
@@ -176,8 +176,8 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     headings = (sun_az0[0] + float(entry.get("heading_offset_deg", -90.0))
                 + np.linspace(0.0, 180.0, len(times), endpoint=False))
     bits = entry.get("daq_bits", 16)
-    sensor = OpponentSensor(errors, daq=Daq(None if bits in (0, "none") else int(bits),
-                                            float(entry.get("daq_range_V", 10.0))))
+    sensor = OpponentSensor(errors, daq=Daq(None if bits in (0, "none") else bits,
+                                            entry.get("daq_range_V", 10.0)))
     meas = sensor.sample(sky, site, times, headings, rng, seed=seed)
     meas.sidecar["generator"].update(_generator(entry, seed))
     _write(meas.table, meas.sidecar, path)

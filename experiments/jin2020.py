@@ -35,6 +35,7 @@ seed 0, and figures ``fig3_static.png``, ``fig4_dynamic.png``, ``fig5_errors.png
 
 from __future__ import annotations
 
+import json
 import time
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
@@ -43,7 +44,7 @@ import numpy as np
 import pandas as pd
 
 from skysim.geometry import wrap_deg
-from skysim.io import atomic_write, atomic_write_many, write_json_atomic
+from skysim.io import atomic_write_many, sidecar_path, write_json_atomic
 from skysim.sun import Site
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
@@ -344,8 +345,9 @@ def _write(out: Path, result: dict, figures: bool, seed: int, sc: Scenario) -> N
                    "generator": {"package": "skysim", "version": __version__,
                                  "scenario": asdict(sc)}}
         csv = out / f"timeseries_{kind}.csv"
-        atomic_write(csv, lambda tmp, ts=ts: ts.to_csv(tmp, index=False))
-        write_json_atomic(csv.with_suffix(".json"), sidecar)
+        atomic_write_many([(csv, lambda tmp, ts=ts: ts.to_csv(tmp, index=False)),
+                           (sidecar_path(csv), lambda tmp, s=sidecar: tmp.write_text(
+                               json.dumps(s, indent=2) + "\n"))])
     if figures:
         plot_attitude(result["runs"]["static"], out / "fig3_static.png", "Static run")
         plot_attitude(result["runs"]["dynamic"], out / "fig4_dynamic.png", "Dynamic run")

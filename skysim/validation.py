@@ -68,8 +68,12 @@ def check_dop(name: str, values) -> np.ndarray:
 
 
 def check_sun_above_horizon(sun_elevation_deg) -> np.ndarray:
-    """Raise :class:`SunBelowHorizonError` when any sun elevation is <= 0 degrees."""
+    """Raise :class:`SunBelowHorizonError` when any sun elevation is <= 0 degrees, and
+    :class:`InvalidParameterError` above 90 degrees (no such elevation)."""
     el = check_finite("sun_elevation_deg", sun_elevation_deg)
+    if np.any(el > 90.0):
+        raise InvalidParameterError(f"sun elevation must be <= 90 deg; got "
+                                    f"{_first_bad(el, el > 90.0)} deg")
     bad = el <= 0.0
     if bad.any():
         raise SunBelowHorizonError(
