@@ -65,8 +65,14 @@ DEFAULT_SEED = 20140601
 def _run_target(targets: dict, args) -> int:
     """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
     func = targets[args.target]
-    if args.out is not None:
-        output_dir(str(args.out))
+    if args.reference is not None and not getattr(func, "takes_reference", False):
+        takers = sorted(n for n, f in targets.items() if getattr(f, "takes_reference", False))
+        raise ValueError(f"--reference applies to {', '.join(takers)}, not {args.target}")
+    per_trial = getattr(sys.modules.get(func.__module__), "MEMORY_PER_TRIAL_BYTES", None)
+    if per_trial and args.trials:
+        from skysim.resources import check_memory
+        check_memory(args.trials * per_trial, f"{args.trials} trials of {args.target}",
+                     "use fewer --trials")
     if args.seed is None:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
     return func(args)
@@ -93,6 +99,10 @@ def build_parser() -> argparse.ArgumentParser:
                      help="a small, fast run (few trials) for smoke tests")
     rep.add_argument("--out", type=output_dir, default=None,
                      help="output folder (default: results/<target>)")
+    rep.add_argument("--reference", default=None,
+                     help="physical-sky, sky-gap: another copy of the Natraj et al. (2009) "
+                          "tables, the file or a folder holding it (default: the tables "
+                          "shipped with skysim)")
     rep.set_defaults(func=lambda args: _run_target(targets, args))
     for mod in modules:
         if hasattr(mod, "register"):
