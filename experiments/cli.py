@@ -9,7 +9,7 @@ Errors have one path (:func:`main`): options are checked when parsed
 (:mod:`experiments.argtypes`); whatever a command raises for bad input (``ValueError`` and its
 subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
 ``skysim CMD: error: ...`` with exit code 2, a missing optional dependency as the command
-that installs it, Ctrl-C as ``interrupted`` (exit 130) and a closed pipe (``skysim ... |
+that installs it into this checkout (:mod:`skysim.extras`), Ctrl-C as ``interrupted`` (exit 130) and a closed pipe (``skysim ... |
 head``) ends quietly (exit 141, as a process killed by SIGPIPE). Files are written atomically
 (:mod:`skysim.io`), so none of these leaves a half-written file.
 """
@@ -45,9 +45,6 @@ EXIT_INTERRUPTED = 130
 EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of the output went away (128 + SIGPIPE)."""
 
-OPTIONAL_EXTRAS = {"sasktran2": "rt", "SALib": "sweep", "dask": "sweep",
-                   "distributed": "sweep"}
-"""Top-level module -> the optional extra of ``pyproject.toml`` that installs it."""
 
 
 def _command_modules():
@@ -119,18 +116,13 @@ def _version() -> str:
         return __version__
 
 
-def install_hint(module: str) -> str | None:
-    """How to install the optional extra that provides ``module`` into this checkout's
-    environment (never the unrelated ``skysim`` on PyPI); None if no extra provides it."""
-    from pathlib import Path
-    extra = OPTIONAL_EXTRAS.get(module.partition(".")[0])
-    if extra is None:
+def _missing_extra(exc: ImportError, command: str) -> str | None:
+    """The install hint for an optional package that failed to import, else None."""
+    from skysim.extras import extra_for_module, missing_extra_message
+    name = exc.name or getattr(exc.__cause__, "name", None)
+    if extra_for_module(name) is None:
         return None
-    root = Path(experiments.__file__).resolve().parents[1]
-    source = f"{root}[{extra}]" if (root / "pyproject.toml").is_file() else \
-        f"<your skysim checkout>[{extra}]"
-    return (f"this needs the optional package {module.partition('.')[0]!r} (skysim extra "
-            f"{extra!r}); install it with: {sys.executable} -m pip install -e '{source}'")
+    return str(exc) if "pip install -e" in str(exc) else missing_extra_message(name, command)
 
 
 def describe_error(exc: BaseException) -> str:
@@ -164,8 +156,8 @@ def main(argv=None) -> int:
     except BrokenPipeError:
         _quiet_stdout()
         return EXIT_BROKEN_PIPE
-    except ModuleNotFoundError as exc:
-        hint = install_hint(exc.name or "")
+    except ImportError as exc:
+        hint = _missing_extra(exc, command)
         if hint is None:
             raise
         print(f"{command}: error: {hint}", file=sys.stderr)

@@ -67,8 +67,9 @@ def _connect(scheduler: str | None, workers: int, timeout_s: float):
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("the dask backend needs dask.distributed: "
-                          "pip install 'skysim[sweep]' (or 'dask[distributed]')") from exc
+        from skysim.extras import missing_extra_message
+        raise ImportError(missing_extra_message("distributed", "the dask backend"),
+                          name="distributed") from exc
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{timeout_s}s"), None

@@ -73,9 +73,18 @@ def _writable_ancestor(path: Path, what: str) -> None:
     if not parent.is_dir():
         raise OutputPathError(f"{what} {path}: {parent} is a file, not a folder; "
                               "choose another location")
-    if not os.access(parent, os.W_OK | os.X_OK):
-        raise OutputPathError(f"{what} {path}: folder {parent} is not writable; choose "
-                              "another location")
+    _probe(parent, f"{what} {path}")
+
+
+def _probe(folder: Path, what: str) -> None:
+    """Create and remove a temporary file in ``folder``: the one test of writability that
+    also holds for read-only file systems and privileged users (``os.access`` does not)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise OutputPathError(f"{what}: cannot write in folder {folder} ({exc.strerror}); "
+                              "choose another location") from None
 
 
 def check_output_file(path, what: str = "output file") -> Path:
@@ -105,8 +114,7 @@ def check_output_dir(path, what: str = "output folder") -> Path:
     if path.exists() and not path.is_dir():
         raise OutputPathError(f"{what} {path} is a file; give a folder")
     if path.is_dir():
-        if not os.access(path, os.W_OK | os.X_OK):
-            raise OutputPathError(f"{what} {path} is not writable; choose another location")
+        _probe(path, f"{what} {path}")
     else:
         _writable_ancestor(path, what)
     return path
