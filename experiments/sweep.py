@@ -48,15 +48,20 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from skysim.exceptions import InvalidParameterError
+
+from .argtypes import existing_file, output_dir, positive_int
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
-           "simulate_trials", "evaluate_trials", "ChunkTask", "plan_chunks", "run_chunk",
+           "simulate_trials", "evaluate_trials", "ChunkPlan", "ChunkTask", "check_sweep_memory",
+           "expected_trials", "plan_chunks", "run_chunk",
            "run_sweep", "sensitivity_indices", "summary_table", "register"]
 
 BLOCK_TRIALS = 64
@@ -351,17 +356,74 @@ def chunk_trials(cfg: SweepConfig) -> int:
     return blocks * BLOCK_TRIALS
 
 
+class ChunkPlan(Sequence):
+    """The chunks of a sweep as a lazy sequence: task ``k`` is made when it is asked for, so
+    planning takes constant time and memory whatever the number of trials."""
+
+    def __init__(self, cfg: SweepConfig, out: Path, digest: str, n_trials: int, X=None,
+                 conditions=None):
+        self.cfg, self.out, self.digest, self.n_trials = cfg, Path(out), digest, n_trials
+        self.X, self.conditions = X, conditions
+        self.size = chunk_trials(cfg)
+
+    def __len__(self) -> int:
+        return -(-self.n_trials // self.size)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if k < 0:
+            k += len(self)
+        if not 0 <= k < len(self):
+            raise IndexError(f"chunk {k} of {len(self)}")
+        start = k * self.size
+        stop = min(start + self.size, self.n_trials)
+        return ChunkTask(self.cfg, k, start, stop,
+                         str(self.out / "chunks" / f"chunk-{k:06d}.parquet"), self.digest,
+                         None if self.X is None else self.X[start:stop],
+                         None if self.conditions is None else self.conditions[start:stop])
+
+
 def plan_chunks(cfg: SweepConfig, out: Path, digest: str, n_trials: int, X=None,
-                conditions=None) -> list[ChunkTask]:
-    """Split the sweep into memory-bounded chunks of whole seed blocks."""
-    size = chunk_trials(cfg)
-    tasks = []
-    for k, start in enumerate(range(0, n_trials, size)):
-        stop = min(start + size, n_trials)
-        tasks.append(ChunkTask(cfg, k, start, stop, str(out / "chunks" / f"chunk-{k:06d}.parquet"),
-                               digest, None if X is None else X[start:stop],
-                               None if conditions is None else conditions[start:stop]))
-    return tasks
+                conditions=None) -> ChunkPlan:
+    """Split the sweep into memory-bounded chunks of whole seed blocks (a lazy sequence of
+    :class:`ChunkTask`)."""
+    return ChunkPlan(cfg, out, digest, n_trials, X, conditions)
+
+
+ANALYSIS_BYTES_PER_VALUE = 24
+"""Memory of one analysed value of one trial [bytes]: the float64 read from
+``trials.parquet`` (8 B), Arrow's buffer while converting and pandas' copies in the grouped
+statistics (2 x 8 B)."""
+
+
+def expected_trials(cfg: SweepConfig) -> int:
+    """Number of trials :func:`design` makes, without making it: Monte-Carlo ``trials``;
+    Sobol (first and total order) ``N (G + 2)``, Morris ``N (G + 1)`` per sun-elevation
+    condition, G the number of varying factors (groups count once) [2]_."""
+    if cfg.method == "montecarlo":
+        return cfg.trials
+    g = len(cfg.factors)
+    per = cfg.base_samples * (g + 2 if cfg.method == "sobol" else g + 1)
+    return per * max(1, len(cfg.conditions))
+
+
+def check_sweep_memory(cfg: SweepConfig) -> None:
+    """Refuse a sweep whose design or analysis would not fit in memory (the chunks stream,
+    but the summary and indices hold the analysed columns of every trial).
+
+    Raises
+    ------
+    MemoryLimitError
+        With the estimate and the limit.
+    """
+    from skysim.resources import check_memory
+    n = expected_trials(cfg)
+    values = len(analysis_columns(cfg)) + (2 * len(salib_problem(cfg)["names"])
+                                           if cfg.method != "montecarlo" else 0)
+    check_memory(n * values * ANALYSIS_BYTES_PER_VALUE,
+                 f"the analysis of {n} trials ({values} values each)",
+                 "lower [sweep] trials or [sensitivity] base_samples")
 
 
 _META_KEY = b"skysim.sweep"
@@ -671,11 +733,14 @@ def analysis_columns(cfg: SweepConfig) -> list[str]:
 
 
 def _check_state(out: Path, cfg: SweepConfig, digest: str) -> None:
+    """Refuse an ``out`` holding results of another sweep; a ``sweep.json`` without any chunk
+    (a run that failed before computing) is no result and is replaced."""
     manifest = out / "sweep.json"
-    if manifest.exists():
+    has_results = any((out / "chunks").glob("chunk-*.parquet")) or (out / "trials.parquet").exists()
+    if manifest.is_file() and has_results:
         try:
             old = json.loads(manifest.read_text()).get("digest")
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
             old = None
         if old is not None and old != digest:
             raise SweepStateError(
@@ -705,10 +770,18 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
     from skysim.io import atomic_write, write_json_atomic
 
     from .sweep_backends import run_tasks
+    from skysim.io import check_output_dir
+    from skysim.sky import make_sky
     t0 = time.perf_counter()
-    out = Path(out)
+    out = check_output_dir(out)
     digest = cfg.digest()
     _check_state(out, cfg, digest)
+    sky = dict(cfg.sky)
+    try:  # a bad sky fails here, before any state is written, not in the first worker
+        make_sky(sky.pop("model"), **sky)
+    except InvalidParameterError as exc:
+        raise SweepConfigError(f"[sky] {exc}") from None
+    check_sweep_memory(cfg)
     n_trials, X, conditions = design(cfg)
     tasks = plan_chunks(cfg, out, digest, n_trials, X, conditions)
     todo = []
@@ -785,12 +858,14 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="error-sensitivity sweep (Monte-Carlo, Sobol, Morris)",
                        description="Run a sweep configured in TOML (see docs/sweeps.md); "
                                    "interrupted sweeps resume from their chunks.")
-    p.add_argument("config", help="sweep configuration (.toml)")
-    p.add_argument("--backend", choices=("local", "dask"), default="local")
+    p.add_argument("config", type=existing_file, help="sweep configuration (.toml)")
+    p.add_argument("--backend", choices=("local", "dask"), default="local",
+                   help="local processes, or dask.distributed (extra 'sweep')")
     p.add_argument("--scheduler", help="dask scheduler address (default: a LocalCluster)")
-    p.add_argument("--workers", type=int, help="processes / LocalCluster workers "
-                                               "(default: usable cores)")
-    p.add_argument("--out", help="output folder (default results/sweep_<name>)")
-    p.add_argument("--no-figures", action="store_true")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--workers", type=positive_int, help="processes / LocalCluster workers "
+                                                        "(default: usable cores)")
+    p.add_argument("--out", type=output_dir,
+                   help="output folder (default: results/sweep_<name>)")
+    p.add_argument("--no-figures", action="store_true", help="write no figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_sweep_command)

@@ -74,5 +74,5 @@ def check_memory(nbytes: float, what: str, fix: str) -> None:
     limit = memory_limit_bytes()
     if nbytes > limit:
         raise MemoryLimitError(
-            f"{what} need about {_gib(nbytes)} of memory, more than the {_gib(limit)} this "
-            f"run may use (80% of the available memory, or SKYSIM_MEMORY_LIMIT_MB); {fix}")
+            f"{what} would need about {_gib(nbytes)} of memory, more than the {_gib(limit)} "
+            f"this run may use (80% of the available memory, or SKYSIM_MEMORY_LIMIT_MB); {fix}")

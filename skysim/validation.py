@@ -18,7 +18,10 @@ __all__ = [
 
 def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
     idx = np.flatnonzero(bad)
-    first = np.asarray(values).ravel()[idx[0]]
+    flat = np.asarray(values).ravel()
+    first = flat[idx[0]].item()
+    if flat.size == 1:
+        return repr(first)
     more = f" (and {idx.size - 1} more)" if idx.size > 1 else ""
     return f"{first!r} at flat index {idx[0]}{more}"
 
