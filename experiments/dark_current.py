@@ -1,4 +1,4 @@
-"""Dark current and weak light: the 2014 model against the dark-current model (issue 4).
+"""Dark current and weak light: the 2014 model against the dark-current model.
 
 Monte-Carlo over simulated sensors (:meth:`sensor.photodiode.PhotodiodeChannels.draw`: mounting
 errors, responsivity spread, dark currents 20-100 pA (~0.4-2 lx equivalent), film-polarizer
@@ -323,7 +323,7 @@ def _summary(by_level, param_table, params, trials, seed, cfg, elapsed) -> dict:
             "max_median_ratio": float(by_level[f"ratio_{comb}_{arm}_median"].max()),
             "worse_beyond_noise_at_lx": E[worse].astype(float).tolist()}
     return {
-        "issue": 4, "trials": trials, "seed": seed, "config": asdict(cfg),
+        "trials": trials, "seed": seed, "config": asdict(cfg),
         "package_version": __version__,
         "daylight_heading_3sigma_deg": {"a_best": float(day["heading_3sigma_a_best_deg_median"]),
                                         "b": float(day["heading_3sigma_b_deg_median"])},
@@ -410,7 +410,7 @@ def _write(out: Path, result: dict, figures: bool):
         atomic_write(out / f"{name}.csv", lambda p, df=df: df.to_csv(p, index=False,
                                                                      float_format="%.6g"))
     atomic_write(out / "summary.md", lambda p: p.write_text(
-        "# Dark current and weak light (issue 4)\n\n" + format_summary(result) + "\n"))
+        "# Dark current and weak light\n\n" + format_summary(result) + "\n"))
     write_json_atomic(out / "summary.json", {**result["summary"], "schema":
                                              "skysim.dark_current/1"})
     if figures:

@@ -16,7 +16,7 @@ pattern", Aero Weaponry 27(1):39 (2020), simulated at Dalian University of Techn
    +-15 deg, roll +-20 deg; Euler-angle rates up to 14/8/14 deg/s, body rates up to ~17 deg/s);
    attitude error of the dynamic step vs the fixed step vs gyro-only integration.
 
-Acceptance (from the issue): over >= 20 seeds, the dynamic step's RMS attitude error in the
+Acceptance: over >= 20 seeds, the dynamic step's RMS attitude error in the
 dynamic run is lower than the fixed step's (mean over seeds, and a one-sided paired sign test
 at the 1 % level), and in the static run both beat gyro-only (every seed). The table also
 gives the RMS over the second half of each run, after the convergence from the initial
@@ -46,6 +46,9 @@ import pandas as pd
 from skysim.geometry import wrap_deg
 from skysim.io import atomic_write_many, sidecar_path, write_json_atomic
 from skysim.sun import Site
+
+from .argtypes import output_dir, positive_int
+from .argtypes import seed as seed_type
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",
@@ -430,8 +433,10 @@ def register_reproduce(targets: dict) -> None:
 def register(subparsers) -> None:
     p = subparsers.add_parser("jin2020", help="Jin et al. 2020 attitude filter (with --quick)",
                               description="Same as 'skysim reproduce jin2020', plus --quick.")
-    p.add_argument("--trials", type=int, default=20, help="seeds (>= 20 for the acceptance)")
-    p.add_argument("--seed", type=int, default=2020, help="master random seed")
-    p.add_argument("--out", default=None, help="output folder (default results/jin2020)")
+    p.add_argument("--trials", type=positive_int, default=20,
+                   help="seeds (>= 20 for the acceptance)")
+    p.add_argument("--seed", type=seed_type, default=2020, help="master random seed, >= 0")
+    p.add_argument("--out", type=output_dir, default=None,
+                   help="output folder (default: results/jin2020)")
     p.add_argument("--quick", action="store_true", help="shorter runs (120 s static, 60 s dynamic)")
     p.set_defaults(func=lambda a: _main(a.trials, a.seed, a.out, a.quick))

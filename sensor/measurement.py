@@ -88,10 +88,14 @@ class Measurement:
             raise MeasurementFormatError(
                 f"{where}: sidecar schema is {self.sidecar.get('schema')!r}, "
                 f"expected {MEASUREMENT_SCHEMA!r}")
-        if "site" not in self.sidecar:
+        site = self.sidecar.get("site")
+        if not isinstance(site, dict) or not all(
+                isinstance(site.get(k), (int, float)) and not isinstance(site.get(k), bool)
+                for k in ("latitude_deg", "longitude_deg")):
             raise MeasurementFormatError(
-                f"{where}: sidecar has no 'site' (latitude_deg, longitude_deg, altitude_m); "
-                "the sun position cannot be computed without it")
+                f"{where}: sidecar has no 'site' with numbers latitude_deg, longitude_deg (and "
+                f"altitude_m) [deg, m]; got {site!r}; the sun position cannot be computed "
+                "without it")
         if "time" not in self.table.columns:
             raise MeasurementFormatError(f"{where}: missing required column 'time'")
         self.table["time"] = parse_iso_times(self.table["time"], where)
