@@ -13,9 +13,21 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["aware_time", "existing_file", "float_in", "int_at_least", "nonnegative_float",
+__all__ = ["DefaultsHelpFormatter", "aware_time", "existing_file", "float_in", "int_at_least", "nonnegative_float",
            "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
            "seed"]
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Adds ``(default: X)`` to an option's help unless the help already speaks of its
+    default, or there is none to show (None, False)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or action.default is None or action.default is False \
+                or action.default == argparse.SUPPRESS or not action.option_strings:
+            return text
+        return text + " (default: %(default)s)"
+
 
 PANDAS_YEARS = (1678, 2261)
 """Whole years inside pandas' nanosecond time range (1677-09-21 .. 2262-04-11)."""

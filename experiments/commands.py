@@ -6,7 +6,7 @@ import argparse
 import json
 from pathlib import Path
 
-from .argtypes import (PANDAS_YEARS, aware_time, existing_file, float_in, nonnegative_float,
+from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file, float_in, nonnegative_float,
                        output_file, positive_float, positive_int, seed)
 
 __all__ = ["register", "sky_grid", "read_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
@@ -275,7 +275,7 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
-    fmt = argparse.ArgumentDefaultsHelpFormatter
+    fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,
                        formatter_class=fmt)
