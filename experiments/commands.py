@@ -162,7 +162,7 @@ def _sky(args) -> int:
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
         print(f"wrote {len(table)} directions to {out}")
     if args.plot:
-        from .polar_maps import plot_polar_maps
+        from .polar_maps import plot_polar_maps, sky_title
         maps = {"DoP": (table.dop.to_numpy(), "viridis", (0, 1)),
                 "AoP [deg]": (table.aop_deg.to_numpy(), "twilight", (-90, 90))}
         marks = None
@@ -171,7 +171,7 @@ def _sky(args) -> int:
             maps["I (flux pi)"] = (table.I.to_numpy(), "magma", None)
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
-                        title=f"{args.model} sky")
+                        title=sky_title(sky.describe(), sun_el, sun_az))
         print(f"wrote {args.plot}")
     if not args.out and not args.plot:
         print(table.describe().to_string())
@@ -245,10 +245,9 @@ def _sensor_errors(spec: str, rng):
 
 def existing_file_or_error(text: str, flag: str) -> Path:
     """``text`` as the path of an existing file, or a ``ValueError`` naming ``flag``."""
-    import argparse as _argparse
     try:
         return existing_file(text)
-    except _argparse.ArgumentTypeError as exc:
+    except argparse.ArgumentTypeError as exc:
         raise ValueError(f"{flag}: {exc} (or give 'random' or 'none')") from None
 
 

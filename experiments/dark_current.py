@@ -417,6 +417,16 @@ def _write(out: Path, result: dict, figures: bool):
         _plot(result, out)
 
 
+LABELS = {
+    "a": "2014 model (LSM on the brightest level)",
+    "b": "dark-current model",
+    "b0": "dark-current model, dark current neglected",
+    "c": "combined, chosen per sample",
+    "cw": "combined, chosen per sweep (pooled 1/I)",
+}
+"""Figure legend of each estimator (the module docstring's (a), (b), (b0), (c), (cw))."""
+
+
 def _plot(result: dict, out: Path):
     import matplotlib
     matplotlib.use("Agg")
@@ -425,20 +435,20 @@ def _plot(result: dict, out: Path):
     t = result["by_level"]
     fig, (ax1, ax2) = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
     E = t.illuminance_lx
-    ax1.loglog(E, t.heading_3sigma_a12_deg_median, "s--", label="(a) 2014 model, pair 1-2")
-    ax1.loglog(E, t.heading_3sigma_a_best_deg_median, "o-", label="(a) 2014 model, best pair")
-    ax1.loglog(E, t.heading_3sigma_b_deg_median, "^-", label="(b) dark-current model")
-    ax1.loglog(E, t.heading_3sigma_b0_deg_median, "x:", label="(b0) same, 1/I = 0")
-    ax1.loglog(E, t.heading_3sigma_c_deg_median, "v-", label="(c) combined, per sample")
-    ax1.loglog(E, t.heading_3sigma_cw_deg_median, "D-", label="(cw) combined, pooled 1/I")
+    ax1.loglog(E, t.heading_3sigma_a12_deg_median, "s--", label=f"{LABELS['a']}, pair 1-2")
+    ax1.loglog(E, t.heading_3sigma_a_best_deg_median, "o-", label=f"{LABELS['a']}, best pair")
+    ax1.loglog(E, t.heading_3sigma_b_deg_median, "^-", label=LABELS["b"])
+    ax1.loglog(E, t.heading_3sigma_b0_deg_median, "x:", label=LABELS["b0"])
+    ax1.loglog(E, t.heading_3sigma_c_deg_median, "v-", label=LABELS["c"])
+    ax1.loglog(E, t.heading_3sigma_cw_deg_median, "D-", label=LABELS["cw"])
     ax1.set(xlabel="illuminance [lx]", ylabel="heading error 3σ [deg] (median of trials)")
-    ax2.loglog(E, t.dop_rms_a12_median, "s--", label="(a) pair 1-2")
-    ax2.loglog(E, t.dop_rms_b_median, "^-", label="(b)")
+    ax2.loglog(E, t.dop_rms_a12_median, "s--", label=f"{LABELS['a']}, pair 1-2")
+    ax2.loglog(E, t.dop_rms_b_median, "^-", label=LABELS["b"])
     ax2.set(xlabel="illuminance [lx]", ylabel="DoP RMS error")
     for ax in (ax1, ax2):
         ax.invert_xaxis()
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend()
+        ax.legend(fontsize=7)
     atomic_write(out / "error_vs_illuminance.png", lambda p: fig.savefig(p, dpi=120,
                                                                          format="png"))
     plt.close(fig)
@@ -463,8 +473,8 @@ def _plot(result: dict, out: Path):
     fig, axes = plt.subplots(1, len(w.water.unique()), figsize=(12, 4), constrained_layout=True,
                              squeeze=False)
     for ax, (name, g) in zip(axes[0], w.groupby("water", sort=False)):
-        for col, style, label in (("a_best", "o-", "(a) best pair"), ("b", "^-", "(b)"),
-                                  ("cw", "D-", "(cw) combined")):
+        for col, style, label in (("a_best", "o-", f"{LABELS['a']}, best pair"),
+                                  ("b", "^-", LABELS["b"]), ("cw", "D-", LABELS["cw"])):
             ax.semilogy(g.depth_m, g[f"heading_3sigma_{col}_deg"], style, label=label)
         ax2 = ax.twinx()
         ax2.semilogy(g.depth_m, g.illuminance_lx, "k:", lw=0.8)

@@ -49,6 +49,7 @@ from skysim.sun import Site
 
 from .argtypes import output_dir, positive_int
 from .argtypes import seed as seed_type
+from .figures import pyplot, save_png
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",
@@ -357,16 +358,9 @@ def _write(out: Path, result: dict, figures: bool, seed: int, sc: Scenario) -> N
         plot_errors(result["runs"], out / "fig5_errors.png")
 
 
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
 def plot_attitude(r: dict, path: Path, title: str) -> None:
     """Yaw, pitch and roll over time: truth and the three estimators (seed 0); like Figs. 3-4."""
-    plt = _plt()
+    plt = pyplot()
     ts = _timeseries(r)
     fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
     for ax, ang in zip(axes, ("yaw", "pitch", "roll")):
@@ -378,13 +372,12 @@ def plot_attitude(r: dict, path: Path, title: str) -> None:
     axes[-1].set_xlabel("time since start [s]")
     fig.suptitle(f"{title}: attitude, seed 0 ({r['start']:%Y-%m-%d %H:%M:%S %Z})")
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)
 
 
 def plot_errors(runs: dict, path: Path) -> None:
     """Attitude error vs time, RMS over seeds, per method and run (like Fig. 5)."""
-    plt = _plt()
+    plt = pyplot()
     fig, axes = plt.subplots(1, 2, figsize=(11, 4))
     for ax, (kind, r) in zip(axes, runs.items()):
         for m in METHODS:
@@ -395,8 +388,7 @@ def plot_errors(runs: dict, path: Path) -> None:
         ax.grid(True, which="both", lw=0.3)
         ax.legend(fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path, dpi=110)
 
 
 def _main(trials: int, seed: int, out, quick: bool) -> int:

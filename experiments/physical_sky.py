@@ -36,6 +36,7 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 
 from .argtypes import output_dir
+from .figures import save_png
 
 __all__ = [
     "NATRAJ_FILE",
@@ -54,12 +55,6 @@ NATRAJ_NAMES = ("natraj2009_subset.csv.gz", "natraj2009_transmitted.csv.gz")
 NATRAJ_COLUMNS = ("tau", "albedo", "mu0", "mu", "phi", "I", "Q", "U", "field")
 MU0_04_ELEVATION_DEG = float(np.degrees(np.arcsin(0.4)))
 QUICK_CASES = [(0.02, 0.0, 0.4), (0.25, 0.0, 0.4), (0.25, 0.25, 0.4), (1.0, 0.25, 0.1)]
-
-
-def _save_png(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
 
 
 def natraj_path(reference=None) -> Path:
@@ -208,7 +203,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
     fig.suptitle(f"Multiple-scattering sky vs Natraj et al. (2009): {len(per_case)} cases, "
                  f"{len(points)} points (mu >= 0.1)", fontsize=9)
     fig.tight_layout()
-    _save_png(fig, out / "validation_hist.png")
+    save_png(fig, out / "validation_hist.png")
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for (tau, albedo), g in npts.groupby(["tau", "albedo"]):
@@ -222,7 +217,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
                  fontsize=9)
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
-    _save_png(fig, out / "neutral_points.png")
+    save_png(fig, out / "neutral_points.png")
 
     fig, ax = plt.subplots(figsize=(6, 4))
     for col in zen.columns[2:]:
@@ -236,7 +231,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
                  fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    _save_png(fig, out / "zenith_dop.png")
+    save_png(fig, out / "zenith_dop.png")
 
     el, az, sun, fields, marks = maps
     ms, berry, single = fields

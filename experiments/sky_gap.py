@@ -26,6 +26,7 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 
 from .argtypes import output_dir
+from .figures import save_png
 from .physical_sky import natraj_path, read_natraj
 
 __all__ = ["CALIBRATION_MU0", "NOISE_FLOOR", "cases_from_natraj", "register",
@@ -37,12 +38,6 @@ NOISE_FLOOR = 2e-3
 (``skysim physical-sky``, ``docs/physical_sky.md``): a perfect model cannot look better."""
 QUICK_CONFIGS = ((0.25, 0.0), (0.25, 0.25))
 MAP_MU0 = 0.4
-
-
-def _save_png(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
 
 
 def natraj_table(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
@@ -101,7 +96,7 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
         ax.set_title(f"{key}: verdict {d['verdict']['effect']}", fontsize=8)
         ax.legend(fontsize=6)
     fig.tight_layout()
-    _save_png(fig, out / "gap_by_slice.png")
+    save_png(fig, out / "gap_by_slice.png")
 
     fig, axes = plt.subplots(len(maps), 2, figsize=(7, 3.2 * len(maps)), squeeze=False,
                              subplot_kw={"projection": "polar"})
@@ -117,7 +112,7 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
             fig.colorbar(sc, ax=ax, fraction=0.04)
     fig.suptitle("|(dq, du)| over the withheld sky (sun at azimuth 0)", fontsize=8)
     fig.tight_layout()
-    _save_png(fig, out / "residual_maps.png")
+    save_png(fig, out / "residual_maps.png")
 
 
 def _report(summary: pd.DataFrame, docs: dict, meta: dict) -> str:

@@ -57,6 +57,7 @@ import numpy as np
 from skysim.exceptions import InvalidParameterError
 
 from .argtypes import existing_file, output_dir, positive_int
+from .figures import pyplot, save_png
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
@@ -603,29 +604,27 @@ def dominant_factors(indices, cfg: SweepConfig) -> list[dict]:
 # --------------------------------------------------------------------------- figures
 
 
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _finish(plt, fig, ax, path, xlabel: str, ylabel: str, **legend) -> None:
+def _finish(fig, ax, path, xlabel: str, ylabel: str, **legend) -> None:
     """Log y axis, labels, legend; save as PNG and close."""
     ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.legend(**legend)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_indices(indices, cfg: SweepConfig, path) -> None:
     """Bar charts of the sensitivity indices: one panel per output kind and sun elevation."""
-    plt = _pyplot()
+    plt = pyplot()
     key, conf = ("ST", "ST_conf") if cfg.method == "sobol" else ("mu_star", "mu_star_conf")
     groups = sorted(indices.sun_elevation_deg.unique())
+    varied = any(p.name == "sun_elevation_deg" and not p.fixed for p in cfg.parameters)
+
+    def sun_label(el: float) -> str:
+        if varied and not cfg.conditions:  # one design over the sun elevation as a factor
+            return "sun elevation a factor of the design"
+        return f"sun elevation {el:g}°"
     kinds = sorted(indices.output.str.split("_").str[0].unique())
     fig, axes = plt.subplots(len(kinds), len(groups), squeeze=False,
                              figsize=(4.2 * len(groups), 3.4 * len(kinds)))
@@ -645,18 +644,17 @@ def plot_indices(indices, cfg: SweepConfig, path) -> None:
                                marker="_", s=60, zorder=3)
             ax.set_xticks(np.arange(len(factors)) + 0.4 - width / 2, factors, rotation=45,
                           ha="right", fontsize=7)
-            ax.set_title(f"{kind} 3σ, sun elevation {el:g}°", fontsize=9)
+            ax.set_title(f"{kind} 3σ, {sun_label(el)}", fontsize=9)
             ax.set_ylabel("Sobol ST (bar), S1 (—)" if cfg.method == "sobol"
                           else "Morris μ* [deg]")
             ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_error_vs_elevation(summary, path) -> None:
     """Median and 5-95 % band of raw and compensated 3 sigma against sun elevation."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for pair, g in summary.groupby("pair"):
         for kind, style in (("raw", "--"), ("compensated", "-")):
@@ -666,7 +664,7 @@ def plot_error_vs_elevation(summary, path) -> None:
                             marker="o", label=f"{kind}, pair {pair}")
             ax.fill_between(g.sun_elevation_deg, g[f"{kind}_3sigma_p05_deg"],
                             g[f"{kind}_3sigma_p95_deg"], color=line.get_color(), alpha=0.12)
-    _finish(plt, fig, ax, path, "sun elevation [deg]",
+    _finish(fig, ax, path, "sun elevation [deg]",
             "heading error 3σ [deg] (median, 5–95 %)", fontsize=7, ncol=2)
 
 
@@ -677,7 +675,7 @@ PLOT_MAX_POINTS = 20_000
 def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
     """Heading error 3 sigma against channel noise (first :data:`PLOT_MAX_POINTS` trials),
     first pair."""
-    plt = _pyplot()
+    plt = pyplot()
     tag = _pair_tags(cfg)[0]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     trials = trials.iloc[:PLOT_MAX_POINTS]
@@ -687,7 +685,7 @@ def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
         if col in trials:
             ax.scatter(noise_mV, trials[col], s=3, alpha=0.3, color=colour,
                        label=f"{kind}, pair {tag[1]}-{tag[2]}")
-    _finish(plt, fig, ax, path, "channel noise σ [mV]", "heading error 3σ [deg]",
+    _finish(fig, ax, path, "channel noise σ [mV]", "heading error 3σ [deg]",
             fontsize=8, markerscale=4)
 
 
