@@ -52,7 +52,8 @@ def plot_polar_maps(elevation_deg, azimuth_deg, quantities: dict, path, *, sun=N
         vmin, vmax = lim if lim is not None else (np.nanmin(values), np.nanmax(values))
         sc = ax.scatter(th, r, c=values, s=4, cmap=cmap, vmin=vmin, vmax=vmax, linewidths=0)
         ax.set_ylim(0, 90)
-        for t in ax.set_yticks([30, 60, 90], ["el 60°", "el 30°", "el 0°"], fontsize=7):
+        ax.set_yticks([30, 60, 90], ["el 60°", "el 30°", "el 0°"], fontsize=7)
+        for t in ax.get_yticklabels():
             t.set_bbox({"boxstyle": "round,pad=0.1", "fc": "white", "alpha": 0.7, "lw": 0})
         # ring labels perpendicular to the solar meridian, away from the sun and the neutral
         # points (which lie on that meridian)
