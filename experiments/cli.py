@@ -5,13 +5,15 @@ defines ``register(subparsers)`` adds its commands (and ``reproduce`` targets vi
 ``register_reproduce(targets)``, a dict name -> function(args)). Modules keep heavy imports
 inside their command functions so that ``skysim --help`` stays fast.
 
-Errors have one path (:func:`main`): options are checked when parsed
-(:mod:`experiments.argtypes`); whatever a command raises for bad input (``ValueError`` and its
-subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
-``skysim CMD: error: ...`` with exit code 2, a missing optional dependency as the command
-that installs it into this checkout (:mod:`skysim.extras`), Ctrl-C as ``interrupted`` (exit 130) and a closed pipe (``skysim ... |
-head``) ends quietly (exit 141, as a process killed by SIGPIPE). Files are written atomically
-(:mod:`skysim.io`), so none of these leaves a half-written file.
+Errors have one path (:func:`main`). Options are checked when parsed
+(:mod:`experiments.argtypes`). Whatever a command raises for bad input (``ValueError`` and
+its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
+``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
+that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
+130); a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
+SIGPIPE); an unexpected exception (a bug) as one ``internal error`` line with exit code 70
+(``SKYSIM_TRACEBACK=1`` re-raises it). Files are written atomically (:mod:`skysim.io`), so
+none of these leaves a half-written file.
 """
 
 from __future__ import annotations
@@ -36,7 +38,8 @@ import experiments
 
 from experiments.argtypes import output_dir, positive_int, seed
 
-__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE"]
+__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE",
+           "EXIT_INTERNAL"]
 
 EXIT_ERROR = 2
 """Exit code of any error in the input (options, files, configurations), as argparse's."""
@@ -44,6 +47,8 @@ EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
 EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of the output went away (128 + SIGPIPE)."""
+EXIT_INTERNAL = 70
+"""Exit code of an unexpected exception, a bug in skysim (``EX_SOFTWARE`` of sysexits.h)."""
 
 
 
@@ -172,6 +177,12 @@ def main(argv=None) -> int:
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"{command}: error: {describe_error(exc)}", file=sys.stderr)
         return EXIT_ERROR
+    except Exception as exc:  # a bug: one line, the traceback on request
+        if os.environ.get("SKYSIM_TRACEBACK"):
+            raise
+        print(f"{command}: internal error: {type(exc).__name__}: {exc} (a bug in skysim; "
+              "run again with SKYSIM_TRACEBACK=1 to see where, and report it)", file=sys.stderr)
+        return EXIT_INTERNAL
     return int(rc or 0)
 
 

@@ -18,7 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import EXIT_BROKEN_PIPE, EXIT_INTERRUPTED, build_parser, main
+from experiments.cli import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED,
+                             build_parser, main)
 
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -393,6 +394,20 @@ def test_ctrl_c_prints_one_line(monkeypatch, capsys):
     assert main(["sky", *SUN]) == EXIT_INTERRUPTED
     err = capsys.readouterr().err
     assert "interrupted" in err and "Traceback" not in err
+
+
+def test_a_bug_is_one_line_unless_the_traceback_is_asked_for(monkeypatch, capsys):
+    import experiments.commands as commands
+
+    def buggy(args):
+        raise TypeError("unsupported operand")
+    monkeypatch.setattr(commands, "_sky", buggy)
+    assert main(["sky", *SUN]) == EXIT_INTERNAL
+    err = capsys.readouterr().err
+    assert "internal error: TypeError: unsupported operand" in err and "Traceback" not in err
+    monkeypatch.setenv("SKYSIM_TRACEBACK", "1")
+    with pytest.raises(TypeError):
+        main(["sky", *SUN])
 
 
 def test_closed_pipe_ends_quietly(monkeypatch, capsys):
