@@ -44,9 +44,31 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
             f"{where}: time {s.iloc[row]!r} in row {row} has no UTC offset; "
             "write times as ISO 8601 with offset, e.g. 2013-05-22T17:10:00+08:00")
     try:
-        return pd.to_datetime(s, format="ISO8601", utc=True)
-    except (ValueError, TypeError) as exc:
-        raise MeasurementFormatError(f"{where}: unparseable time ({exc})") from exc
+        parsed = pd.to_datetime(s, format="ISO8601", utc=True)
+    except (ValueError, TypeError, OverflowError):
+        parsed = None
+    if parsed is not None:
+        years = parsed.dt.year.to_numpy()
+        out = np.flatnonzero((years < 1678) | (years > 2261))
+        if not out.size:
+            return parsed.dt.as_unit("ns")
+        raise MeasurementFormatError(
+            f"{where}: time {s.iloc[out[0]]!r} in row {out[0]} is outside the supported years "
+            f"1678-2261 ({out.size} such row(s))")
+    # locate the first bad row (vectorised) and say what is wrong with it
+    row = int(np.flatnonzero(pd.to_datetime(s, format="ISO8601", utc=True,
+                                            errors="coerce").isna().to_numpy())[0])
+    text = s.iloc[row]
+    try:
+        pd.Timestamp(text).as_unit("ns")
+        why = "not an ISO 8601 time"
+    except (pd.errors.OutOfBoundsDatetime, OverflowError):
+        why = "outside the supported years 1678-2261"
+    except (ValueError, TypeError):
+        why = "not an ISO 8601 time"
+    raise MeasurementFormatError(
+        f"{where}: time {text!r} in row {row} is {why}; write times as ISO 8601 with offset, "
+        "e.g. 2013-05-22T17:10:00+08:00")
 
 
 def check_numeric_columns(table: pd.DataFrame, columns, where: str) -> None:

@@ -260,6 +260,19 @@ def test_bad_sidecars_are_named(kind, table, capsys):
     _fails(["calibrate", str(table)], capsys, needle)
 
 
+@pytest.mark.parametrize("time,needle", [
+    ("3013-05-22T17:10:00+08:00", "in row 5 is outside the supported years 1678-2261"),
+    ("2013-05-32T17:10:00+08:00", "in row 5 is not an ISO 8601 time"),
+    ("yesterday+08:00", "in row 5 is not an ISO 8601 time"),
+])
+def test_bad_times_in_a_table_name_row_and_value(time, needle, table, capsys):
+    t = pd.read_csv(table)
+    t.loc[5, "time"] = time
+    t.to_csv(table, index=False)
+    line = _fails(["calibrate", str(table)], capsys, needle, repr(time))
+    assert "You might want" not in line   # no advice relayed from pandas
+
+
 def test_dead_channel_is_named(table, capsys):
     t = pd.read_csv(table)
     t["U2_V"] = 0.25
