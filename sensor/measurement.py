@@ -71,6 +71,21 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
         "e.g. 2013-05-22T17:10:00+08:00")
 
 
+def check_daq_block(daq, where: str) -> None:
+    """A sidecar's ``sensor.daq`` block must describe a valid :class:`sensor.daq.Daq`
+    (``bits`` a whole number 1..32 or null, ``range_V`` > 0 [V])."""
+    from skysim.exceptions import InvalidParameterError
+
+    from .daq import Daq
+    if not isinstance(daq, dict) or set(daq) - {"bits", "range_V"}:
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq must be an object with "
+                                     f"bits and range_V; got {daq!r}")
+    try:
+        Daq(daq.get("bits", 16), daq.get("range_V", 10.0))
+    except InvalidParameterError as exc:
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq: {exc}") from None
+
+
 def check_numeric_columns(table: pd.DataFrame, columns, where: str) -> None:
     """Raise :class:`MeasurementFormatError` for missing, non-numeric or NaN columns."""
     missing = [c for c in columns if c not in table.columns]
@@ -118,6 +133,10 @@ class Measurement:
                 f"{where}: sidecar has no 'site' with numbers latitude_deg, longitude_deg (and "
                 f"altitude_m) [deg, m]; got {site!r}; the sun position cannot be computed "
                 "without it")
+        sensor = self.sidecar.get("sensor")
+        daq = sensor.get("daq") if isinstance(sensor, dict) else None
+        if daq is not None:
+            check_daq_block(daq, where)
         if "time" not in self.table.columns:
             raise MeasurementFormatError(f"{where}: missing required column 'time'")
         self.table["time"] = parse_iso_times(self.table["time"], where)

@@ -243,7 +243,7 @@ def test_reader_accepts_the_older_sidecar_spelling(table):
     assert len(read_measurement(table).table) == 40
 
 
-@pytest.mark.parametrize("kind", ["list", "folder", "not_json", "no_site"])
+@pytest.mark.parametrize("kind", ["list", "folder", "not_json", "no_site", "daq_bits"])
 def test_bad_sidecars_are_named(kind, table, capsys):
     side = table.with_name(table.name + ".json")
     side.unlink()
@@ -253,10 +253,15 @@ def test_bad_sidecars_are_named(kind, table, capsys):
         side.write_text("[1, 2]")
     elif kind == "not_json":
         side.write_text("{nope")
-    else:
+    elif kind == "no_site":
         side.write_text(json.dumps({"schema": "skysim.measurement/1", "site": {"lat": 3}}))
+    else:
+        side.write_text(json.dumps({"schema": "skysim.measurement/1",
+                                    "site": {"latitude_deg": 34.1, "longitude_deg": 108.5},
+                                    "sensor": {"daq": {"bits": "sixteen", "range_V": 10}}}))
     needle = {"list": "must be a JSON object", "folder": "is a folder",
-              "not_json": "not valid JSON", "no_site": "latitude_deg"}[kind]
+              "not_json": "not valid JSON", "no_site": "latitude_deg",
+              "daq_bits": "sensor.daq: DAQ bits must be a whole number"}[kind]
     _fails(["calibrate", str(table)], capsys, needle)
 
 
