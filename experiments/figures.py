@@ -4,8 +4,6 @@ from __future__ import annotations
 
 from pathlib import Path
 
-from skysim.io import atomic_write
-
 __all__ = ["pyplot", "save_png"]
 
 
@@ -20,6 +18,8 @@ def pyplot():
 def save_png(fig, path, dpi: int = 110) -> Path:
     """Write ``fig`` as PNG atomically (never a half-written figure) and close it."""
     import matplotlib.pyplot as plt
+
+    from skysim.io import atomic_write
     path = Path(path)
     try:
         atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=dpi, format="png"))
