@@ -730,6 +730,13 @@ def analysis_columns(cfg: SweepConfig) -> list[str]:
                                "noise_V", *factors, *output_columns(cfg), *extra]))
 
 
+def _remove_temporaries(folder: Path) -> None:
+    """Remove the temporary files of chunks whose worker was stopped mid-write (a finished
+    chunk is renamed into place atomically, so these are never results)."""
+    for tmp in Path(folder).glob(".tmp-*"):
+        tmp.unlink(missing_ok=True)
+
+
 def _check_state(out: Path, cfg: SweepConfig, digest: str) -> None:
     """Refuse an ``out`` holding results of another sweep; a ``sweep.json`` without any chunk
     (a run that failed before computing) is no result and is replaced."""
@@ -789,6 +796,7 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
             if why != "missing":
                 log(f"chunk {task.index}: {why}; recomputing")
             todo.append(task)
+    _remove_temporaries(out / "chunks")   # of chunks a killed run cut short
     manifest = {"schema": "skysim.sweep/1", "digest": digest, "config": cfg.to_dict(),
                 "n_trials": n_trials, "chunk_trials": chunk_trials(cfg), "chunks": len(tasks)}
     (out / "chunks").mkdir(parents=True, exist_ok=True)
@@ -800,8 +808,12 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
         reports = run_tasks(run_chunk, todo, backend=backend, scheduler=scheduler,
                             workers=workers, progress=progress, desc=cfg.name)
     except KeyboardInterrupt:
+        _remove_temporaries(out / "chunks")
         log(f"interrupted: finished chunks are kept in {out / 'chunks'}; rerun the same "
             "command to resume")
+        raise
+    except BaseException:
+        _remove_temporaries(out / "chunks")
         raise
     compute_s = time.perf_counter() - t_run
     atomic_write(out / "trials.parquet", lambda p: concatenate_chunks(tasks, p))

@@ -49,7 +49,7 @@ def _run_local(fn, tasks, workers, bar, on_done):
             bar.update(1)
         return
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)))
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_worker_init)
     try:
         pending = {pool.submit(fn, t) for t in tasks}
         while pending:
@@ -58,9 +58,21 @@ def _run_local(fn, tasks, workers, bar, on_done):
                 on_done(fut.result())
                 bar.update(1)
     except BaseException:
+        # Ctrl-C or a failed chunk: stop now, not after the queued chunks (finished chunks
+        # are on disk; the caller removes the temporary files of the chunks cut short)
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
         pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
         raise
     pool.shutdown(wait=True)
+
+
+def _worker_init() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM: the pool's
+    worker loop would catch an exception raised in a signal handler and carry on)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _connect(scheduler: str | None, workers: int, timeout_s: float):

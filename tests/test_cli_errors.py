@@ -462,3 +462,35 @@ def test_sample_writes_several_sweeps(tmp_path):
     # each sweep starts with the reference axis 90 deg counter-clockwise of its own sun
     first = m.groupby("sweep").head(1)
     np.testing.assert_allclose(first.true_phi_deg.abs(), 90.0, atol=1e-6)
+
+
+def _slow_marker(path):
+    import time
+    time.sleep(0.5)
+    Path(path).write_text("done")
+    return path
+
+
+def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
+    """After Ctrl-C the pool's queued chunks must not run on: the workers are stopped."""
+    import signal
+    import threading
+
+    from experiments.sweep_backends import run_tasks
+    tasks = [str(tmp_path / f"t{k}") for k in range(24)]
+    started = threading.Event()
+
+    def interrupt():
+        started.wait(10)
+        while not any(Path(t).exists() for t in tasks):   # the pool is running
+            threading.Event().wait(0.05)
+        os.kill(os.getpid(), signal.SIGINT)
+    threading.Thread(target=interrupt, daemon=True).start()
+    started.set()
+    with pytest.raises(KeyboardInterrupt):
+        run_tasks(_slow_marker, tasks, workers=2, progress=False)
+    import concurrent.futures.process as cfp   # what the interpreter joins at exit
+    for t in list(cfp._threads_wakeups):
+        t.join(timeout=30)
+    done = sum(Path(t).exists() for t in tasks)
+    assert 1 <= done <= 8, done        # 24 would mean the queue was drained
