@@ -485,10 +485,15 @@ def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
         while not any(Path(t).exists() for t in tasks):   # the pool is running
             threading.Event().wait(0.05)
         os.kill(os.getpid(), signal.SIGINT)
+    # Ctrl-C as the interpreter handles it (other tests' libraries may install handlers)
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
     threading.Thread(target=interrupt, daemon=True).start()
     started.set()
-    with pytest.raises(KeyboardInterrupt):
-        run_tasks(_slow_marker, tasks, workers=2, progress=False)
+    try:
+        with pytest.raises(KeyboardInterrupt):
+            run_tasks(_slow_marker, tasks, workers=2, progress=False)
+    finally:
+        signal.signal(signal.SIGINT, previous)
     import concurrent.futures.process as cfp   # what the interpreter joins at exit
     for t in list(cfp._threads_wakeups):
         t.join(timeout=30)
