@@ -16,7 +16,7 @@ $(BIN)/python:
 
 # Stamps re-install when pyproject.toml changes. `make run` installs the extras the README's
 # commands need: rt (multiple-scattering sky) and sweep (sensitivity sweeps).
-$(VENV)/.installed-run: pyproject.toml | $(BIN)/python
+$(VENV)/.installed-run: pyproject.toml Makefile | $(BIN)/python
 	$(PIP) install --quiet -e '.[rt,sweep]'
 	@touch $@
 
