@@ -130,6 +130,12 @@ def _times(entry: dict, where: str):
     if start.tzinfo is None:
         raise GenerateConfigError(f"{where}: start {entry['start']!r} has no UTC offset; write "
                                   "e.g. 2013-05-22T17:10:00+08:00")
+    from skysim.resources import check_memory
+
+    from .commands import SAMPLE_BYTES_PER_SAMPLE
+    check_memory(n * SAMPLE_BYTES_PER_SAMPLE * max(1, entry.get("n_units", 1) / 3)
+                 if isinstance(entry.get("n_units", 1), int) else 0,
+                 f"{n} samples", "lower n")
     offsets = np.linspace(0.0, _number(entry, "duration_s", 600.0, where, low=0.0), n)
     try:
         return pd.DatetimeIndex(start + pd.to_timedelta(offsets, unit="s")).as_unit("ns")
@@ -165,7 +171,9 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
 
     from skysim.sun import sun_position
 
-    from .commands import AOP_CONVENTION, sky_grid
+    from skysim.resources import check_memory
+
+    from .commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION, sky_grid, sky_grid_size
     sky = _sky(entry, where)
     if "time" in entry:
         pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,
@@ -179,7 +187,12 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
     else:
         raise GenerateConfigError(f"{where}: give the sun as time (with [site]) or as "
                                   "sun_elevation_deg and sun_azimuth_deg")
-    el, az = sky_grid(_number(entry, "grid_step_deg", 5.0, where))
+    step = _number(entry, "grid_step_deg", 5.0, where)
+    if not 0 < step <= 90:
+        raise GenerateConfigError(f"{where}: grid_step_deg must be in (0, 90] [deg]; got {step}")
+    check_memory(sky_grid_size(step) * SKY_BYTES_PER_DIRECTION,
+                 f"{sky_grid_size(step)} sky directions", "use a coarser grid_step_deg")
+    el, az = sky_grid(step)
     f = sky.field(el, az, sun_el, sun_az)
     table = pd.DataFrame({"elevation_deg": el, "azimuth_deg": az, "dop": f.dop,
                           "aop_deg": f.aop_deg, "I": f.I, "Q": f.Q, "U": f.U})
@@ -330,6 +343,7 @@ def generate(config: dict, out) -> dict:
     from skysim.io import check_output_dir, sidecar_path, write_json_atomic
     from skysim.sun import Site
     out = check_output_dir(out)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     site = Site.from_dict(config["site"]) if "site" in config else None
     files = {}
@@ -362,6 +376,11 @@ def generate(config: dict, out) -> dict:
             for f in (name, info["sidecar"]):
                 os.replace(staging / f, out / f)
         os.replace(staging / "manifest.json", out / "manifest.json")
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()            # leave no empty folder behind a failed first run
+        raise
     finally:
         shutil.rmtree(staging, ignore_errors=True)
     return manifest

@@ -241,7 +241,8 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
                              "AoP [deg] (Berry)": (berry.aop_deg, "twilight", (-90, 90)),
                              "AoP [deg] (single)": (single.aop_deg, "twilight", (-90, 90))},
                     out / "polar_maps.png", sun=sun, marks=marks,
-                    title="tau = 0.25, albedo = 0.25; x: neutral points (multiple scattering)")
+                    title=f"tau 0.25, albedo 0.25; sun elevation {sun[0]:g}°, azimuth "
+                          f"{sun[1]:g}°; x: neutral points (multiple scattering)")
 
 
 def run(out: Path, quick: bool = False, reference=None) -> dict:

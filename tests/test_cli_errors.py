@@ -368,6 +368,11 @@ def test_memory_is_estimated_before_allocating(capsys, tmp_path, monkeypatch):
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1")
     _fails(["sample", "--out", "s.csv", "--n", "10000"], capsys, "10000 samples",
            "SKYSIM_MEMORY_LIMIT_MB")
+    big = tmp_path / "big.toml"
+    big.write_text('seed = 1\n[[sky_map]]\nname = "a"\nsun_elevation_deg = 30.0\n'
+                   'sun_azimuth_deg = 0.0\ngrid_step_deg = 0.001\n')
+    _fails(["generate", str(big), "--out", "g"], capsys, "'a': 32400360000 sky directions")
+    big.unlink()
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "lots")
     _fails(["sample", "--out", "s.csv"], capsys, "'lots'")
     assert list(tmp_path.iterdir()) == []
