@@ -378,6 +378,14 @@ def test_memory_is_estimated_before_allocating(capsys, tmp_path, monkeypatch):
     assert list(tmp_path.iterdir()) == []
 
 
+@pytest.mark.parametrize("target", ["yang2014", "dark-current", "compound-eye", "jin2020"])
+def test_reproductions_refuse_trials_that_do_not_fit(target, tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
+    _fails(["reproduce", target, "--trials", "100000", "--out", str(tmp_path / "o")], capsys,
+           f"100000 trials of {target}", "--trials")
+    assert not (tmp_path / "o").exists()
+
+
 def test_huge_sweep_is_refused_at_once_and_planned_lazily(tmp_path, capsys):
     from dataclasses import replace
 
