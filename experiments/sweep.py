@@ -409,9 +409,10 @@ def expected_trials(cfg: SweepConfig) -> int:
     return per * max(1, len(cfg.conditions))
 
 
-def check_sweep_memory(cfg: SweepConfig) -> None:
+def check_sweep_memory(cfg: SweepConfig, workers: int = 1) -> None:
     """Refuse a sweep whose design or analysis would not fit in memory (the chunks stream,
-    but the summary and indices hold the analysed columns of every trial).
+    but the summary and indices hold the analysed columns of every trial), or whose chunks,
+    ``workers`` at a time on this machine, would not.
 
     Raises
     ------
@@ -420,6 +421,10 @@ def check_sweep_memory(cfg: SweepConfig) -> None:
     """
     from skysim.resources import check_memory
     n = expected_trials(cfg)
+    size = min(chunk_trials(cfg), n)
+    check_memory(workers * size * cfg.stops * BYTES_PER_TRIAL_STOP,
+                 f"{workers} chunk(s) of {size} trials x {cfg.stops} stops at a time",
+                 "lower [execution] memory_mb or chunk_trials, or --workers")
     values = len(analysis_columns(cfg)) + (2 * len(salib_problem(cfg)["names"])
                                            if cfg.method != "montecarlo" else 0)
     check_memory(n * values * ANALYSIS_BYTES_PER_VALUE,
@@ -786,7 +791,9 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
         make_sky(sky.pop("model"), **sky)
     except InvalidParameterError as exc:
         raise SweepConfigError(f"[sky] {exc}") from None
-    check_sweep_memory(cfg)
+    from .sweep_backends import default_workers
+    local = backend == "local" or not scheduler   # a remote cluster has its own memory
+    check_sweep_memory(cfg, (workers or default_workers()) if local else 1)
     n_trials, X, conditions = design(cfg)
     tasks = plan_chunks(cfg, out, digest, n_trials, X, conditions)
     todo = []

@@ -402,6 +402,16 @@ def test_huge_sweep_is_refused_at_once_and_planned_lazily(tmp_path, capsys):
     assert [t.start for t in plan[2:4]] == [128, 192]
 
 
+def test_sweep_chunks_must_fit_beside_each_other(tmp_path, capsys, monkeypatch):
+    cfg = tmp_path / "w.toml"
+    cfg.write_text('[sweep]\nname = "w"\ntrials = 100000\n[execution]\nmemory_mb = 1e9\n'
+                   '[parameters]\nnoise_V = {uniform = [0.0001, 0.002]}\n')
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1000")
+    _fails(["sweep", str(cfg), "--out", str(tmp_path / "o"), "--workers", "2"], capsys,
+           "2 chunk(s) of 100000 trials x 182 stops", "memory_mb")
+    assert not (tmp_path / "o").exists()
+
+
 def test_expected_trials_match_the_designs():
     from dataclasses import replace
 
