@@ -35,7 +35,6 @@ import pkgutil  # noqa: E402
 import sys  # noqa: E402
 
 import experiments
-
 from experiments.argtypes import output_dir, positive_int, seed
 
 __all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE",
@@ -49,7 +48,6 @@ EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of the output went away (128 + SIGPIPE)."""
 EXIT_INTERNAL = 70
 """Exit code of an unexpected exception, a bug in skysim (``EX_SOFTWARE`` of sysexits.h)."""
-
 
 
 def _command_modules():
@@ -167,7 +165,7 @@ def main(argv=None) -> int:
     except ImportError as exc:
         hint = _missing_extra(exc, command)
         if hint is None:
-            raise
+            return _internal_error(command, exc)
         print(f"{command}: error: {hint}", file=sys.stderr)
         return EXIT_ERROR
     except MemoryError:
@@ -177,13 +175,18 @@ def main(argv=None) -> int:
     except (ValueError, OSError, RuntimeError) as exc:
         print(f"{command}: error: {describe_error(exc)}", file=sys.stderr)
         return EXIT_ERROR
-    except Exception as exc:  # a bug: one line, the traceback on request
-        if os.environ.get("SKYSIM_TRACEBACK"):
-            raise
-        print(f"{command}: internal error: {type(exc).__name__}: {exc} (a bug in skysim; "
-              "run again with SKYSIM_TRACEBACK=1 to see where, and report it)", file=sys.stderr)
-        return EXIT_INTERNAL
+    except Exception as exc:  # a bug
+        return _internal_error(command, exc)
     return int(rc or 0)
+
+
+def _internal_error(command: str, exc: Exception) -> int:
+    """A bug: one line, or the traceback with ``SKYSIM_TRACEBACK=1``."""
+    if os.environ.get("SKYSIM_TRACEBACK"):
+        raise exc
+    print(f"{command}: internal error: {type(exc).__name__}: {exc} (a bug in skysim; run again "
+          "with SKYSIM_TRACEBACK=1 to see where, and report it)", file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover
