@@ -6,8 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
-from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file, float_in, nonnegative_float,
-                       output_file, positive_float, positive_int, seed)
+from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file,
+                       float_in, nonnegative_float, output_file, positive_float, positive_int,
+                       seed)
 
 __all__ = ["register", "sky_grid", "read_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
 
@@ -17,13 +18,14 @@ MODEL_OPTIONS = {"rayleigh": ("dmax",),
 """The ``skysim sky`` options of each sky model (attribute names of the parsed arguments)."""
 
 SKY_BYTES_PER_DIRECTION = 400
-"""Peak memory of ``skysim sky`` per view direction [bytes]: the grid (meshgrid and flat
-copies, 32 B), seven float64 columns in the chunks and again in the joined table (112 B),
-the writer's copy; measured ~250 B with tracemalloc at 1.6 M directions, rounded up."""
+"""Peak memory of ``skysim sky`` per view direction [bytes]: the grid, seven float64 columns
+in the chunks and again in the joined table, the writer's copy; tracemalloc peak 170 B (CSV)
+and 130 B (Parquet) per direction at 520 k directions, 290 B at 130 k; rounded up."""
 
-SAMPLE_BYTES_PER_SAMPLE = 2000
+SAMPLE_BYTES_PER_SAMPLE = 1000
 """Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
-the table and its CSV text; measured ~1 kB with tracemalloc at 1e5 samples, doubled)."""
+the table and its CSV text): tracemalloc peak 343 B per sample at 1e5 samples, 1.1 kB at
+2e4 (fixed costs included); about 3x the large-run value."""
 
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
