@@ -14,9 +14,10 @@ $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
 	$(PIP) install --quiet --upgrade pip
 
-# Stamps re-install when pyproject.toml changes.
-$(VENV)/.installed-run: pyproject.toml | $(BIN)/python
-	$(PIP) install --quiet -e .
+# Stamps re-install when pyproject.toml changes. `make run` installs the extras the README's
+# commands need: rt (multiple-scattering sky) and sweep (sensitivity sweeps).
+$(VENV)/.installed-run: pyproject.toml Makefile | $(BIN)/python
+	$(PIP) install --quiet -e '.[rt,sweep,series]'
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
@@ -27,6 +28,8 @@ venv: $(VENV)/.installed-run
 
 run: $(VENV)/.installed-run
 	$(BIN)/skysim reproduce yang2014
+	@echo "skysim is installed in $(VENV): run it as $(BIN)/skysim ..., or once per shell"
+	@echo "  . $(BIN)/activate    and then   skysim --help"
 
 # benchmarks (tests/benchmarks) run under `make bench`: some call the radiative-transfer
 # engine dozens of times, which would triple the suite's time on 2 cores

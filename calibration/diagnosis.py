@@ -334,11 +334,18 @@ def load_diagnosis_data(path) -> DiagnosisData:
     """Read a measurement table or photodiode data (schema from the sidecar)."""
     import json
 
-    from skysim.io import sidecar_path
-    side = sidecar_path(path)
-    if not side.exists():
-        raise FileNotFoundError(f"no sidecar {side} beside {path}")
-    schema = json.loads(side.read_text()).get("schema")
+    from skysim.io import find_sidecar, sidecar_path
+    side = find_sidecar(path)
+    if side is None:
+        raise FileNotFoundError(f"no sidecar {sidecar_path(path)} beside {path}")
+    try:
+        sidecar = json.loads(side.read_text())
+    except ValueError as exc:
+        raise MeasurementFormatError(f"{side}: not valid JSON ({exc})") from None
+    if not isinstance(sidecar, dict):
+        raise MeasurementFormatError(f"{side}: a sidecar must be a JSON object; got "
+                                     f"{type(sidecar).__name__}")
+    schema = sidecar.get("schema")
     if schema == PHOTODIODES_SCHEMA:
         from sensor.photodiodes_io import read_photodiodes
         return data_from_photodiodes(read_photodiodes(path), str(path))

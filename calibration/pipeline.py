@@ -19,7 +19,33 @@ from skysim.sky import RayleighSky, Sky
 from .lsq import PairCalibration, fit_pair
 from .solve import PAIRS, heading_error_deg, solve_pair
 
-__all__ = ["MeasurementCalibration", "reference_polarization", "calibrate_measurement"]
+__all__ = ["DeadChannelError", "MeasurementCalibration", "reference_polarization",
+           "calibrate_measurement", "check_live_channels"]
+
+DEAD_SPREAD_V = 1e-6
+"""[V] A channel whose outputs span less than this over a table is dead or stuck: a live
+channel swings by ~0.1-1 V over a 180-deg sweep (eq. 2 at d = 0.3-0.8); 1 uV is 1/300 of
+one 16-bit LSB on +/-10 V."""
+
+
+class DeadChannelError(ValueError):
+    """A channel's outputs do not change over the table (dead, stuck or disconnected)."""
+
+
+def check_live_channels(measurement: Measurement, pairs=PAIRS) -> None:
+    """Raise :class:`DeadChannelError` naming every channel of ``pairs`` whose outputs span
+    less than :data:`DEAD_SPREAD_V`, with its value (a constant channel makes the LSM's
+    Jacobian singular, which would otherwise be reported as a geometry problem)."""
+    from sensor.measurement import CHANNEL_COLUMNS
+    U = measurement.channels
+    used = sorted({c for pair in pairs for c in pair})
+    dead = [k for k in used if np.ptp(U[:, k - 1]) < DEAD_SPREAD_V]
+    if dead:
+        what = ", ".join(f"{CHANNEL_COLUMNS[k - 1]} (constant {U[0, k - 1]:.6g} V)"
+                         for k in dead)
+        raise DeadChannelError(
+            f"dead or stuck channel(s) over all {len(U)} samples: {what}; check the wiring "
+            "and the acquisition, or calibrate only the pairs without them")
 
 
 def reference_polarization(measurement: Measurement, sky: Sky | None = None):
@@ -67,9 +93,11 @@ def calibrate_measurement(measurement: Measurement, pairs=PAIRS, sky: Sky | None
                           fit_dop_scale: bool = True) -> MeasurementCalibration:
     """Fit every pair of a measurement table by the LSM of Yang et al. (2014).
 
-    Raises the errors of :func:`calibration.lsq.fit_pair` (too few samples, rank deficiency,
-    non-convergence) and of :func:`reference_polarization`.
+    Raises :class:`DeadChannelError` for a constant channel, the errors of
+    :func:`calibration.lsq.fit_pair` (too few samples, rank deficiency, non-convergence) and
+    of :func:`reference_polarization`.
     """
+    check_live_channels(measurement, pairs)
     phi, shape, _, _ = reference_polarization(measurement, sky)
     U = measurement.channels
     fits: dict[tuple, PairCalibration] = {}

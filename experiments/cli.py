@@ -4,6 +4,16 @@ Sub-commands are contributed by modules of the :mod:`experiments` package: every
 defines ``register(subparsers)`` adds its commands (and ``reproduce`` targets via
 ``register_reproduce(targets)``, a dict name -> function(args)). Modules keep heavy imports
 inside their command functions so that ``skysim --help`` stays fast.
+
+Errors have one path (:func:`main`). Options are checked when parsed
+(:mod:`experiments.argtypes`). Whatever a command raises for bad input (``ValueError`` and
+its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
+``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
+that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
+130); a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
+SIGPIPE); an unexpected exception (a bug) as one ``internal error`` line with exit code 70
+(``SKYSIM_TRACEBACK=1`` re-raises it). Files are written atomically (:mod:`skysim.io`), so
+none of these leaves a half-written file.
 """
 
 from __future__ import annotations
@@ -26,8 +36,19 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import experiments
+from experiments.argtypes import output_dir, positive_int, seed
 
-__all__ = ["main", "build_parser"]
+__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE",
+           "EXIT_INTERNAL"]
+
+EXIT_ERROR = 2
+"""Exit code of any error in the input (options, files, configurations), as argparse's."""
+EXIT_INTERRUPTED = 130
+"""Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+EXIT_BROKEN_PIPE = 141
+"""Exit code when the reader of the output went away (128 + SIGPIPE)."""
+EXIT_INTERNAL = 70
+"""Exit code of an unexpected exception, a bug in skysim (``EX_SOFTWARE`` of sysexits.h)."""
 
 
 def _module_names() -> list[str]:
@@ -42,6 +63,14 @@ DEFAULT_SEED = 20140601
 def _run_target(targets: dict, args) -> int:
     """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
     func = targets[args.target]
+    if args.reference is not None and not getattr(func, "takes_reference", False):
+        takers = sorted(n for n, f in targets.items() if getattr(f, "takes_reference", False))
+        raise ValueError(f"--reference applies to {', '.join(takers)}, not {args.target}")
+    per_trial = getattr(sys.modules.get(func.__module__), "MEMORY_PER_TRIAL_BYTES", None)
+    if per_trial and args.trials:
+        from skysim.resources import check_memory
+        check_memory(args.trials * per_trial, f"{args.trials} trials of {args.target}",
+                     "use fewer --trials")
     if args.seed is None:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
     return func(args)
@@ -61,6 +90,7 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     modules = {n: importlib.import_module(f"experiments.{n}") for n in names if n in wanted}
     parser = argparse.ArgumentParser(
         prog="skysim", description="Skylight-polarization simulator and virtual sensor testbed.")
+    parser.add_argument("--version", action="version", version=f"skysim {_version()}")
     sub = parser.add_subparsers(dest="command", required=True, metavar="COMMAND")
     targets: dict = {}
     for mod in modules.values():
@@ -69,16 +99,21 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     rep = sub.add_parser("reproduce", help="run a published experiment's reproduction",
                          description="Run a scripted reproduction; writes tables and figures.")
     rep.add_argument("target", choices=sorted(targets), help="which experiment")
-    rep.add_argument("--trials", type=int, default=None,
-                     help="Monte-Carlo trials (default: the target's own)")
-    rep.add_argument("--seed", type=int, default=None,
-                     help="master random seed (default: the target's DEFAULT_SEED)")
+    rep.add_argument("--trials", type=positive_int, default=None,
+                     help="Monte-Carlo trials, >= 1 (default: the experiment's own)")
+    rep.add_argument("--seed", type=seed, default=None,
+                     help="master random seed, >= 0 (default: the experiment's own)")
     rep.add_argument("--quick", action="store_true",
                      help="a small, fast run (few trials) for smoke tests")
-    rep.add_argument("--out", default=None, help="output folder (default results/<target>)")
+    rep.add_argument("--out", type=output_dir, default=None,
+                     help="output folder (default: results/<target>)")
     rep.add_argument("--data", default=None, metavar="DIR",
-                     help="folder of recorded sessions (real-sky-compass; default: the "
-                          "reference recordings beside the checkout)")
+                     help="real-sky-compass: folder of recorded photodiode sessions (default: "
+                          "the reference recordings beside the checkout)")
+    rep.add_argument("--reference", default=None,
+                     help="physical-sky, sky-gap: another copy of the Natraj et al. (2009) "
+                          "tables, the file or a folder holding it (default: the tables "
+                          "shipped with skysim)")
     rep.set_defaults(func=lambda args: _run_target(targets, args))
     for name in names:
         if name in modules:
@@ -91,16 +126,85 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     return parser
 
 
-def main(argv=None) -> int:
-    argv = sys.argv[1:] if argv is None else list(argv)
-    parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
-    args = parser.parse_args(argv)
+def _version() -> str:
+    from importlib.metadata import PackageNotFoundError, version
     try:
+        return version("skysim")
+    except PackageNotFoundError:  # run from a source tree without installing
+        from skysim import __version__
+        return __version__
+
+
+def _missing_extra(exc: ImportError, command: str) -> str | None:
+    """The install hint for an optional package that failed to import, else None."""
+    from skysim.extras import extra_for_module, missing_extra_message
+    name = exc.name or getattr(exc.__cause__, "name", None)
+    if extra_for_module(name) is None:
+        return None
+    return str(exc) if "pip install -e" in str(exc) else missing_extra_message(name, command)
+
+
+def describe_error(exc: BaseException) -> str:
+    """One line for an error: the message, or for a bare ``OSError`` its file and reason."""
+    if isinstance(exc, OSError) and exc.strerror and exc.filename:
+        return f"{exc.filename}: {exc.strerror}"
+    return str(exc) or type(exc).__name__
+
+
+def _quiet_stdout() -> None:
+    """After a broken pipe, point stdout at /dev/null so the interpreter's final flush does
+    not raise again (Python docs, "Note on SIGPIPE")."""
+    try:
+        devnull = os.open(os.devnull, os.O_WRONLY)
+        os.dup2(devnull, sys.stdout.fileno())
+    except (OSError, ValueError, AttributeError):  # stdout is not a file (e.g. captured)
+        pass
+
+
+def main(argv=None) -> int:
+    """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
+    command = "skysim"
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        try:
+            parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
+            args = parser.parse_args(argv)
+        except SystemExit as exc:  # argparse: --help, --version, or a usage error (printed)
+            return exc.code if isinstance(exc.code, int) else EXIT_ERROR
+        command = f"skysim {args.command}"
         rc = args.func(args)
-    except (ValueError, FileNotFoundError, RuntimeError) as exc:
-        print(f"skysim {args.command}: error: {exc}", file=sys.stderr)
-        return 2
+        sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+    except KeyboardInterrupt:
+        print(f"\n{command}: interrupted", file=sys.stderr)
+        return EXIT_INTERRUPTED
+    except BrokenPipeError:
+        _quiet_stdout()
+        return EXIT_BROKEN_PIPE
+    except ImportError as exc:
+        hint = _missing_extra(exc, command)
+        if hint is None:
+            return _internal_error(command, exc)
+        print(f"{command}: error: {hint}", file=sys.stderr)
+        return EXIT_ERROR
+    except MemoryError:
+        print(f"{command}: error: out of memory; use a smaller size (fewer trials, directions "
+              "or samples)", file=sys.stderr)
+        return EXIT_ERROR
+    except (ValueError, OSError, RuntimeError) as exc:
+        print(f"{command}: error: {describe_error(exc)}", file=sys.stderr)
+        return EXIT_ERROR
+    except Exception as exc:  # a bug
+        return _internal_error(command, exc)
     return int(rc or 0)
+
+
+def _internal_error(command: str, exc: Exception) -> int:
+    """A bug: one line, or the traceback with ``SKYSIM_TRACEBACK=1``."""
+    if os.environ.get("SKYSIM_TRACEBACK"):
+        raise exc
+    print(f"{command}: internal error: {type(exc).__name__}: {exc} (a bug in skysim; run again "
+          "with SKYSIM_TRACEBACK=1 to see where, and report it)", file=sys.stderr)
+    return EXIT_INTERNAL
 
 
 if __name__ == "__main__":  # pragma: no cover

@@ -6,7 +6,27 @@ import argparse
 import json
 from pathlib import Path
 
-__all__ = ["register", "sky_grid", "view_directions", "AOP_CONVENTION"]
+from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file,
+                       float_in, nonnegative_float, output_file, positive_float, positive_int,
+                       seed)
+
+__all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CONVENTION",
+           "MODEL_OPTIONS"]
+
+MODEL_OPTIONS = {"rayleigh": ("dmax",),
+                 "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
+                 "berry": ("delta_deg", "dmax")}
+"""The ``skysim sky`` options of each sky model (attribute names of the parsed arguments)."""
+
+SKY_BYTES_PER_DIRECTION = 400
+"""Peak memory of ``skysim sky`` per view direction [bytes]: the grid, seven float64 columns
+in the chunks and again in the joined table, the writer's copy; tracemalloc peak 170 B (CSV)
+and 130 B (Parquet) per direction at 520 k directions, 290 B at 130 k; rounded up."""
+
+SAMPLE_BYTES_PER_SAMPLE = 1000
+"""Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
+the table and its CSV text): tracemalloc peak 343 B per sample at 1e5 samples, 1.1 kB at
+2e4 (fixed costs included); about 3x the large-run value."""
 
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
@@ -16,26 +36,93 @@ AOP_CONVENTION = (
     "clockwise from geographic north; at the zenith the meridian is that of the row's azimuth.")
 
 
+def sky_grid_size(step_deg: float) -> int:
+    """Number of directions of :func:`sky_grid` with spacing ``step_deg`` [deg]."""
+    import math
+    return (math.floor(90.0 / step_deg + 1e-9) + 1) * math.ceil(360.0 / step_deg - 1e-9)
+
+
 def sky_grid(step_deg: float = 2.0):
-    """Default full-sky grid: elevations 0..90 and azimuths 0..360-step [deg], flattened."""
+    """Default full-sky grid: elevations 0..90 and azimuths 0..360-step [deg], flattened.
+
+    Raises
+    ------
+    InvalidParameterError
+        If ``step_deg`` is not in (0, 90].
+    """
     import numpy as np
+
+    from skysim.validation import check_in_range
+    check_in_range("grid step [deg]", step_deg, 0.0, 90.0, low_open=True)
     el = np.arange(0.0, 90.0 + 1e-9, step_deg)
     az = np.arange(0.0, 360.0, step_deg)
     E, A = np.meshgrid(el, az, indexing="ij")
     return E.ravel(), A.ravel()
 
 
-def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
-    """View directions [deg] from a CSV with columns elevation_deg, azimuth_deg, or else the
-    default full-sky grid (:func:`sky_grid`)."""
-    if not directions_csv:
-        return sky_grid(grid_step_deg)
+def read_directions(path):
+    """View directions from a CSV with columns ``elevation_deg``, ``azimuth_deg`` [deg].
+
+    Raises
+    ------
+    ValueError
+        For a folder, an empty file, missing columns, no rows, or a value that is not a
+        number (naming the row and the value).
+    """
+    import numpy as np
     import pandas as pd
-    d = pd.read_csv(directions_csv)
+    path = Path(path)
+    if path.is_dir():
+        raise ValueError(f"--directions {path} is a folder; give a CSV file")
+    try:
+        d = pd.read_csv(path)
+    except pd.errors.EmptyDataError:
+        raise ValueError(f"--directions {path} is empty; write a CSV with the header "
+                         "elevation_deg,azimuth_deg and one direction per row") from None
+    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--directions {path} is not a readable CSV ({exc})") from None
     missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
     if missing:
-        raise ValueError(f"{directions_csv}: missing column(s) {sorted(missing)}")
-    return d.elevation_deg.to_numpy(float), d.azimuth_deg.to_numpy(float)
+        raise ValueError(f"--directions {path}: missing column(s) {sorted(missing)}; found "
+                         f"{list(d.columns)}")
+    if d.empty:
+        raise ValueError(f"--directions {path} has a header but no directions")
+    cols = []
+    for c in ("elevation_deg", "azimuth_deg"):
+        x = pd.to_numeric(d[c], errors="coerce").to_numpy(float)
+        bad = np.flatnonzero(~np.isfinite(x))
+        if bad.size:
+            raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is "
+                             f"{d[c].iloc[bad[0]]!r}, not a number ({bad.size} such value(s))")
+        cols.append(x)
+    return cols[0], cols[1]
+
+
+def _sky_params(args) -> dict:
+    """The sky-model options given, checked against ``--model`` (another model's option is
+    an error, not silently ignored)."""
+    given = {k for opts in MODEL_OPTIONS.values() for k in opts
+             if getattr(args, k, None) is not None}
+    foreign = sorted(given - set(MODEL_OPTIONS[args.model]))
+    if foreign:
+        flag = "--" + foreign[0].replace("_", "-").replace("-hpa", "-hPa")
+        owners = " or ".join(m for m, o in MODEL_OPTIONS.items() if foreign[0] in o)
+        takes = ", ".join("--" + k.replace("_", "-") for k in MODEL_OPTIONS[args.model])
+        raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
+                         f"takes {takes}")
+    return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
+
+
+def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
+    """View directions [deg] from a CSV (:func:`read_directions`), or else the default
+    full-sky grid (:func:`sky_grid`), after checking its memory."""
+    from skysim.resources import check_memory
+    if directions_csv:
+        return read_directions(directions_csv)
+    check_memory(sky_grid_size(grid_step_deg) * SKY_BYTES_PER_DIRECTION,
+                 f"{sky_grid_size(grid_step_deg)} sky directions (--grid-step "
+                 f"{grid_step_deg:g})", "use a coarser --grid-step")
+    return sky_grid(grid_step_deg)
 
 
 def _sky(args) -> int:
@@ -46,6 +133,7 @@ def _sky(args) -> int:
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
 
+    params = _sky_params(args)
     if args.sun_elevation is not None:
         if args.sun_azimuth is None:
             raise ValueError("--sun-elevation needs --sun-azimuth")
@@ -59,13 +147,10 @@ def _sky(args) -> int:
         site = Site(args.lat, args.lon, args.alt)
         pos = sun_position([args.time], site.latitude_deg, site.longitude_deg, site.altitude_m)
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
-        sun_info = {"site": site.to_dict(), "time": args.time, "elevation_deg": sun_el,
-                    "azimuth_deg": sun_az}
-    el, az = view_directions(args.directions, args.grid_step)
-    params = {k: getattr(args, k) for k in ("dmax", "tau", "albedo", "wavelength_nm",
-                                              "delta_deg", "pressure_hPa")
-              if getattr(args, k, None) is not None}
+        sun_info = {"site": site.to_dict(), "time": args.time.isoformat(),
+                    "elevation_deg": sun_el, "azimuth_deg": sun_az}
     sky = make_sky(args.model, **params)
+    el, az = view_directions(args.directions, args.grid_step)
     chunk = 100_000
     starts = range(0, el.size, chunk)
     if el.size > chunk:
@@ -80,8 +165,6 @@ def _sky(args) -> int:
                                                            zip(*parts))}
     if args.out:
         out = Path(args.out)
-        if out.suffix.lower() not in (".csv", ".parquet"):
-            raise ValueError(f"--out must end in .csv or .parquet; got {out.name!r}")
         sidecar = {"schema": "skysim.skymap/1", "sky": sky.describe(), "sun": sun_info,
                    "aop_convention": AOP_CONVENTION, "n_directions": int(el.size)}
         writer = (lambda p: _frame(table).to_csv(p, index=False)) \
@@ -90,7 +173,7 @@ def _sky(args) -> int:
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
         print(f"wrote {el.size} directions to {out}")
     if args.plot:
-        from .polar_maps import plot_polar_maps
+        from .polar_maps import plot_polar_maps, sky_title
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
@@ -99,7 +182,7 @@ def _sky(args) -> int:
             maps["I (flux pi)"] = (table["I"], "magma", None)
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
-                        title=f"{args.model} sky")
+                        title=sky_title(sky.describe(), sun_el, sun_az))
         print(f"wrote {args.plot}")
     if not args.out and not args.plot:
         print(_frame(table).describe().to_string())
@@ -127,37 +210,73 @@ def _sample(args) -> int:
     import numpy as np
     import pandas as pd
 
-    from experiments.yang2014 import ERROR_MODEL
     from sensor.daq import Daq
-    from sensor.errors import OpponentErrors
     from sensor.opponent import OpponentSensor, zenith_polarization
     from skysim.sky import make_sky
     from skysim.sun import Site
 
+    from skysim.resources import check_memory
+
+    interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
+    if args.sweeps > 1 and interval < args.duration:
+        raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
+                         f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
+    total = args.n * args.sweeps
+    check_memory(total * SAMPLE_BYTES_PER_SAMPLE, f"{total} samples (--n {args.n} x "
+                 f"--sweeps {args.sweeps})", "use fewer samples or sweeps")
     rng = np.random.default_rng(args.seed)
     site = Site(args.lat, args.lon, args.alt)
-    if args.errors == "none":
-        errors = OpponentErrors()
-    elif args.errors == "random":
-        m = ERROR_MODEL
-        errors = OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
-                                     transmittance_sd=m.transmittance_sd,
-                                     noise_range_V=m.noise_range_V,
-                                     turntable_error_deg=m.turntable_error_deg)
-    else:
-        errors = OpponentErrors.from_dict(json.loads(Path(args.errors).read_text()))
-    start = pd.Timestamp(args.start)
-    times = pd.DatetimeIndex(start + pd.to_timedelta(np.linspace(0, args.duration, args.n),
-                                                     unit="s"))
+    errors = _sensor_errors(args.errors, rng)
+    # sweep k starts k * interval after --start; each sweeps the heading over 180 deg from
+    # 90 deg counter-clockwise of the sun at its own start (as the paper's groups a, b, c)
+    offsets_s = (np.arange(args.sweeps)[:, None] * interval
+                 + np.linspace(0.0, args.duration, args.n)[None, :])
+    end = args.start + pd.Timedelta(seconds=float(offsets_s.max()))  # pandas' range
+    if end.year > PANDAS_YEARS[1]:
+        raise ValueError(f"the last sample ({end}) is beyond the supported years "
+                         f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; shorten --duration, "
+                         "--sweeps or --sweep-interval")
+    times = pd.DatetimeIndex(args.start + pd.to_timedelta(offsets_s.ravel(), unit="s"))
     sky = make_sky("rayleigh", dmax=args.dmax)
-    _, _, _, sun_az0 = zenith_polarization(sky, site, times[:1], [0.0])
-    headings = sun_az0[0] - 90.0 + np.linspace(0.0, 180.0, args.n, endpoint=False)
+    _, _, _, sun_az0 = zenith_polarization(sky, site, times[::args.n], np.zeros(args.sweeps))
+    headings = (sun_az0[:, None] - 90.0
+                + np.linspace(0.0, 180.0, args.n, endpoint=False)[None, :]).ravel()
+    sweep = np.repeat(np.arange(args.sweeps), args.n)
     sensor = OpponentSensor(errors, daq=Daq(None if args.no_daq else 16, 10.0))
-    meas = sensor.sample(sky, site, times, headings, rng, seed=args.seed)
+    meas = sensor.sample(sky, site, times, headings, rng, seed=args.seed,
+                         sweep=sweep if args.sweeps > 1 else None)
     meas.write(args.out)
-    print(f"wrote {args.n} samples to {args.out} (+ sidecar); injected errors: "
-          f"{json.dumps(errors.to_dict())}")
+    print(f"wrote {total} samples ({args.sweeps} sweep(s) of {args.n}) to {args.out} "
+          f"(+ sidecar); injected errors: {json.dumps(errors.to_dict())}")
     return 0
+
+
+def _sensor_errors(spec: str, rng):
+    """``--errors``: 'random' (the Yang 2014 error model), 'none' or a JSON file."""
+    from experiments.yang2014 import ERROR_MODEL
+    from sensor.errors import OpponentErrors
+    if spec == "none":
+        return OpponentErrors()
+    if spec == "random":
+        m = ERROR_MODEL
+        return OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
+                                   transmittance_sd=m.transmittance_sd,
+                                   noise_range_V=m.noise_range_V,
+                                   turntable_error_deg=m.turntable_error_deg)
+    path = existing_file_or_error(spec, "--errors")
+    try:
+        d = json.loads(path.read_text())
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise ValueError(f"--errors {path}: not valid JSON ({exc})") from None
+    return OpponentErrors.from_dict(d, where=f"--errors {path}")
+
+
+def existing_file_or_error(text: str, flag: str) -> Path:
+    """``text`` as the path of an existing file, or a ``ValueError`` naming ``flag``."""
+    try:
+        return existing_file(text)
+    except argparse.ArgumentTypeError as exc:
+        raise ValueError(f"{flag}: {exc} (or give 'random' or 'none')") from None
 
 
 def _calibrate(args) -> int:
@@ -183,50 +302,88 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
+    fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--lat", type=float, help="site latitude [deg, north +]")
-    p.add_argument("--lon", type=float, help="site longitude [deg, east +]")
-    p.add_argument("--alt", type=float, default=0.0, help="site altitude [m]")
-    p.add_argument("--time", help="timezone-aware ISO 8601 time, e.g. 2013-05-22T17:10+08:00")
-    p.add_argument("--sun-elevation", type=float, help="sun elevation [deg] (instead of site/time)")
-    p.add_argument("--sun-azimuth", type=float, help="sun azimuth [deg, clockwise from north]")
-    p.add_argument("--directions", help="CSV with columns elevation_deg, azimuth_deg")
-    p.add_argument("--grid-step", type=float, default=2.0, help="default grid spacing [deg]")
-    p.add_argument("--model", default="rayleigh", help="rayleigh | multiple | berry")
-    p.add_argument("--dmax", type=float, help="rayleigh: maximum degree of polarization")
-    p.add_argument("--tau", type=float, help="multiple: Rayleigh optical thickness")
-    p.add_argument("--albedo", type=float, help="multiple: Lambertian ground albedo")
-    p.add_argument("--wavelength-nm", type=float, help="multiple: wavelength (derives tau)")
-    p.add_argument("--pressure-hPa", type=float, dest="pressure_hPa",
-                   help="multiple: surface pressure with --wavelength-nm (default 1013.25)")
-    p.add_argument("--delta-deg", type=float,
-                   help="berry: separation of the neutral-point pairs (default 40)")
-    p.add_argument("--out", help="output table (.csv or .parquet) with a JSON sidecar")
-    p.add_argument("--plot", help="PNG with polar maps of DoP and AoP (multiple: also I and "
-                   "the neutral points)")
+                       formatter_class=fmt)
+    p.add_argument("--lat", type=float_in(-90, 90, unit="deg"),
+                   help="site latitude [deg, north +]")
+    p.add_argument("--lon", type=float_in(-180, 360, unit="deg"),
+                   help="site longitude [deg, east +]")
+    p.add_argument("--alt", type=float_in(-500, 9000, unit="m"), default=0.0,
+                   help="site altitude [m]")
+    p.add_argument("--time", type=aware_time,
+                   help="timezone-aware ISO 8601 time, e.g. 2013-05-22T17:10+08:00")
+    p.add_argument("--sun-elevation", type=float_in(-90, 90, unit="deg"),
+                   help="sun elevation [deg] (instead of site and time)")
+    p.add_argument("--sun-azimuth", type=float_in(unit="deg"),
+                   help="sun azimuth [deg, clockwise from north]")
+    p.add_argument("--directions", type=existing_file,
+                   help="CSV with columns elevation_deg, azimuth_deg [deg] (instead of a grid)")
+    p.add_argument("--grid-step", type=float_in(0, 90, low_open=True, unit="deg"), default=2.0,
+                   help="spacing of the elevation-azimuth grid [deg]")
+    p.add_argument("--model", default="rayleigh", choices=sorted(MODEL_OPTIONS),
+                   help="sky model")
+    p.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True),
+                   help="rayleigh, berry: maximum degree of polarization (model default 1)")
+    p.add_argument("--tau", type=positive_float,
+                   help="multiple: Rayleigh optical thickness (or give --wavelength-nm)")
+    p.add_argument("--albedo", type=float_in(0, 1),
+                   help="multiple: Lambertian ground albedo (model default 0)")
+    p.add_argument("--wavelength-nm", type=positive_float,
+                   help="multiple: wavelength [nm], sets tau instead of --tau")
+    p.add_argument("--pressure-hPa", type=positive_float, dest="pressure_hPa",
+                   help="multiple: surface pressure [hPa] with --wavelength-nm "
+                        "(model default 1013.25)")
+    p.add_argument("--delta-deg", type=float_in(0, 90, low_open=True, high_open=True,
+                                                unit="deg"),
+                   help="berry: separation of the neutral-point pairs [deg] (model default 40)")
+    p.add_argument("--out", type=output_file(".csv", ".parquet"),
+                   help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
+    p.add_argument("--plot", type=output_file(".png"),
+                   help="PNG with polar maps of DoP and AoP (multiple: also I and the neutral "
+                        "points)")
     p.set_defaults(func=_sky)
 
     s = sub.add_parser("sample", help="simulate a three-pair sensor sweep (measurement table)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    s.add_argument("--out", required=True, help="output .csv or .parquet (sidecar beside it)")
-    s.add_argument("--lat", type=float, default=34.1447)
-    s.add_argument("--lon", type=float, default=108.5467)
-    s.add_argument("--alt", type=float, default=400.0)
-    s.add_argument("--start", default="2013-05-22T17:10:00+08:00", help="timezone-aware start")
-    s.add_argument("--duration", type=float, default=600.0, help="sweep duration [s]")
-    s.add_argument("--n", type=int, default=181, help="number of samples")
-    s.add_argument("--dmax", type=float, default=0.7)
+                       description="Simulate the three-pair sensor of Yang et al. (2014) on a "
+                                   "turntable under a single-scattering sky: each sweep turns "
+                                   "the heading through 180 deg; several sweeps follow each "
+                                   "other (column 'sweep').",
+                       formatter_class=fmt)
+    s.add_argument("--out", required=True, type=output_file(".csv", ".parquet"),
+                   help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
+    s.add_argument("--lat", type=float_in(-90, 90, unit="deg"), default=34.1447,
+                   help="site latitude [deg, north +]")
+    s.add_argument("--lon", type=float_in(-180, 360, unit="deg"), default=108.5467,
+                   help="site longitude [deg, east +]")
+    s.add_argument("--alt", type=float_in(-500, 9000, unit="m"), default=400.0,
+                   help="site altitude [m]")
+    s.add_argument("--start", type=aware_time, default="2013-05-22T17:10:00+08:00",
+                   help="timezone-aware ISO 8601 start of the first sweep")
+    s.add_argument("--duration", type=nonnegative_float, default=600.0,
+                   help="duration of one sweep [s]")
+    s.add_argument("--n", type=positive_int, default=181, help="samples per sweep")
+    s.add_argument("--sweeps", type=positive_int, default=1,
+                   help="number of sweeps (e.g. 3 for a diagnosis with held-out sweeps)")
+    s.add_argument("--sweep-interval", type=positive_float, default=None,
+                   help="time from one sweep's start to the next [s] (default: --duration "
+                        "+ 60)")
+    s.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True), default=0.7,
+                   help="maximum degree of polarization of the sky")
     s.add_argument("--errors", default="random",
-                   help="'random' (Yang 2014 error model), 'none', or a JSON file of OpponentErrors")
-    s.add_argument("--no-daq", action="store_true", help="disable 16-bit quantisation")
-    s.add_argument("--seed", type=int, default=0)
+                   help="sensor errors: 'random' (Yang 2014 error model), 'none', or a JSON "
+                        "file with misalignment_deg (6 values) [deg], transmittance (3) "
+                        "[log10], noise_V (3) [V], turntable_error_deg [deg]")
+    s.add_argument("--no-daq", action="store_true",
+                   help="no 16-bit quantisation of the outputs (+/-10 V range)")
+    s.add_argument("--seed", type=seed, default=0, help="random seed, >= 0")
     s.set_defaults(func=_sample)
 
     c = sub.add_parser("calibrate", help="LSM compensation of a measurement table",
                        description="Fit each channel pair's mounting errors, transmittance "
                                    "terms and d_max (Yang et al. 2014, eqs. 10-14).")
-    c.add_argument("file", help="measurement table (.csv/.parquet) with its JSON sidecar")
-    c.add_argument("--out", help="write the fitted parameters as JSON")
+    c.add_argument("file", type=existing_file,
+                   help="measurement table (.csv/.parquet) with its JSON sidecar")
+    c.add_argument("--out", type=output_file(".json"), help="write the fitted parameters as JSON")
     c.set_defaults(func=_calibrate)

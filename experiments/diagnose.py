@@ -462,9 +462,9 @@ def _photodiode_instrument(path) -> bool:
     import json
 
     from calibration.photodiode_diagnosis import is_three_pair_sensor
-    from skysim.io import sidecar_path
-    side = sidecar_path(path)
-    if not side.exists():
+    from skysim.io import find_sidecar
+    side = find_sidecar(path)
+    if side is None:
         return False
     try:
         sidecar = json.loads(side.read_text())

@@ -22,6 +22,7 @@ from __future__ import annotations
 
 import hashlib
 import json
+import os
 import zlib
 from dataclasses import dataclass
 from pathlib import Path
@@ -30,12 +31,27 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError
 
+from .argtypes import existing_file, output_dir, output_file
+
 __all__ = ["GROUNDTRUTH_SCHEMA", "TOLERANCES", "GenerateConfigError", "CompareError",
            "dataset_rng", "generate", "compare_tables", "compare_paths", "register"]
 
 GROUNDTRUTH_SCHEMA = "skysim.groundtruth/1"
 SKYMAP_SCHEMA = "skysim.skymap/1"
 _KINDS = ("sky_map", "measurement", "photodiodes")
+_TIMES = {"start", "n", "duration_s"}
+ENTRY_KEYS = {
+    "sky_map": {"name", "format", "sky", "time", "sun_elevation_deg", "sun_azimuth_deg",
+                "grid_step_deg"},
+    "measurement": {"name", "format", "sky", *_TIMES, "errors", "heading_offset_deg",
+                    "daq_bits", "daq_range_V"},
+    "photodiodes": {"name", "format", "sky", *_TIMES, "configuration", "n_units",
+                    "elevation_deg", "installation_error_max_deg", "yaw_start_deg",
+                    "yaw_end_deg", "pitch_deg", "roll_deg", "attitude_noise_deg",
+                    "noise_counts", "sweeps", "sweep_interval_s"},
+}
+"""The keys each kind of entry takes (``docs/ground_truth.md``); any other key is an error."""
+SITE_KEYS = {"latitude_deg", "longitude_deg", "altitude_m", "name"}
 
 TOLERANCES = {
     "dop": 1e-6, "aop_deg": 1e-4, "I": 1e-6, "Q": 1e-6, "U": 1e-6,
@@ -79,20 +95,53 @@ def _key(name: str) -> int:
 # --------------------------------------------------------------------------- generate
 
 
+def _number(entry: dict, key: str, default: float, where: str, low: float = -np.inf) -> float:
+    """``entry[key]`` (or ``default``) as a finite float ``>= low``, else a
+    :class:`GenerateConfigError` naming the entry and key."""
+    v = entry.get(key, default)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not np.isfinite(v) or v < low:
+        bound = f" >= {low:g}" if np.isfinite(low) else ""
+        raise GenerateConfigError(f"{where}: {key} must be a number{bound}; got {v!r}")
+    return float(v)
+
+
+def _count(entry: dict, key: str, default: int | None, where: str) -> int:
+    """``entry[key]`` (or ``default``) as an integer >= 1."""
+    v = entry.get(key, default)
+    if v is None:
+        raise GenerateConfigError(f"{where}: missing {key!r}")
+    if isinstance(v, bool) or not isinstance(v, int) or v < 1:
+        raise GenerateConfigError(f"{where}: {key} must be an integer >= 1; got {v!r}")
+    return v
+
+
 def _times(entry: dict, where: str):
     import pandas as pd
-    for k in ("start", "n"):
-        if k not in entry:
-            raise GenerateConfigError(f"{where}: missing {k!r}")
-    n = int(entry["n"])
-    if n < 1:
-        raise GenerateConfigError(f"{where}: n must be >= 1; got {n}")
-    start = pd.Timestamp(entry["start"])
+    if "start" not in entry:
+        raise GenerateConfigError(f"{where}: missing 'start'")
+    n = _count(entry, "n", None, where)
+    try:
+        start = pd.Timestamp(entry["start"])
+    except (ValueError, TypeError):
+        start = None
+    if start is None or start is pd.NaT:
+        raise GenerateConfigError(f"{where}: start {entry['start']!r} is not an ISO 8601 time; "
+                                  "write e.g. 2013-05-22T17:10:00+08:00")
     if start.tzinfo is None:
         raise GenerateConfigError(f"{where}: start {entry['start']!r} has no UTC offset; write "
                                   "e.g. 2013-05-22T17:10:00+08:00")
-    offsets = np.linspace(0.0, float(entry.get("duration_s", 600.0)), n)
-    return pd.DatetimeIndex(start + pd.to_timedelta(offsets, unit="s"))
+    from skysim.resources import check_memory
+
+    from .commands import SAMPLE_BYTES_PER_SAMPLE
+    check_memory(n * SAMPLE_BYTES_PER_SAMPLE * max(1, entry.get("n_units", 1) / 3)
+                 if isinstance(entry.get("n_units", 1), int) else 0,
+                 f"{n} samples", "lower n")
+    offsets = np.linspace(0.0, _number(entry, "duration_s", 600.0, where, low=0.0), n)
+    try:
+        return pd.DatetimeIndex(start + pd.to_timedelta(offsets, unit="s")).as_unit("ns")
+    except (OverflowError, pd.errors.OutOfBoundsDatetime):
+        raise GenerateConfigError(f"{where}: start {entry['start']!r} plus duration_s is outside "
+                                  "the supported years 1678-2261") from None
 
 
 def _sky(entry: dict, where: str):
@@ -102,8 +151,11 @@ def _sky(entry: dict, where: str):
     try:
         return make_sky(model, **spec)
     except ImportError as exc:
-        raise GenerateConfigError(f"{where}: sky model {model!r} is not available here "
-                                  f"({exc}); install its extra or choose another") from exc
+        from skysim.extras import extra_for_module, missing_extra_message
+        name = exc.name or getattr(exc.__cause__, "name", None)
+        why = missing_extra_message(name, f"sky model {model!r}") if extra_for_module(name) \
+            else f"sky model {model!r} is not available here ({exc})"
+        raise GenerateConfigError(f"{where}: {why}") from exc
     except TypeError as exc:
         raise GenerateConfigError(f"{where}: sky parameters {spec} do not fit model "
                                   f"{model!r} ({exc})") from exc
@@ -119,7 +171,9 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
 
     from skysim.sun import sun_position
 
-    from .commands import AOP_CONVENTION, sky_grid
+    from skysim.resources import check_memory
+
+    from .commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION, sky_grid, sky_grid_size
     sky = _sky(entry, where)
     if "time" in entry:
         pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,
@@ -127,12 +181,18 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
         sun = {"site": site.to_dict(), "time": entry["time"]}
     elif "sun_elevation_deg" in entry and "sun_azimuth_deg" in entry:
-        sun_el, sun_az = float(entry["sun_elevation_deg"]), float(entry["sun_azimuth_deg"])
+        sun_el = _number(entry, "sun_elevation_deg", None, where)
+        sun_az = _number(entry, "sun_azimuth_deg", None, where)
         sun = {}
     else:
         raise GenerateConfigError(f"{where}: give the sun as time (with [site]) or as "
                                   "sun_elevation_deg and sun_azimuth_deg")
-    el, az = sky_grid(float(entry.get("grid_step_deg", 5.0)))
+    step = _number(entry, "grid_step_deg", 5.0, where)
+    if not 0 < step <= 90:
+        raise GenerateConfigError(f"{where}: grid_step_deg must be in (0, 90] [deg]; got {step}")
+    check_memory(sky_grid_size(step) * SKY_BYTES_PER_DIRECTION,
+                 f"{sky_grid_size(step)} sky directions", "use a coarser grid_step_deg")
+    el, az = sky_grid(step)
     f = sky.field(el, az, sun_el, sun_az)
     table = pd.DataFrame({"elevation_deg": el, "azimuth_deg": az, "dop": f.dop,
                           "aop_deg": f.aop_deg, "I": f.I, "Q": f.Q, "U": f.U})
@@ -166,18 +226,18 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     elif errors == "none":
         errors = OpponentErrors()
     elif isinstance(errors, dict):
-        errors = OpponentErrors(**errors)
+        errors = OpponentErrors.from_dict(errors, where=f"{where}: errors")
     else:
         raise GenerateConfigError(f"{where}: errors must be 'random', 'none' or a table of "
                                   f"OpponentErrors fields; got {errors!r}")
     sky = _sky(entry, where)
     times = _times(entry, where)
     _, _, _, sun_az0 = zenith_polarization(sky, site, times[:1], [0.0])
-    headings = (sun_az0[0] + float(entry.get("heading_offset_deg", -90.0))
+    headings = (sun_az0[0] + _number(entry, "heading_offset_deg", -90.0, where)
                 + np.linspace(0.0, 180.0, len(times), endpoint=False))
     bits = entry.get("daq_bits", 16)
-    sensor = OpponentSensor(errors, daq=Daq(None if bits in (0, "none") else int(bits),
-                                            float(entry.get("daq_range_V", 10.0))))
+    sensor = OpponentSensor(errors, daq=Daq(None if bits in (0, "none") else bits,
+                                            entry.get("daq_range_V", 10.0)))
     meas = sensor.sample(sky, site, times, headings, rng, seed=seed)
     meas.sidecar["generator"].update(_generator(entry, seed))
     _write(meas.table, meas.sidecar, path)
@@ -187,27 +247,39 @@ def _photodiodes(entry: dict, site, seed: int, path: Path, where: str) -> None:
     from sensor.compound_eye import (PhotodiodeModel, patent_configuration,
                                      ring_configuration, with_random_installation_errors)
     rng = dataset_rng(seed, entry["name"])
-    pm = PhotodiodeModel(noise_counts=float(entry.get("noise_counts", 3.0)))
+    pm = PhotodiodeModel(noise_counts=_number(entry, "noise_counts", 3.0, where, low=0.0))
     layout = entry.get("configuration", "ring")
     if layout == "ring":
-        sensor = ring_configuration(int(entry.get("n_units", 8)),
-                                    float(entry.get("elevation_deg", 45.0)), photodiode=pm)
+        sensor = ring_configuration(_count(entry, "n_units", 8, where),
+                                    _number(entry, "elevation_deg", 45.0, where), photodiode=pm)
     elif layout == "patent":
-        sensor = patent_configuration(float(entry.get("elevation_deg", 60.0)), photodiode=pm)
+        sensor = patent_configuration(_number(entry, "elevation_deg", 60.0, where),
+                                      photodiode=pm)
     else:
         raise GenerateConfigError(f"{where}: configuration {layout!r} unknown; valid: ring, "
                                   "patent")
-    max_err = float(entry.get("installation_error_max_deg", 0.0))
+    max_err = _number(entry, "installation_error_max_deg", 0.0, where, low=0.0)
     if max_err > 0:
         sensor = with_random_installation_errors(
             sensor, max_err, rng, zenith_unit=0 if layout == "patent" else None)
-    times = _times(entry, where)
-    yaw = np.linspace(float(entry.get("yaw_start_deg", 0.0)),
-                      float(entry.get("yaw_end_deg", 360.0)), len(times), endpoint=False)
+    import pandas as pd
+    one = _times(entry, where)
+    yaw1 = np.linspace(_number(entry, "yaw_start_deg", 0.0, where),
+                       _number(entry, "yaw_end_deg", 360.0, where), len(one), endpoint=False)
+    # several sweeps (one turn each, a sweep column) for a held-out diagnosis
+    n_sweeps = _count(entry, "sweeps", 1, where)
+    span = float((one[-1] - one[0]).total_seconds()) if len(one) > 1 else 0.0
+    every = _number(entry, "sweep_interval_s", span + 60.0, where, low=span)
+    times = pd.DatetimeIndex(np.concatenate([one + pd.Timedelta(seconds=k * every)
+                                             for k in range(n_sweeps)]))
+    yaw = np.tile(yaw1, n_sweeps)
     data = sensor.sample(_sky(entry, where), site, times, yaw,
-                         float(entry.get("pitch_deg", 0.0)), float(entry.get("roll_deg", 0.0)),
-                         rng, attitude_noise_deg=float(entry.get("attitude_noise_deg", 0.0)),
-                         seed=seed)
+                         _number(entry, "pitch_deg", 0.0, where),
+                         _number(entry, "roll_deg", 0.0, where), rng,
+                         attitude_noise_deg=_number(entry, "attitude_noise_deg", 0.0, where,
+                                                    low=0.0),
+                         seed=seed, sweep=np.repeat(np.arange(n_sweeps), len(one))
+                         if n_sweeps > 1 else None)
     data.sidecar["generator"].update(_generator(entry, seed))
     _write(data.table, data.sidecar, path)
 
@@ -226,6 +298,26 @@ def load_generate_config(path) -> dict:
     if not isinstance(raw.get("seed"), int):
         raise GenerateConfigError(f"{path}: 'seed' (an integer) is required so that the data "
                                   "can be regenerated")
+    for kind in _KINDS:
+        entries = raw.get(kind, [])
+        if not isinstance(entries, list) or not all(isinstance(e, dict) for e in entries):
+            raise GenerateConfigError(f"{path}: {kind} must be a list of tables, written "
+                                      f"[[{kind}]]; got {entries!r}")
+        for e in entries:
+            unknown = sorted(set(e) - ENTRY_KEYS[kind])
+            if unknown:
+                raise GenerateConfigError(
+                    f"{path}: [[{kind}]] {e.get('name')!r}: unknown key(s) {unknown}; valid: "
+                    f"{', '.join(sorted(ENTRY_KEYS[kind]))}")
+            if not isinstance(e.get("sky", {}), dict):
+                raise GenerateConfigError(f"{path}: [[{kind}]] {e.get('name')!r}: sky must be a "
+                                          f"table like {{model = \"rayleigh\", dmax = 0.7}}")
+    if "site" in raw:
+        site = raw["site"]
+        if not isinstance(site, dict) or not {"latitude_deg", "longitude_deg"} <= set(site) \
+                or set(site) - SITE_KEYS:
+            raise GenerateConfigError(f"{path}: [site] needs latitude_deg and longitude_deg "
+                                      f"(and optionally altitude_m, name); got {site!r}")
     names = [e.get("name") for k in _KINDS for e in raw.get(k, [])]
     if not names:
         raise GenerateConfigError(f"{path}: nothing to generate; add [[sky_map]], "
@@ -240,30 +332,66 @@ def load_generate_config(path) -> dict:
 
 
 def generate(config: dict, out) -> dict:
-    """Write every entry of ``config`` into ``out`` and a manifest; return the manifest."""
-    from skysim.io import sidecar_path, write_json_atomic
+    """Write every entry of ``config`` into ``out`` and a manifest; return the manifest.
+
+    All files are first written into a staging folder inside ``out`` and moved into place
+    only when every entry succeeded, ``manifest.json`` last: a failed run leaves ``out`` as it
+    was (no data without a manifest, no earlier data set half replaced).
+
+    Raises
+    ------
+    GenerateConfigError
+        For an invalid entry (the message names it); the sky layer's errors for invalid
+        physical inputs are re-raised as this, with the entry named.
+    OutputPathError
+        If ``out`` is a file or not writable.
+    """
+    import shutil
+    import tempfile
+
+    from skysim.io import check_output_dir, sidecar_path, write_json_atomic
     from skysim.sun import Site
-    out = Path(out)
+    out = check_output_dir(out)
+    created = not out.exists()
     out.mkdir(parents=True, exist_ok=True)
     site = Site.from_dict(config["site"]) if "site" in config else None
     files = {}
-    for kind in _KINDS:
-        for entry in config.get(kind, []):
-            where = f"[[{kind}]] {entry['name']!r}"
-            if site is None and (kind != "sky_map" or "time" in entry):
-                raise GenerateConfigError(f"{where}: needs [site] (latitude_deg, "
-                                          "longitude_deg, altitude_m)")
-            fmt = entry.get("format", "csv")
-            if fmt not in ("csv", "parquet"):
-                raise GenerateConfigError(f"{where}: format must be csv or parquet; got {fmt!r}")
-            path = out / f"{entry['name']}.{fmt}"
-            _WRITERS[kind](entry, site, config["seed"], path, where)
-            files[path.name] = {"kind": kind, "sha256": _sha256(path),
-                                "sidecar": sidecar_path(path).name,
-                                "sidecar_sha256": _sha256(sidecar_path(path))}
-    manifest = {"schema": GROUNDTRUTH_SCHEMA, "config": config, "seed": config["seed"],
-                "files": files}
-    write_json_atomic(out / "manifest.json", manifest)
+    staging = Path(tempfile.mkdtemp(prefix=".generate-", dir=out))
+    try:
+        for kind in _KINDS:
+            for entry in config.get(kind, []):
+                where = f"[[{kind}]] {entry['name']!r}"
+                if site is None and (kind != "sky_map" or "time" in entry):
+                    raise GenerateConfigError(f"{where}: needs [site] (latitude_deg, "
+                                              "longitude_deg, altitude_m)")
+                fmt = entry.get("format", "csv")
+                if fmt not in ("csv", "parquet"):
+                    raise GenerateConfigError(f"{where}: format must be csv or parquet; "
+                                              f"got {fmt!r}")
+                path = staging / f"{entry['name']}.{fmt}"
+                try:
+                    _WRITERS[kind](entry, site, config["seed"], path, where)
+                except GenerateConfigError:
+                    raise
+                except InvalidParameterError as exc:
+                    raise GenerateConfigError(f"{where}: {exc}") from exc
+                files[path.name] = {"kind": kind, "sha256": _sha256(path),
+                                    "sidecar": sidecar_path(path).name,
+                                    "sidecar_sha256": _sha256(sidecar_path(path))}
+        manifest = {"schema": GROUNDTRUTH_SCHEMA, "config": config, "seed": config["seed"],
+                    "files": files}
+        write_json_atomic(staging / "manifest.json", manifest)
+        for name, info in files.items():
+            for f in (name, info["sidecar"]):
+                os.replace(staging / f, out / f)
+        os.replace(staging / "manifest.json", out / "manifest.json")
+    except BaseException:
+        shutil.rmtree(staging, ignore_errors=True)
+        if created and not any(out.iterdir()):
+            out.rmdir()            # leave no empty folder behind a failed first run
+        raise
+    finally:
+        shutil.rmtree(staging, ignore_errors=True)
     return manifest
 
 
@@ -402,7 +530,11 @@ def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
         manifest = truth / "manifest.json"
         if not manifest.is_file():
             raise FileNotFoundError(f"{truth} has no manifest.json (not a skysim generate folder)")
-        names = list(json.loads(manifest.read_text())["files"])
+        try:
+            names = list(json.loads(manifest.read_text())["files"])
+        except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
+            raise CompareError(f"{manifest}: not a skysim manifest ({type(exc).__name__}: "
+                               f"{exc})") from None
         pairs = [(theirs / n if theirs.is_dir() else theirs, truth / n) for n in names]
     else:
         pairs = [(theirs, truth)]
@@ -429,13 +561,21 @@ def _parse_tolerances(items) -> dict:
         if name not in TOLERANCES or not value:
             raise ValueError(f"--tol {item!r}: use NAME=VALUE with NAME one of "
                              f"{', '.join(TOLERANCES)}")
-        tol[name] = float(value)
+        try:
+            x = float(value)
+        except ValueError:
+            x = float("nan")
+        if not (np.isfinite(x) and x >= 0):
+            raise ValueError(f"--tol {item!r}: the tolerance must be a number >= 0 (an absolute "
+                             f"error in the unit of {name})")
+        tol[name] = x
     return tol
 
 
 def _compare_command(args) -> int:
     from skysim.io import write_json_atomic
-    report = compare_paths(args.theirs, args.truth, _parse_tolerances(args.tol))
+    tolerances = _parse_tolerances(args.tol)
+    report = compare_paths(args.theirs, args.truth, tolerances)
     for name, rows in report["files"].items():
         print(f"\n{name}")
         print(f"  {'quantity':<24s} {'n':>8s} {'max |err|':>11s} {'RMS':>11s} {'tolerance':>10s}"
@@ -454,8 +594,9 @@ def _compare_command(args) -> int:
 def register(sub) -> None:
     g = sub.add_parser("generate", help="ground-truth sky maps and sensor streams from a TOML "
                                         "configuration (byte-identical for the same seed)")
-    g.add_argument("config", help="configuration (.toml), see docs/ground_truth.md")
-    g.add_argument("--out", required=True, help="output folder")
+    g.add_argument("config", type=existing_file,
+                   help="configuration (.toml), see docs/ground_truth.md")
+    g.add_argument("--out", required=True, type=output_dir, help="output folder")
     g.set_defaults(func=_generate_command)
     c = sub.add_parser("compare", help="compare another implementation's output with "
                                        "generated ground truth (exit 1 on failure)")
@@ -463,5 +604,5 @@ def register(sub) -> None:
     c.add_argument("truth", help="a generated file, or a `skysim generate` folder")
     c.add_argument("--tol", action="append", metavar="NAME=VALUE",
                    help="override a tolerance, e.g. --tol aop_deg=1e-3 (repeatable)")
-    c.add_argument("--report", help="write the comparison as JSON")
+    c.add_argument("--report", type=output_file(".json"), help="write the comparison as JSON")
     c.set_defaults(func=_compare_command)

@@ -1,4 +1,4 @@
-"""Physically based sky (issue 3): validation, neutral points, Berry model, zenith DoP.
+"""Physically based sky: validation, neutral points, Berry model, zenith DoP.
 
 ``skysim reproduce physical-sky`` (or ``skysim physical-sky [--quick]``) writes to
 ``results/physical-sky/``:
@@ -12,12 +12,16 @@
 - ``polar_maps.png``: DoP, AoP and I of the multiple-scattering sky with the neutral points
   marked, beside the Berry and Rayleigh AoP;
 - ``zenith_dop.csv`` and ``zenith_dop.png``: zenith DoP vs sun elevation for single
-  scattering, multiple scattering (black ground and albedo 0.25) and Berry, with the issue's
-  quoted numbers (0.72, 0.63, 0.53 at mu0 = 0.4);
+  scattering, multiple scattering (black ground and albedo 0.25) and Berry, with the tables'
+  numbers (0.72, 0.63, 0.53 at mu0 = 0.4);
 - ``summary.json``.
 
 Nothing is fitted to the tables: the engine set-up is fixed by convergence studies
 (``docs/physical_sky.md``); Berry's delta is set from the multiple-scattering neutral points.
+
+The tables ship with skysim (``experiments/data/natraj2009/``: the transmitted rows of the
+subset, view cosines >= 0.1, with the script that builds them); ``--reference`` reads
+another copy of the tables.
 """
 
 from __future__ import annotations
@@ -31,6 +35,9 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
+from .argtypes import output_dir
+from .figures import save_png
+
 __all__ = [
     "NATRAJ_FILE",
     "neutral_point_curves",
@@ -41,16 +48,36 @@ __all__ = [
     "zenith_dop_curves",
 ]
 
-NATRAJ_FILE = (Path(__file__).resolve().parents[2] / "shared" / "reference" / "natraj2009"
-               / "natraj2009_subset.csv.gz")
+NATRAJ_FILE = Path(__file__).with_name("data") / "natraj2009" / "natraj2009_transmitted.csv.gz"
+"""The Natraj et al. (2009) rows shipped with skysim (transmitted field, mu >= 0.1; built by
+``build_natraj2009_transmitted.py`` beside it from the published subset)."""
+NATRAJ_NAMES = ("natraj2009_subset.csv.gz", "natraj2009_transmitted.csv.gz")
+NATRAJ_COLUMNS = ("tau", "albedo", "mu0", "mu", "phi", "I", "Q", "U", "field")
 MU0_04_ELEVATION_DEG = float(np.degrees(np.arcsin(0.4)))
 QUICK_CASES = [(0.02, 0.0, 0.4), (0.25, 0.0, 0.4), (0.25, 0.25, 0.4), (1.0, 0.25, 0.1)]
 
 
-def _save_png(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
+def natraj_path(reference=None) -> Path:
+    """The Natraj table file: the shipped one (``reference`` None), the file ``reference``, or
+    the first of :data:`NATRAJ_NAMES` in the folder ``reference`` or its ``natraj2009/``.
+
+    Raises
+    ------
+    FileNotFoundError
+        If ``reference`` is neither such a file nor a folder holding one.
+    """
+    if reference is None:
+        return NATRAJ_FILE
+    ref = Path(reference)
+    if ref.is_file():
+        return ref
+    for folder in (ref, ref / "natraj2009"):
+        for name in NATRAJ_NAMES:
+            if (folder / name).is_file():
+                return folder / name
+    raise FileNotFoundError(f"--reference {ref}: no Natraj table there; give the table file or "
+                            f"a folder holding {' or '.join(NATRAJ_NAMES)} (directly or in "
+                            "natraj2009/)")
 
 
 def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
@@ -60,14 +87,28 @@ def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
     Raises
     ------
     FileNotFoundError
-        If the table is missing (it lives in ``../shared/reference/natraj2009/``).
+        If the table is missing.
+    ValueError
+        If it is not a readable CSV with the columns :data:`NATRAJ_COLUMNS`, or holds no
+        transmitted rows at ``mu >= min_mu``.
     """
     path = Path(table_path)
     if not path.is_file():
-        raise FileNotFoundError(f"{path} not found: give the reference folder holding "
-                                "natraj2009/natraj2009_subset.csv.gz")
-    d = pd.read_csv(path)
-    return d[(d.field == "transmitted") & (d.mu >= min_mu)]
+        raise FileNotFoundError(f"no Natraj table {path}; give --reference with the table file "
+                                f"or a folder holding {' or '.join(NATRAJ_NAMES)}")
+    try:
+        d = pd.read_csv(path)
+    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
+            EOFError) as exc:
+        raise ValueError(f"{path}: not a readable Natraj table ({exc})") from None
+    missing = [c for c in NATRAJ_COLUMNS if c not in d.columns]
+    if missing:
+        raise ValueError(f"{path}: missing column(s) {missing} of a Natraj table; found "
+                         f"{list(d.columns)}")
+    d = d[(d.field == "transmitted") & (d.mu >= min_mu)]
+    if d.empty:
+        raise ValueError(f"{path}: no transmitted-field rows with mu >= {min_mu}")
+    return d
 
 
 def validate_against_natraj(table_path=NATRAJ_FILE, cases=None, min_mu: float = 0.1):
@@ -162,7 +203,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
     fig.suptitle(f"Multiple-scattering sky vs Natraj et al. (2009): {len(per_case)} cases, "
                  f"{len(points)} points (mu >= 0.1)", fontsize=9)
     fig.tight_layout()
-    _save_png(fig, out / "validation_hist.png")
+    save_png(fig, out / "validation_hist.png")
 
     fig, ax = plt.subplots(figsize=(6.5, 4.2))
     for (tau, albedo), g in npts.groupby(["tau", "albedo"]):
@@ -176,7 +217,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
                  fontsize=9)
     ax.legend(fontsize=6, ncol=2)
     fig.tight_layout()
-    _save_png(fig, out / "neutral_points.png")
+    save_png(fig, out / "neutral_points.png")
 
     fig, ax = plt.subplots(figsize=(6, 4))
     for col in zen.columns[2:]:
@@ -186,10 +227,11 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
     ax.axvline(MU0_04_ELEVATION_DEG, color="grey", lw=0.5)
     ax.set_xlabel("sun elevation [deg]")
     ax.set_ylabel("DoP at the zenith")
-    ax.set_title("Zenith DoP; crosses: issue's 0.72 / 0.63 / 0.53 at mu0 = 0.4", fontsize=9)
+    ax.set_title("Zenith DoP; crosses: 0.72 / 0.63 / 0.53 at mu0 = 0.4 (Natraj et al. 2009)",
+                 fontsize=9)
     ax.legend(fontsize=7)
     fig.tight_layout()
-    _save_png(fig, out / "zenith_dop.png")
+    save_png(fig, out / "zenith_dop.png")
 
     el, az, sun, fields, marks = maps
     ms, berry, single = fields
@@ -199,11 +241,15 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
                              "AoP [deg] (Berry)": (berry.aop_deg, "twilight", (-90, 90)),
                              "AoP [deg] (single)": (single.aop_deg, "twilight", (-90, 90))},
                     out / "polar_maps.png", sun=sun, marks=marks,
-                    title="tau = 0.25, albedo = 0.25; x: neutral points (multiple scattering)")
+                    title=f"tau 0.25, albedo 0.25; sun elevation {sun[0]:g}°, azimuth "
+                          f"{sun[1]:g}°; x: neutral points (multiple scattering)")
 
 
-def run(out: Path, quick: bool = False) -> dict:
-    """Run everything; return the tables and a summary dict."""
+def run(out: Path, quick: bool = False, reference=None) -> dict:
+    """Run everything; return the tables and a summary dict.
+
+    ``reference``: another copy of the Natraj tables (:func:`natraj_path`); default the
+    shipped rows."""
     from skysim.berry import BerrySky
     from skysim.multiple import MultipleScatteringSky
     from skysim.neutral_points import neutral_points
@@ -213,10 +259,8 @@ def run(out: Path, quick: bool = False) -> dict:
 
     t0 = time.perf_counter()
     out = Path(out)
-    if not NATRAJ_FILE.is_file():
-        raise FileNotFoundError(f"reference tables not found at {NATRAJ_FILE} (they live in "
-                                "../shared/reference beside the repository)")
-    per_case, points = validate_against_natraj(cases=QUICK_CASES if quick else None)
+    table = natraj_path(reference)
+    per_case, points = validate_against_natraj(table, cases=QUICK_CASES if quick else None)
     suns = [5.0, MU0_04_ELEVATION_DEG, 45.0] if quick else \
         [3.0, 6.0, 10.0, 15.0, MU0_04_ELEVATION_DEG, 30.0, 40.0, 50.0, 60.0, 70.0]
     configs = [(0.25, 0.0), (0.25, 0.25)]
@@ -256,10 +300,10 @@ def run(out: Path, quick: bool = False) -> dict:
         "zenith_dop_mu0_0.4": {"single": float(row04.single_scattering),
                                "tau0.25_A0": float(row04["multiple_tau0.25_A0"]),
                                "tau0.25_A0.25": float(row04["multiple_tau0.25_A0.25"]),
-                               "issue": [0.72, 0.63, 0.53]},
+                               "natraj2009": [0.72, 0.63, 0.53]},
         "aop_rms_over_sky": aop_rms,
         "elapsed_s": time.perf_counter() - t0,
-        "config": {"reference": str(NATRAJ_FILE), "min_mu": 0.1,
+        "config": {"reference": str(table), "min_mu": 0.1,
                    "cases": "quick subset " + repr(QUICK_CASES) if quick else "all shared",
                    "sun_elevations_deg": suns, "neutral_point_configs": configs,
                    "map_sun": sun, "sky": MultipleScatteringSky(tau=0.25).describe()},
@@ -287,7 +331,8 @@ def _print(result, out: Path) -> None:
           f"{'met' if s['acceptance_2e-3'] else 'NOT met'})")
     z = s["zenith_dop_mu0_0.4"]
     print(f"  zenith DoP at mu0 = 0.4: single {z['single']:.3f}, tau 0.25 black ground "
-          f"{z['tau0.25_A0']:.3f}, albedo 0.25 {z['tau0.25_A0.25']:.3f} (issue: 0.72/0.63/0.53)")
+          f"{z['tau0.25_A0']:.3f}, albedo 0.25 {z['tau0.25_A0.25']:.3f} (tables: "
+          "0.72/0.63/0.53)")
     cols = ["tau", "albedo", "sun_elevation_deg", "babinet_distance_deg",
             "brewster_distance_deg", "arago_distance_deg", "berry_delta_deg"]
     print(result["neutral_points"][cols].to_string(index=False, float_format=lambda x: f"{x:.2f}"))
@@ -303,9 +348,12 @@ def _print(result, out: Path) -> None:
 def _reproduce(args) -> int:
     quick = bool(getattr(args, "quick", False)) or (args.trials is not None and args.trials < 10)
     out = Path(args.out or "results/physical-sky")
-    result = run(out, quick=quick)
+    result = run(out, quick=quick, reference=getattr(args, "reference", None))
     _print(result, out)
     return 0
+
+
+_reproduce.takes_reference = True
 
 
 def register_reproduce(targets: dict) -> None:
@@ -314,8 +362,11 @@ def register_reproduce(targets: dict) -> None:
 
 def register(sub) -> None:
     p = sub.add_parser("physical-sky", help="multiple-scattering sky: validation vs the Natraj "
-                       "tables, neutral points, Berry model, zenith DoP (issue 3)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+                       "tables, neutral points, Berry model, zenith DoP")
     p.add_argument("--quick", action="store_true", help="4 table cases, 3 sun elevations")
-    p.add_argument("--out", default=None, help="output folder (default results/physical-sky)")
+    p.add_argument("--reference", default=None,
+                   help="another copy of the Natraj et al. (2009) tables: the file, or a folder "
+                        "holding it (default: the tables shipped with skysim)")
+    p.add_argument("--out", type=output_dir, default=None,
+                   help="output folder (default: results/physical-sky)")
     p.set_defaults(func=lambda a: _reproduce(argparse.Namespace(trials=None, **vars(a))))

@@ -1,4 +1,4 @@
-"""Sky-level gap on the Natraj et al. (2009) tables (issue 7): ``skysim sky-gap``.
+"""Sky-level gap on the Natraj et al. (2009) tables: ``skysim sky-gap``.
 
 For each atmosphere of the shared subset (tau in {0.02, 0.1, 0.25, 1.0}, ground albedo in
 {0, 0.25}; transmitted field, view cosines >= 0.1 as in ``skysim physical-sky``) the cases are
@@ -25,7 +25,9 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .physical_sky import NATRAJ_FILE, read_natraj
+from .argtypes import output_dir
+from .figures import save_png
+from .physical_sky import natraj_path, read_natraj
 
 __all__ = ["CALIBRATION_MU0", "NOISE_FLOOR", "cases_from_natraj", "register",
            "register_reproduce", "run"]
@@ -38,18 +40,11 @@ QUICK_CONFIGS = ((0.25, 0.0), (0.25, 0.25))
 MAP_MU0 = 0.4
 
 
-def _save_png(fig, path: Path) -> None:
-    import matplotlib.pyplot as plt
-    atomic_write(path, lambda tmp: fig.savefig(tmp, dpi=110, format="png"))
-    plt.close(fig)
-
-
 def natraj_table(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
-    """The Natraj 2009 transmitted rows from ``reference`` (a folder holding ``natraj2009/``),
-    or from ``../shared/reference`` by default (:func:`experiments.physical_sky.read_natraj`)."""
-    path = NATRAJ_FILE if reference is None else (Path(reference) / "natraj2009"
-                                                  / "natraj2009_subset.csv.gz")
-    return read_natraj(path, min_mu)
+    """The Natraj 2009 transmitted rows from ``reference`` (a table file or a folder holding
+    one, :func:`experiments.physical_sky.natraj_path`), by default the rows shipped with
+    skysim (:func:`experiments.physical_sky.read_natraj`)."""
+    return read_natraj(natraj_path(reference), min_mu)
 
 
 def cases_from_natraj(rows: pd.DataFrame):
@@ -101,7 +96,7 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
         ax.set_title(f"{key}: verdict {d['verdict']['effect']}", fontsize=8)
         ax.legend(fontsize=6)
     fig.tight_layout()
-    _save_png(fig, out / "gap_by_slice.png")
+    save_png(fig, out / "gap_by_slice.png")
 
     fig, axes = plt.subplots(len(maps), 2, figsize=(7, 3.2 * len(maps)), squeeze=False,
                              subplot_kw={"projection": "polar"})
@@ -117,7 +112,7 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
             fig.colorbar(sc, ax=ax, fraction=0.04)
     fig.suptitle("|(dq, du)| over the withheld sky (sun at azimuth 0)", fontsize=8)
     fig.tight_layout()
-    _save_png(fig, out / "residual_maps.png")
+    save_png(fig, out / "residual_maps.png")
 
 
 def _report(summary: pd.DataFrame, docs: dict, meta: dict) -> str:
@@ -183,7 +178,7 @@ def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
     meta = {"schema": "skysim.skygap-summary/1", "quick": quick,
             "calibration_mu0": list(CALIBRATION_MU0), "noise_floor": NOISE_FLOOR,
             "engine_settings": settings.to_dict(), "elapsed_s": time.perf_counter() - t0,
-            "reference": str(NATRAJ_FILE if reference is None else reference),
+            "reference": str(natraj_path(reference)),
             "rows": summary.to_dict(orient="records")}
     _figures(out, docs, maps)
     atomic_write(out / "summary.csv", lambda p: summary.to_csv(p, index=False))
@@ -202,19 +197,26 @@ def _main(args) -> int:
     return 0
 
 
-def register_reproduce(targets: dict) -> None:
-    targets["sky-gap"] = lambda a: _main(argparse.Namespace(
-        out=a.out, reference=None,
+def _reproduce(a) -> int:
+    return _main(argparse.Namespace(
+        out=a.out, reference=getattr(a, "reference", None),
         quick=bool(getattr(a, "quick", False)) or (a.trials is not None and a.trials < 10)))
+
+
+_reproduce.takes_reference = True
+
+
+def register_reproduce(targets: dict) -> None:
+    targets["sky-gap"] = _reproduce
 
 
 def register(sub) -> None:
     p = sub.add_parser("sky-gap", help="sky-level gap: single scattering vs the Natraj tables, "
-                       "which effect explains it, on withheld suns (issue 7)",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    p.add_argument("--reference", type=Path, default=None,
-                   help="folder holding natraj2009/natraj2009_subset.csv.gz "
-                        "(default ../shared/reference)")
-    p.add_argument("--out", default=None, help="output folder (default results/sky-gap)")
+                       "which effect explains it, on withheld suns")
+    p.add_argument("--reference", default=None,
+                   help="another copy of the Natraj et al. (2009) tables: the file, or a folder "
+                        "holding it (default: the tables shipped with skysim)")
+    p.add_argument("--out", type=output_dir, default=None,
+                   help="output folder (default: results/sky-gap)")
     p.add_argument("--quick", action="store_true", help="two atmospheres, coarser tau search")
     p.set_defaults(func=_main)

@@ -48,17 +48,22 @@ from __future__ import annotations
 import json
 import math
 import time
+from collections.abc import Sequence
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
+from skysim.exceptions import InvalidParameterError
+
+from .argtypes import existing_file, output_dir, positive_int
+from .figures import pyplot, save_png
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
-           "simulate_trials", "evaluate_trials", "ephemeris_sun_elevation", "ChunkTask",
-           "plan_chunks", "run_chunk", "run_sweep", "sensitivity_indices", "summary_table",
-           "register"]
+           "simulate_trials", "evaluate_trials", "ephemeris_sun_elevation", "ChunkPlan",
+           "ChunkTask", "check_sweep_memory", "expected_trials", "plan_chunks", "run_chunk",
+           "run_sweep", "sensitivity_indices", "summary_table", "register"]
 
 BLOCK_TRIALS = 64
 """Trials per random-number block (the unit of seeding; chunks are whole blocks)."""
@@ -385,17 +390,79 @@ def chunk_trials(cfg: SweepConfig) -> int:
     return blocks * BLOCK_TRIALS
 
 
+class ChunkPlan(Sequence):
+    """The chunks of a sweep as a lazy sequence: task ``k`` is made when it is asked for, so
+    planning takes constant time and memory whatever the number of trials."""
+
+    def __init__(self, cfg: SweepConfig, out: Path, digest: str, n_trials: int, X=None,
+                 conditions=None):
+        self.cfg, self.out, self.digest, self.n_trials = cfg, Path(out), digest, n_trials
+        self.X, self.conditions = X, conditions
+        self.size = chunk_trials(cfg)
+
+    def __len__(self) -> int:
+        return -(-self.n_trials // self.size)
+
+    def __getitem__(self, k):
+        if isinstance(k, slice):
+            return [self[i] for i in range(*k.indices(len(self)))]
+        if k < 0:
+            k += len(self)
+        if not 0 <= k < len(self):
+            raise IndexError(f"chunk {k} of {len(self)}")
+        start = k * self.size
+        stop = min(start + self.size, self.n_trials)
+        return ChunkTask(self.cfg, k, start, stop,
+                         str(self.out / "chunks" / f"chunk-{k:06d}.parquet"), self.digest,
+                         None if self.X is None else self.X[start:stop],
+                         None if self.conditions is None else self.conditions[start:stop])
+
+
 def plan_chunks(cfg: SweepConfig, out: Path, digest: str, n_trials: int, X=None,
-                conditions=None) -> list[ChunkTask]:
-    """Split the sweep into memory-bounded chunks of whole seed blocks."""
-    size = chunk_trials(cfg)
-    tasks = []
-    for k, start in enumerate(range(0, n_trials, size)):
-        stop = min(start + size, n_trials)
-        tasks.append(ChunkTask(cfg, k, start, stop, str(out / "chunks" / f"chunk-{k:06d}.parquet"),
-                               digest, None if X is None else X[start:stop],
-                               None if conditions is None else conditions[start:stop]))
-    return tasks
+                conditions=None) -> ChunkPlan:
+    """Split the sweep into memory-bounded chunks of whole seed blocks (a lazy sequence of
+    :class:`ChunkTask`)."""
+    return ChunkPlan(cfg, out, digest, n_trials, X, conditions)
+
+
+ANALYSIS_BYTES_PER_VALUE = 24
+"""Memory of one analysed value of one trial [bytes]: the float64 read from
+``trials.parquet`` (8 B), Arrow's buffer while converting and pandas' copies in the grouped
+statistics (2 x 8 B)."""
+
+
+def expected_trials(cfg: SweepConfig) -> int:
+    """Number of trials :func:`design` makes, without making it: Monte-Carlo ``trials``;
+    Sobol (first and total order) ``N (G + 2)``, Morris ``N (G + 1)`` per sun-elevation
+    condition, G the number of varying factors (groups count once) [2]_."""
+    if cfg.method == "montecarlo":
+        return cfg.trials
+    g = len(cfg.factors)
+    per = cfg.base_samples * (g + 2 if cfg.method == "sobol" else g + 1)
+    return per * max(1, len(cfg.conditions))
+
+
+def check_sweep_memory(cfg: SweepConfig, workers: int = 1) -> None:
+    """Refuse a sweep whose design or analysis would not fit in memory (the chunks stream,
+    but the summary and indices hold the analysed columns of every trial), or whose chunks,
+    ``workers`` at a time on this machine, would not.
+
+    Raises
+    ------
+    MemoryLimitError
+        With the estimate and the limit.
+    """
+    from skysim.resources import check_memory
+    n = expected_trials(cfg)
+    size = min(chunk_trials(cfg), n)
+    check_memory(workers * size * cfg.stops * BYTES_PER_TRIAL_STOP,
+                 f"{workers} chunk(s) of {size} trials x {cfg.stops} stops at a time",
+                 "lower [execution] memory_mb or chunk_trials, or --workers")
+    values = len(analysis_columns(cfg)) + (2 * len(salib_problem(cfg)["names"])
+                                           if cfg.method != "montecarlo" else 0)
+    check_memory(n * values * ANALYSIS_BYTES_PER_VALUE,
+                 f"the analysis of {n} trials ({values} values each)",
+                 "lower [sweep] trials or [sensitivity] base_samples")
 
 
 _META_KEY = b"skysim.sweep"
@@ -577,29 +644,27 @@ def dominant_factors(indices, cfg: SweepConfig) -> list[dict]:
 # --------------------------------------------------------------------------- figures
 
 
-def _pyplot():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
-
-
-def _finish(plt, fig, ax, path, xlabel: str, ylabel: str, **legend) -> None:
+def _finish(fig, ax, path, xlabel: str, ylabel: str, **legend) -> None:
     """Log y axis, labels, legend; save as PNG and close."""
     ax.set_yscale("log")
     ax.set_xlabel(xlabel)
     ax.set_ylabel(ylabel)
     ax.legend(**legend)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_indices(indices, cfg: SweepConfig, path) -> None:
     """Bar charts of the sensitivity indices: one panel per output kind and sun elevation."""
-    plt = _pyplot()
+    plt = pyplot()
     key, conf = ("ST", "ST_conf") if cfg.method == "sobol" else ("mu_star", "mu_star_conf")
     groups = sorted(indices.sun_elevation_deg.unique())
+    varied = any(p.name == "sun_elevation_deg" and not p.fixed for p in cfg.parameters)
+
+    def sun_label(el: float) -> str:
+        if varied and not cfg.conditions:  # one design over the sun elevation as a factor
+            return "sun elevation a factor of the design"
+        return f"sun elevation {el:g}°"
     kinds = sorted(indices.output.str.split("_").str[0].unique())
     fig, axes = plt.subplots(len(kinds), len(groups), squeeze=False,
                              figsize=(4.2 * len(groups), 3.4 * len(kinds)))
@@ -619,18 +684,17 @@ def plot_indices(indices, cfg: SweepConfig, path) -> None:
                                marker="_", s=60, zorder=3)
             ax.set_xticks(np.arange(len(factors)) + 0.4 - width / 2, factors, rotation=45,
                           ha="right", fontsize=7)
-            ax.set_title(f"{kind} 3σ, sun elevation {el:g}°", fontsize=9)
+            ax.set_title(f"{kind} 3σ, {sun_label(el)}", fontsize=9)
             ax.set_ylabel("Sobol ST (bar), S1 (—)" if cfg.method == "sobol"
                           else "Morris μ* [deg]")
             ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(path, dpi=110)
-    plt.close(fig)
+    save_png(fig, path)
 
 
 def plot_error_vs_elevation(summary, path) -> None:
     """Median and 5-95 % band of raw and compensated 3 sigma against sun elevation."""
-    plt = _pyplot()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     for pair, g in summary.groupby("pair"):
         for kind, style in (("raw", "--"), ("compensated", "-")):
@@ -640,7 +704,7 @@ def plot_error_vs_elevation(summary, path) -> None:
                             marker="o", label=f"{kind}, pair {pair}")
             ax.fill_between(g.sun_elevation_deg, g[f"{kind}_3sigma_p05_deg"],
                             g[f"{kind}_3sigma_p95_deg"], color=line.get_color(), alpha=0.12)
-    _finish(plt, fig, ax, path, "sun elevation [deg]",
+    _finish(fig, ax, path, "sun elevation [deg]",
             "heading error 3σ [deg] (median, 5–95 %)", fontsize=7, ncol=2)
 
 
@@ -651,7 +715,7 @@ PLOT_MAX_POINTS = 20_000
 def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
     """Heading error 3 sigma against channel noise (first :data:`PLOT_MAX_POINTS` trials),
     first pair."""
-    plt = _pyplot()
+    plt = pyplot()
     tag = _pair_tags(cfg)[0]
     fig, ax = plt.subplots(figsize=(6.4, 4.2))
     trials = trials.iloc[:PLOT_MAX_POINTS]
@@ -661,7 +725,7 @@ def plot_error_vs_noise(trials, cfg: SweepConfig, path) -> None:
         if col in trials:
             ax.scatter(noise_mV, trials[col], s=3, alpha=0.3, color=colour,
                        label=f"{kind}, pair {tag[1]}-{tag[2]}")
-    _finish(plt, fig, ax, path, "channel noise σ [mV]", "heading error 3σ [deg]",
+    _finish(fig, ax, path, "channel noise σ [mV]", "heading error 3σ [deg]",
             fontsize=8, markerscale=4)
 
 
@@ -706,12 +770,22 @@ def analysis_columns(cfg: SweepConfig) -> list[str]:
                                "noise_V", *factors, *output_columns(cfg), *extra]))
 
 
+def _remove_temporaries(folder: Path) -> None:
+    """Remove the temporary files of chunks whose worker was stopped mid-write (a finished
+    chunk is renamed into place atomically, so these are never results)."""
+    for tmp in Path(folder).glob(".tmp-*"):
+        tmp.unlink(missing_ok=True)
+
+
 def _check_state(out: Path, cfg: SweepConfig, digest: str) -> None:
+    """Refuse an ``out`` holding results of another sweep; a ``sweep.json`` without any chunk
+    (a run that failed before computing) is no result and is replaced."""
     manifest = out / "sweep.json"
-    if manifest.exists():
+    has_results = any((out / "chunks").glob("chunk-*.parquet")) or (out / "trials.parquet").exists()
+    if manifest.is_file() and has_results:
         try:
             old = json.loads(manifest.read_text()).get("digest")
-        except json.JSONDecodeError:
+        except (json.JSONDecodeError, UnicodeDecodeError, AttributeError):
             old = None
         if old is not None and old != digest:
             raise SweepStateError(
@@ -741,10 +815,20 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
     from skysim.io import atomic_write, write_json_atomic
 
     from .sweep_backends import run_tasks
+    from skysim.io import check_output_dir
+    from skysim.sky import make_sky
     t0 = time.perf_counter()
-    out = Path(out)
+    out = check_output_dir(out)
     digest = cfg.digest()
     _check_state(out, cfg, digest)
+    sky = dict(cfg.sky)
+    try:  # a bad sky fails here, before any state is written, not in the first worker
+        make_sky(sky.pop("model"), **sky)
+    except InvalidParameterError as exc:
+        raise SweepConfigError(f"[sky] {exc}") from None
+    from .sweep_backends import default_workers
+    local = backend == "local" or not scheduler   # a remote cluster has its own memory
+    check_sweep_memory(cfg, (workers or default_workers()) if local else 1)
     n_trials, X, conditions = design(cfg)
     if cfg.uses_ephemeris and X is not None:  # a SALib design: every sun checked up front
         ephemeris_sun_elevation(cfg, trial_parameters(cfg, n_trials, None, X, conditions))
@@ -756,6 +840,7 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
             if why != "missing":
                 log(f"chunk {task.index}: {why}; recomputing")
             todo.append(task)
+    _remove_temporaries(out / "chunks")   # of chunks a killed run cut short
     manifest = {"schema": "skysim.sweep/1", "digest": digest, "config": cfg.to_dict(),
                 "n_trials": n_trials, "chunk_trials": chunk_trials(cfg), "chunks": len(tasks)}
     (out / "chunks").mkdir(parents=True, exist_ok=True)
@@ -767,8 +852,12 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
         reports = run_tasks(run_chunk, todo, backend=backend, scheduler=scheduler,
                             workers=workers, progress=progress, desc=cfg.name)
     except KeyboardInterrupt:
+        _remove_temporaries(out / "chunks")
         log(f"interrupted: finished chunks are kept in {out / 'chunks'}; rerun the same "
             "command to resume")
+        raise
+    except BaseException:
+        _remove_temporaries(out / "chunks")
         raise
     compute_s = time.perf_counter() - t_run
     atomic_write(out / "trials.parquet", lambda p: concatenate_chunks(tasks, p))
@@ -823,12 +912,14 @@ def register(sub) -> None:
     p = sub.add_parser("sweep", help="error-sensitivity sweep (Monte-Carlo, Sobol, Morris)",
                        description="Run a sweep configured in TOML (see docs/sweeps.md); "
                                    "interrupted sweeps resume from their chunks.")
-    p.add_argument("config", help="sweep configuration (.toml)")
-    p.add_argument("--backend", choices=("local", "dask"), default="local")
+    p.add_argument("config", type=existing_file, help="sweep configuration (.toml)")
+    p.add_argument("--backend", choices=("local", "dask"), default="local",
+                   help="local processes, or dask.distributed (extra 'sweep')")
     p.add_argument("--scheduler", help="dask scheduler address (default: a LocalCluster)")
-    p.add_argument("--workers", type=int, help="processes / LocalCluster workers "
-                                               "(default: usable cores)")
-    p.add_argument("--out", help="output folder (default results/sweep_<name>)")
-    p.add_argument("--no-figures", action="store_true")
-    p.add_argument("--no-progress", action="store_true")
+    p.add_argument("--workers", type=positive_int, help="processes / LocalCluster workers "
+                                                        "(default: usable cores)")
+    p.add_argument("--out", type=output_dir,
+                   help="output folder (default: results/sweep_<name>)")
+    p.add_argument("--no-figures", action="store_true", help="write no figures")
+    p.add_argument("--no-progress", action="store_true", help="no progress bar")
     p.set_defaults(func=_sweep_command)

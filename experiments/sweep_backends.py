@@ -49,7 +49,7 @@ def _run_local(fn, tasks, workers, bar, on_done):
             bar.update(1)
         return
     from concurrent.futures import FIRST_COMPLETED, ProcessPoolExecutor, wait
-    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)))
+    pool = ProcessPoolExecutor(max_workers=min(workers, len(tasks)), initializer=_worker_init)
     try:
         pending = {pool.submit(fn, t) for t in tasks}
         while pending:
@@ -58,17 +58,30 @@ def _run_local(fn, tasks, workers, bar, on_done):
                 on_done(fut.result())
                 bar.update(1)
     except BaseException:
+        # Ctrl-C or a failed chunk: stop now, not after the queued chunks (finished chunks
+        # are on disk; the caller removes the temporary files of the chunks cut short)
+        procs = list((getattr(pool, "_processes", None) or {}).values())  # before shutdown
         pool.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
         raise
     pool.shutdown(wait=True)
+
+
+def _worker_init() -> None:
+    """Worker processes leave Ctrl-C to the parent, which stops them (SIGTERM: the pool's
+    worker loop would catch an exception raised in a signal handler and carry on)."""
+    import signal
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
 
 
 def _connect(scheduler: str | None, workers: int, timeout_s: float):
     try:
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise ImportError("the dask backend needs dask.distributed: "
-                          "pip install 'skysim[sweep]' (or 'dask[distributed]')") from exc
+        from skysim.extras import missing_extra_message
+        raise ImportError(missing_extra_message("distributed", "the dask backend"),
+                          name="distributed") from exc
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{timeout_s}s"), None

@@ -322,12 +322,18 @@ def parse_config(raw: dict) -> SweepConfig:
     if not memory > 0:
         raise SweepConfigError(f"[execution] memory_mb must be > 0; got {memory}")
     bits = sensor.get("daq_bits", 16)
+    bits = None if bits in (None, 0, "none") else bits
+    try:
+        from sensor.daq import Daq
+        Daq(bits, sensor.get("daq_range_V", 10.0))
+    except InvalidParameterError as exc:
+        raise SweepConfigError(f"[sensor] {exc}") from None
     return SweepConfig(
         name=str(sw.get("name", "sweep")), method=method, trials=counts["trials"],
         base_samples=counts["base_samples"], morris_levels=int(sens.get("morris_levels", 4)),
         seed=int(sw.get("seed", 0)), year=year, parameters=params, conditions=conditions,
         stops=counts["stops"], pairs=pairs, calibrate=bool(sw.get("calibrate", True)), sky=sky,
-        daq_bits=None if bits in (None, 0, "none") else int(bits),
+        daq_bits=bits,
         daq_range_V=float(sensor.get("daq_range_V", 10.0)), chunk_trials=chunk,
         memory_mb=memory)
 

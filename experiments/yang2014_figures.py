@@ -9,19 +9,14 @@ import numpy as np
 from calibration.solve import PAIRS, heading_error_deg
 from sensor.opponent import channel_outputs
 
+from .figures import pyplot, save_png
+
 __all__ = ["plot_error_vs_phi", "plot_table1_bands"]
-
-
-def _plt():
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    return plt
 
 
 def plot_error_vs_phi(result: dict, out: Path) -> None:
     """Fig. 3: channel outputs vs phi; Fig. 4: ideal-model error; Fig. 5: compensated error."""
-    plt = _plt()
+    plt = pyplot()
     ex = result["examples"]
     groups = sorted({g for g, _ in ex})
     # Fig. 3 analogue: measured outputs and the ideal model, group a
@@ -37,8 +32,7 @@ def plot_error_vs_phi(result: dict, out: Path) -> None:
            title=f"Fig. 3 analogue: outputs vs φ, group {groups[0]} (lines: ideal model)")
     ax.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "fig3_outputs_vs_phi.png", dpi=120)
-    plt.close(fig)
+    save_png(fig, out / "fig3_outputs_vs_phi.png", dpi=120)
 
     for fig_no, kind in ((4, "ideal model (uncompensated)"), (5, "after LSM compensation")):
         fig, axes = plt.subplots(len(groups), 1, figsize=(6.4, 2.4 * len(groups)), sharex=True)
@@ -54,18 +48,17 @@ def plot_error_vs_phi(result: dict, out: Path) -> None:
                 ax.plot(x[o], y[o], ".-", ms=2, lw=0.6, label=f"pair {pair[0]}-{pair[1]}")
             ax.set_ylabel(f"group {g}\nerror [deg]")
             ax.grid(alpha=0.3)
-        np.atleast_1d(axes)[0].set_title(f"Fig. {fig_no} analogue: heading error, {kind} (trial 0)")
+        fig.suptitle(f"Fig. {fig_no} analogue: heading error, {kind}, trial 0", fontsize=10)
         np.atleast_1d(axes)[0].legend(fontsize=7, ncol=3)
         np.atleast_1d(axes)[-1].set_xlabel("polarization azimuth φ [deg]")
         fig.tight_layout()
-        fig.savefig(out / f"fig{fig_no}_error_{'raw' if fig_no == 4 else 'compensated'}.png",
-                    dpi=120)
-        plt.close(fig)
+        save_png(fig, out / f"fig{fig_no}_error_{'raw' if fig_no == 4 else 'compensated'}.png",
+                 dpi=120)
 
 
 def plot_table1_bands(table1, path: Path) -> None:
     """Monte-Carlo 5-95 % bands of compensated 3 sigma with the paper's values."""
-    plt = _plt()
+    plt = pyplot()
     fig, ax = plt.subplots(figsize=(7, 3.6))
     x = np.arange(len(table1))
     med = table1.compensated_3sigma_median_deg.to_numpy()
@@ -78,5 +71,4 @@ def plot_table1_bands(table1, path: Path) -> None:
     ax.legend(fontsize=8)
     ax.grid(alpha=0.3)
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
-    plt.close(fig)
+    save_png(fig, path, dpi=120)

@@ -21,13 +21,32 @@ class Daq:
     Parameters
     ----------
     bits : int or None
-        Resolution; None disables quantisation (and clipping).
+        Resolution, 1..32; None disables quantisation (and clipping).
     range_V : float
-        Full scale is [-range_V, +range_V) [V].
+        Full scale is [-range_V, +range_V) [V], > 0.
+
+    Raises
+    ------
+    InvalidParameterError
+        For bits that are not a whole number 1..32 (e.g. ``"sixteen"``) or a range that is
+        not a positive number.
     """
 
     bits: int | None = 16
     range_V: float = 10.0
+
+    def __post_init__(self):
+        from skysim.exceptions import InvalidParameterError
+        b = self.bits
+        if b is not None and (isinstance(b, bool) or not isinstance(b, (int, np.integer))
+                              or not 1 <= b <= 32):
+            raise InvalidParameterError(f"DAQ bits must be a whole number 1..32 (or None for "
+                                        f"no quantisation); got {b!r}")
+        r = self.range_V
+        if isinstance(r, bool) or not isinstance(r, (int, float, np.floating)) \
+                or not np.isfinite(r) or r <= 0:
+            raise InvalidParameterError(f"DAQ range_V must be a positive number of volts; "
+                                        f"got {r!r}")
 
     @property
     def lsb_V(self) -> float:

@@ -18,6 +18,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from skysim.exceptions import InvalidParameterError
 from skysim.validation import check_finite, check_in_range
 
 __all__ = ["OpponentErrors"]
@@ -80,6 +81,40 @@ class OpponentErrors:
                 "turntable_error_deg": self.turntable_error_deg}
 
     @classmethod
-    def from_dict(cls, d: dict) -> "OpponentErrors":
+    def from_dict(cls, d: dict, where: str = "sensor errors") -> "OpponentErrors":
+        """Errors from a dict as written by :meth:`to_dict` (``turntable_error_deg`` optional).
+
+        Raises
+        ------
+        InvalidParameterError
+            If ``d`` is not a dict, misses a key, has an unknown key, or a value has the wrong
+            length or is not a number (the message starts with ``where``).
+        """
+        required = ("misalignment_deg", "transmittance", "noise_V")
+        sizes = {"misalignment_deg": 6, "transmittance": 3, "noise_V": 3}
+        if not isinstance(d, dict):
+            raise InvalidParameterError(f"{where}: expected a JSON object with keys "
+                                        f"{', '.join(required)}; got a {type(d).__name__}")
+        missing = [k for k in required if k not in d]
+        unknown = sorted(set(d) - set(required) - {"turntable_error_deg"})
+        if missing or unknown:
+            what = "; ".join(x for x in (f"missing key(s) {missing}" if missing else "",
+                                         f"unknown key(s) {unknown}" if unknown else "") if x)
+            raise InvalidParameterError(f"{where}: {what}; valid: {', '.join(required)}, "
+                                        "turntable_error_deg")
+        for k, n in sizes.items():
+            v = d[k]
+            ok = (isinstance(v, (int, float)) and not isinstance(v, bool) and k == "noise_V") \
+                or (isinstance(v, list) and len(v) == n and all(
+                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in v))
+            if not ok:
+                raise InvalidParameterError(f"{where}: {k} must be a list of {n} numbers"
+                                            f"{' (or one number)' if k == 'noise_V' else ''}; "
+                                            f"got {v!r}")
+        t = d.get("turntable_error_deg", 0.0)
+        if not isinstance(t, (int, float)) or isinstance(t, bool):
+            raise InvalidParameterError(f"{where}: turntable_error_deg must be a number; "
+                                        f"got {t!r}")
         return cls(tuple(d["misalignment_deg"]), tuple(d["transmittance"]),
-                   tuple(d["noise_V"]), float(d.get("turntable_error_deg", 0.0)))
+                   d["noise_V"] if isinstance(d["noise_V"], (int, float)) else tuple(d["noise_V"]),
+                   float(t))

@@ -44,9 +44,46 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
             f"{where}: time {s.iloc[row]!r} in row {row} has no UTC offset; "
             "write times as ISO 8601 with offset, e.g. 2013-05-22T17:10:00+08:00")
     try:
-        return pd.to_datetime(s, format="ISO8601", utc=True)
-    except (ValueError, TypeError) as exc:
-        raise MeasurementFormatError(f"{where}: unparseable time ({exc})") from exc
+        parsed = pd.to_datetime(s, format="ISO8601", utc=True)
+    except (ValueError, TypeError, OverflowError):
+        parsed = None
+    if parsed is not None:
+        years = parsed.dt.year.to_numpy()
+        out = np.flatnonzero((years < 1678) | (years > 2261))
+        if not out.size:
+            return parsed.dt.as_unit("ns")
+        raise MeasurementFormatError(
+            f"{where}: time {s.iloc[out[0]]!r} in row {out[0]} is outside the supported years "
+            f"1678-2261 ({out.size} such row(s))")
+    # locate the first bad row (vectorised) and say what is wrong with it
+    row = int(np.flatnonzero(pd.to_datetime(s, format="ISO8601", utc=True,
+                                            errors="coerce").isna().to_numpy())[0])
+    text = s.iloc[row]
+    try:
+        pd.Timestamp(text).as_unit("ns")
+        why = "not an ISO 8601 time"
+    except (pd.errors.OutOfBoundsDatetime, OverflowError):
+        why = "outside the supported years 1678-2261"
+    except (ValueError, TypeError):
+        why = "not an ISO 8601 time"
+    raise MeasurementFormatError(
+        f"{where}: time {text!r} in row {row} is {why}; write times as ISO 8601 with offset, "
+        "e.g. 2013-05-22T17:10:00+08:00")
+
+
+def check_daq_block(daq, where: str) -> None:
+    """A sidecar's ``sensor.daq`` block must describe a valid :class:`sensor.daq.Daq`
+    (``bits`` a whole number 1..32 or null, ``range_V`` > 0 [V])."""
+    from skysim.exceptions import InvalidParameterError
+
+    from .daq import Daq
+    if not isinstance(daq, dict) or set(daq) - {"bits", "range_V"}:
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq must be an object with "
+                                     f"bits and range_V; got {daq!r}")
+    try:
+        Daq(daq.get("bits", 16), daq.get("range_V", 10.0))
+    except InvalidParameterError as exc:
+        raise MeasurementFormatError(f"{where}: sidecar sensor.daq: {exc}") from None
 
 
 def check_numeric_columns(table: pd.DataFrame, columns, where: str) -> None:
@@ -88,10 +125,18 @@ class Measurement:
             raise MeasurementFormatError(
                 f"{where}: sidecar schema is {self.sidecar.get('schema')!r}, "
                 f"expected {MEASUREMENT_SCHEMA!r}")
-        if "site" not in self.sidecar:
+        site = self.sidecar.get("site")
+        if not isinstance(site, dict) or not all(
+                isinstance(site.get(k), (int, float)) and not isinstance(site.get(k), bool)
+                for k in ("latitude_deg", "longitude_deg")):
             raise MeasurementFormatError(
-                f"{where}: sidecar has no 'site' (latitude_deg, longitude_deg, altitude_m); "
-                "the sun position cannot be computed without it")
+                f"{where}: sidecar has no 'site' with numbers latitude_deg, longitude_deg (and "
+                f"altitude_m) [deg, m]; got {site!r}; the sun position cannot be computed "
+                "without it")
+        sensor = self.sidecar.get("sensor")
+        daq = sensor.get("daq") if isinstance(sensor, dict) else None
+        if daq is not None:
+            check_daq_block(daq, where)
         if "time" not in self.table.columns:
             raise MeasurementFormatError(f"{where}: missing required column 'time'")
         self.table["time"] = parse_iso_times(self.table["time"], where)

@@ -1,7 +1,9 @@
 """Shared file layer of the sensor data schemas: a table (CSV or Parquet) plus a JSON sidecar.
 
 Both "skysim.measurement/1" and "skysim.photodiodes/1" store one row per sample in
-``<name>.csv`` or ``<name>.parquet`` with ``<name>.json`` beside it (``docs/schemas.md``).
+``<name>.csv`` or ``<name>.parquet`` with the sidecar ``<name>.csv.json`` (or
+``<name>.parquet.json``) beside it; readers also accept the older ``<name>.json``
+(``docs/schemas.md``).
 These two functions hold the rules common to both: extensions, ISO 8601 times with offsets in
 CSV, atomic commit of both files (both or neither), and the errors for missing, non-JSON or
 unreadable files. Schema checks stay with each schema's reader.
@@ -14,7 +16,7 @@ from pathlib import Path
 
 import pandas as pd
 
-from skysim.io import _json_default, atomic_write_many, sidecar_path
+from skysim.io import _json_default, atomic_write_many, find_sidecar, sidecar_path
 
 __all__ = ["TABLE_SUFFIXES", "write_table_and_sidecar", "read_table_and_sidecar",
            "format_iso_times"]
@@ -67,11 +69,13 @@ def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
     Parameters
     ----------
     path : path-like
-        ``.csv`` or ``.parquet`` data file; the sidecar is ``<stem>.json`` beside it.
+        ``.csv`` or ``.parquet`` data file; the sidecar is ``<name>.json`` beside it
+        (``data.csv.json``), or the older ``<stem>.json`` (``data.json``).
     schema : str
         Schema name, for messages.
     error_cls : exception class
-        Raised (with the path and cause) for a non-JSON sidecar or an unreadable table.
+        Raised (with the path and cause) for a sidecar that is not a JSON object, an
+        extension other than ``.csv``/``.parquet`` or an unreadable table.
     **read_csv_kwargs
         Passed to :func:`pandas.read_csv`.
 
@@ -81,15 +85,25 @@ def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
         If the data file or the sidecar is missing.
     """
     path = Path(path)
-    side = sidecar_path(path)
+    if path.is_dir():
+        raise error_cls(f"{path} is a folder; give a data file (.csv or .parquet)")
     if not path.exists():
         raise FileNotFoundError(f"no data file {path} (schema {schema})")
-    if not side.exists():
-        raise FileNotFoundError(f"no sidecar {side} beside {path} (schema {schema})")
+    if path.suffix.lower() not in TABLE_SUFFIXES:
+        raise error_cls(f"{path}: unsupported extension {path.suffix!r}; use .csv or .parquet")
+    side = find_sidecar(path)
+    if side is None:
+        if sidecar_path(path).is_dir():
+            raise error_cls(f"sidecar {sidecar_path(path)} is a folder, not a JSON file")
+        raise FileNotFoundError(f"no sidecar {sidecar_path(path)} beside {path} "
+                                f"(schema {schema})")
     try:
         sidecar = json.loads(side.read_text())
-    except json.JSONDecodeError as exc:
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise error_cls(f"{side}: not valid JSON ({exc})") from exc
+    if not isinstance(sidecar, dict):
+        raise error_cls(f"{side}: the sidecar must be a JSON object {{...}}; got a "
+                        f"{type(sidecar).__name__}")
     try:
         table = pd.read_parquet(path) if path.suffix.lower() == ".parquet" else \
             pd.read_csv(path, **read_csv_kwargs)

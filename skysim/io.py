@@ -3,7 +3,12 @@
 Each writer renders into a temporary file in the destination directory and renames it into
 place with :func:`os.replace` (atomic on POSIX). A data file and its JSON sidecar are
 committed together; if anything fails, the temporaries are removed and the old files (if
-any) are untouched.
+any) are untouched. Files get the permissions of an ordinary ``open()`` (``0666`` minus the
+umask, usually ``0644``), not the ``0600`` of a temporary file.
+
+A data file's JSON sidecar is named after the whole file name (``sky.csv`` ->
+``sky.csv.json``), so ``sky.csv`` and ``sky.parquet`` side by side keep their own sidecars;
+readers also accept the older ``<stem>.json`` spelling (:func:`find_sidecar`).
 """
 
 from __future__ import annotations
@@ -15,13 +20,104 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ["atomic_write", "atomic_write_many", "write_json_atomic", "sidecar_path"]
+__all__ = ["OutputPathError", "atomic_write", "atomic_write_many", "check_output_dir",
+           "check_output_file", "find_sidecar", "legacy_sidecar_path", "sidecar_path",
+           "write_json_atomic"]
+
+
+class OutputPathError(OSError):
+    """An output path cannot be written: it is a folder, lies under a file, or its folder is
+    not writable. The message names the path and what to give instead."""
 
 
 def sidecar_path(path) -> Path:
-    """The JSON sidecar of a data file: ``<name>.json`` beside it (``data.csv`` -> ``data.json``)."""
+    """The JSON sidecar a writer writes for a data file: ``<name>.json`` after the whole file
+    name (``data.csv`` -> ``data.csv.json``)."""
     p = Path(path)
-    return p.with_suffix(".json")
+    return p.with_name(p.name + ".json")
+
+
+def legacy_sidecar_path(path) -> Path:
+    """The older sidecar spelling ``<stem>.json`` (``data.csv`` -> ``data.json``)."""
+    return Path(path).with_suffix(".json")
+
+
+def find_sidecar(path) -> Path | None:
+    """The sidecar of a data file for reading: ``<name>.json`` if present, else the older
+    ``<stem>.json``; None if neither is a file."""
+    for side in (sidecar_path(path), legacy_sidecar_path(path)):
+        if side.is_file():
+            return side
+    return None
+
+
+def _umask_mode() -> int:
+    mask = os.umask(0o022)
+    os.umask(mask)
+    return 0o666 & ~mask
+
+
+_FILE_MODE = _umask_mode()
+"""Permissions of written files: what ``open()`` would give (read once: ``os.umask`` can
+only be read by setting it)."""
+
+
+def _writable_ancestor(path: Path, what: str) -> None:
+    """Raise :class:`OutputPathError` unless the nearest existing ancestor of ``path`` is a
+    writable folder (the folders below it would be created)."""
+    parent = path.parent
+    while not parent.exists():
+        if parent == parent.parent:
+            break
+        parent = parent.parent
+    if not parent.is_dir():
+        raise OutputPathError(f"{what} {path}: {parent} is a file, not a folder; "
+                              "choose another location")
+    _probe(parent, f"{what} {path}")
+
+
+def _probe(folder: Path, what: str) -> None:
+    """Create and remove a temporary file in ``folder``: the one test of writability that
+    also holds for read-only file systems and privileged users (``os.access`` does not)."""
+    try:
+        with tempfile.TemporaryFile(dir=folder):
+            pass
+    except OSError as exc:
+        raise OutputPathError(f"{what}: cannot write in folder {folder} ({exc.strerror}); "
+                              "choose another location") from None
+
+
+def check_output_file(path, what: str = "output file") -> Path:
+    """Check before any work that ``path`` can be written as a file; return it as a Path.
+
+    Raises
+    ------
+    OutputPathError
+        If ``path`` is a folder, lies under a file or in a folder that is not writable.
+    """
+    path = Path(path)
+    if path.is_dir():
+        raise OutputPathError(f"{what} {path} is a folder; give a file name")
+    _writable_ancestor(path, what)
+    return path
+
+
+def check_output_dir(path, what: str = "output folder") -> Path:
+    """Check before any work that ``path`` is (or can be created as) a writable folder.
+
+    Raises
+    ------
+    OutputPathError
+        If ``path`` is a file, lies under a file or is not writable.
+    """
+    path = Path(path)
+    if path.exists() and not path.is_dir():
+        raise OutputPathError(f"{what} {path} is a file; give a folder")
+    if path.is_dir():
+        _probe(path, f"{what} {path}")
+    else:
+        _writable_ancestor(path, what)
+    return path
 
 
 @contextlib.contextmanager
@@ -39,14 +135,24 @@ def atomic_write_many(items: Iterable[tuple[Path, Callable[[Path], None]]]) -> N
     """Write several files so that either all appear (complete) or none changes.
 
     ``items`` pairs each destination with a function that writes a given temporary path.
+
+    Raises
+    ------
+    OutputPathError
+        If a destination is a folder, lies under a file or its folder is not writable.
     """
-    items = [(Path(dest), fn) for dest, fn in items]
+    items = [(check_output_file(dest), fn) for dest, fn in items]
     with contextlib.ExitStack() as stack:
         temps = []
         for dest, fn in items:
-            dest.parent.mkdir(parents=True, exist_ok=True)
+            try:
+                dest.parent.mkdir(parents=True, exist_ok=True)
+            except OSError as exc:
+                raise OutputPathError(f"cannot create folder {dest.parent} ({exc.strerror})") \
+                    from exc
             tmp = stack.enter_context(_temp_in(dest.parent, dest.suffix))
             fn(tmp)
+            os.chmod(tmp, _FILE_MODE)
             temps.append((tmp, dest))
         for tmp, dest in temps:
             os.replace(tmp, dest)

@@ -4,7 +4,7 @@ The model is the plane-parallel problem of the Coulson-Dave-Sekera tables [1]_ [
 homogeneous, conservative Rayleigh atmosphere of optical thickness ``tau`` (given, or derived
 from wavelength and surface pressure after Bodhaine et al. 1999 [3]_) over a Lambertian ground
 of albedo ``A``. The radiative transfer is solved by sasktran2 (:mod:`skysim.rt_sasktran`,
-optional extra ``pip install 'skysim[rt]'``).
+optional extra ``rt``: ``python -m pip install -e '.[rt]'`` in the checkout).
 
 Speed by physics
 ----------------

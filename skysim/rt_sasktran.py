@@ -129,7 +129,8 @@ def tau_check(tau: float) -> str:
 class SasktranUnavailableError(ImportError):
     """The optional radiative-transfer engine sasktran2 is not installed.
 
-    Fix: ``pip install 'skysim[rt]'`` (or ``pip install sasktran2``).
+    Fix: install the ``rt`` extra from the skysim checkout,
+    ``python -m pip install -e '.[rt]'`` (the message gives the exact command).
     """
 
 
@@ -182,9 +183,10 @@ def require_sasktran2():
     try:
         import sasktran2
     except ImportError as exc:  # pragma: no cover - exercised only without the extra
+        from .extras import missing_extra_message
         raise SasktranUnavailableError(
-            "the multiple-scattering sky needs the radiative-transfer engine sasktran2, which "
-            "is not installed: pip install 'skysim[rt]'") from exc
+            missing_extra_message("sasktran2", "the multiple-scattering sky (radiative-transfer "
+                                  "engine)"), name="sasktran2") from exc
     return sasktran2
 
 

@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rayleigh
+from .exceptions import InvalidParameterError
 from .geometry import e_vector_from_aop, wrap_axial_deg
 from .validation import (
     TWILIGHT_LIMIT_DEG,
@@ -192,9 +193,18 @@ def make_sky(model: str = "rayleigh", **params) -> Sky:
     ------
     ValueError
         For an unknown model name (the message lists the valid ones).
+    InvalidParameterError
+        For a parameter the model does not take (the message lists the ones it takes).
     """
+    import inspect
     if model not in SKY_MODELS:
         raise ValueError(f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
     module_name, cls_name = SKY_MODELS[model].split(":")
     cls = getattr(importlib.import_module(module_name), cls_name)
+    takes = [n for n, p in inspect.signature(cls).parameters.items()
+             if p.kind in (p.POSITIONAL_OR_KEYWORD, p.KEYWORD_ONLY)]
+    unknown = sorted(set(params) - set(takes))
+    if unknown:
+        raise InvalidParameterError(f"sky model {model!r} has no parameter(s) {unknown}; it "
+                                    f"takes {', '.join(takes)}")
     return cls(**params)

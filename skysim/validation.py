@@ -19,7 +19,10 @@ __all__ = [
 
 def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
     idx = np.flatnonzero(bad)
-    first = np.asarray(values).ravel()[idx[0]]
+    flat = np.asarray(values).ravel()
+    first = flat[idx[0]].item()
+    if flat.size == 1:
+        return repr(first)
     more = f" (and {idx.size - 1} more)" if idx.size > 1 else ""
     return f"{first!r} at flat index {idx[0]}{more}"
 
@@ -85,9 +88,13 @@ def check_sun_above_horizon(sun_elevation_deg, min_elevation_deg: float = 0.0) -
 
     ``min_elevation_deg`` is 0 for models that need a sunlit atmosphere (plane-parallel
     radiative transfer, illuminance) and :data:`TWILIGHT_LIMIT_DEG` for the single-scattering
-    sky models, which hold in twilight.
+    sky models, which hold in twilight. Above 90 deg: :class:`InvalidParameterError` (no such
+    elevation).
     """
     el = check_finite("sun_elevation_deg", sun_elevation_deg)
+    if np.any(el > 90.0):
+        raise InvalidParameterError(f"sun elevation must be <= 90 deg; got "
+                                    f"{_first_bad(el, el > 90.0)} deg")
     bad = el <= min_elevation_deg
     if bad.any():
         where = "above the horizon" if min_elevation_deg == 0.0 else \

@@ -19,7 +19,7 @@ def test_sky_command_with_site_and_time(tmp_path, capsys):
     assert list(t.columns) == ["elevation_deg", "azimuth_deg", "dop", "aop_deg", "I", "Q", "U"]
     assert t.dop.max() == pytest.approx(0.7, abs=0.01)  # grid passes near 90 deg from the sun
     np.testing.assert_allclose(np.hypot(t.Q, t.U) / t.I, t.dop, atol=1e-12)
-    side = json.loads((tmp_path / "sky.json").read_text())
+    side = json.loads((tmp_path / "sky.csv.json").read_text())
     assert side["sky"] == {"model": "rayleigh", "dmax": 0.7} and "meridian" in side["aop_convention"]
     assert (tmp_path / "sky.png").stat().st_size > 10_000
 
@@ -52,11 +52,11 @@ def test_reproduce_yang2014_small(tmp_path, capsys):
 
 
 @pytest.mark.parametrize("argv,msg", [
-    (["sky", "--lat", "34", "--lon", "108", "--time", "2013-05-22T17:10"], "naive"),
-    (["sky", "--lat", "95", "--lon", "108", "--time", "2013-05-22T17:10Z"], "latitude"),
+    (["sky", "--lat", "34", "--lon", "108", "--time", "2013-05-22T17:10"], "no UTC offset"),
+    (["sky", "--lat", "95", "--lon", "108", "--time", "2013-05-22T17:10Z"], "--lat"),
     (["sky", "--sun-elevation", "-12", "--sun-azimuth", "10"], "twilight limit"),
     (["sky", "--model", "mie", "--sun-elevation", "3", "--sun-azimuth", "10"], "valid"),
-    (["calibrate", "/nonexistent.csv"], "no data file"),
+    (["calibrate", "/nonexistent.csv"], "no file /nonexistent.csv"),
 ])
 def test_errors_exit_2_with_message(argv, msg, capsys):
     assert main(argv) == 2

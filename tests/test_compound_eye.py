@@ -179,7 +179,7 @@ def test_reproduce_compound_eye_cli(tmp_path, capsys):
     printed = capsys.readouterr().out
     assert "phi_1 sensor-to-body, axis x" in printed and "goal ≤ 0.05: met" in printed
     for name in ("table.md", "installation_errors.csv", "attitude_errors.csv", "summary.json",
-                 "calibration_data.parquet", "calibration_data.json",
+                 "calibration_data.parquet", "calibration_data.parquet.json",
                  "fig_recovered_vs_injected.png", "fig_heading_error_vs_yaw.png"):
         assert (tmp_path / name).exists(), name
     summary = json.loads((tmp_path / "summary.json").read_text())

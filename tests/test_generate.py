@@ -126,14 +126,14 @@ def test_sky_map_matches_closed_form_rayleigh_and_compare_passes(tmp_path, confi
     out = tmp_path / "gt"
     generate(load_generate_config(config_file), out)
     truth = pd.read_csv(out / "map.csv")
-    side = json.loads((out / "map.json").read_text())
+    side = json.loads((out / "map.csv.json").read_text())
     assert side["schema"] == "skysim.skymap/1" and side["generator"]["master_seed"] == 5
     theirs = _rayleigh_map(truth.elevation_deg.to_numpy(), truth.azimuth_deg.to_numpy(),
                            35.0, 250.0, 0.8)
     mine = tmp_path / "mine"
     mine.mkdir()
     theirs.to_csv(mine / "map.csv", index=False)
-    shutil.copy(out / "map.json", mine / "map.json")
+    shutil.copy(out / "map.csv.json", mine / "map.csv.json")
     results = {r.quantity: r for r in compare_tables(mine / "map.csv", out / "map.csv")}
     assert all(r.passed for r in results.values()), results
     assert results["dop"].max_abs_error < 1e-12      # same closed form in double precision
@@ -175,7 +175,7 @@ def test_measurement_truth_against_pvlib_and_paper_equations(tmp_path, config_fi
                            "true_sun_elevation_deg": sun.elevation.to_numpy()})
     mine = tmp_path / "ideal.csv"
     theirs.to_csv(mine, index=False)
-    shutil.copy(out / "ideal.json", tmp_path / "ideal.json")
+    shutil.copy(out / "ideal.csv.json", tmp_path / "ideal.csv.json")
     results = compare_tables(mine, out / "ideal.csv")
     assert {r.quantity for r in results} >= {"U1_V", "true_phi_deg", "true_dop"}
     assert all(r.passed for r in results), [r.to_dict() for r in results if not r.passed]
@@ -199,7 +199,7 @@ def test_compare_rejects_incomparable_files(tmp_path, config_file):
     theirs = tmp_path / "t"
     theirs.mkdir()
     truth = pd.read_csv(out / "map.csv")
-    shutil.copy(out / "map.json", theirs / "map.json")
+    shutil.copy(out / "map.csv.json", theirs / "map.csv.json")
     truth.drop(columns="aop_deg").to_csv(theirs / "map.csv", index=False)
     with pytest.raises(CompareError, match=r"missing column\(s\) \['aop_deg'\]"):
         compare_tables(theirs / "map.csv", out / "map.csv")
@@ -252,7 +252,7 @@ def test_aop_is_not_compared_at_neutral_points(tmp_path, config_file):
     theirs = truth.copy()
     theirs.loc[3, "aop_deg"] += 45.0
     theirs.to_csv(tmp_path / "map.csv", index=False)
-    shutil.copy(out / "map.json", tmp_path / "map.json")
+    shutil.copy(out / "map.csv.json", tmp_path / "map.csv.json")
     aop = {r.quantity: r for r in compare_tables(tmp_path / "map.csv", out / "map.csv")}["aop_deg"]
     assert aop.passed and aop.max_abs_error == 0.0
     theirs.loc[4, "aop_deg"] += 45.0

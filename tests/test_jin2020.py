@@ -73,7 +73,7 @@ def test_acceptance_over_20_seeds(tmp_path):
     for name in ("sun_positions.csv", "errors.csv", "table.md", "summary.json",
                  "timeseries_static.csv", "timeseries_dynamic.csv"):
         assert (tmp_path / name).stat().st_size > 0
-    sidecar = json.loads((tmp_path / "timeseries_dynamic.json").read_text())
+    sidecar = json.loads((tmp_path / "timeseries_dynamic.csv.json").read_text())
     assert sidecar["schema"] == "skysim.jin2020.timeseries/1" and sidecar["seed"] == 11
 
 

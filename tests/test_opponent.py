@@ -101,7 +101,7 @@ def test_measurement_round_trip(tmp_path, xian, rng, ext):
                                                             np.linspace(185, 365, 30), rng,
                                                             seed=1, sweep="a")
     path = m.write(tmp_path / f"data{ext}")
-    side = json.loads((tmp_path / "data.json").read_text())
+    side = json.loads((tmp_path / f"data{ext}.json").read_text())
     assert side["schema"] == "skysim.measurement/1" and side["site"]["latitude_deg"] > 34
     back = read_measurement(path)
     assert (back.table.time == m.table.time).all()

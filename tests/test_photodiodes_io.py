@@ -172,7 +172,7 @@ def test_atomic_writer_leaves_nothing_on_failure(tmp_path):
     with pytest.raises(TypeError):
         write_photodiodes(data, path)
     assert path.read_bytes() == before                    # old file untouched, no temporaries
-    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.csv", "x.json"]
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["x.csv", "x.csv.json"]
 
 
 def test_ring_with_relative_yaw_round_trip(tmp_path, rng):

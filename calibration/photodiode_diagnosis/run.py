@@ -196,12 +196,13 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
 
 
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
-    """Held-out base residuals by slice, sorted by their share of the excess variance."""
+    """Held-out base residuals by slice, sorted by their share of the excess variance
+    ``sum(r^2) - n floor^2`` of their dimension (each dimension partitions the readings, so
+    its shares add up to 1; of ``sum(r^2)`` where no slice exceeds the floor)."""
     obs = fwd.observe(theta_ho)
     n, P = r.shape
     u = inst.pd_unit
     r2 = np.where(w, r, 0.0) ** 2
-    excess_total = max(float(r2.sum() - w.sum() * floor ** 2), 1e-300)
     sun = fwd.sun(inst.t_s)
     view = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)    # (n, U, 3)
     sun_dist = angle_between_deg(view, sun[:, None, :])[:, u]
@@ -214,8 +215,8 @@ def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
         m = mask & w
         if m.sum() == 0:
             return
-        ex = float(r2[m].sum() - m.sum() * floor ** 2)
-        row = {"dimension": dimension, "label": str(label), "share": max(ex, 0.0) / excess_total,
+        row = {"dimension": dimension, "label": str(label),
+               "excess": float(r2[m].sum() - m.sum() * floor ** 2), "ss": float(r2[m].sum()),
                "n": int(m.sum()), "rms": float(np.sqrt(r2[m].mean()))}
         if lo is not None:
             row["lo_deg"], row["hi_deg"] = float(lo), float(hi)
@@ -240,6 +241,14 @@ def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
         for a, b in zip(edges[:-1], edges[1:]):
             add("sun_elevation_deg", f"{a:.1f}-{b:.1f}",
                 ((sun_el >= a) & (sun_el <= b))[:, None] & full, a, b)
+    for dim in {r["dimension"] for r in rows}:   # shares within a dimension add up to 1
+        part = [r for r in rows if r["dimension"] == dim]
+        ex = sum(max(r["excess"], 0.0) for r in part)
+        for r in part:
+            r["share"] = (max(r["excess"], 0.0) / ex if ex > 0 else
+                          r["ss"] / max(sum(q["ss"] for q in part), 1e-300))
+    for r in rows:
+        del r["excess"], r["ss"]
     return sorted(rows, key=lambda x: -x["share"])
 
 

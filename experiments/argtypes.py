@@ -1,0 +1,158 @@
+"""Argument types of the ``skysim`` command line: every option is checked when it is parsed.
+
+Each function here is an ``argparse`` ``type=``: it converts the text the user typed or raises
+:class:`argparse.ArgumentTypeError`, which argparse reports as
+``skysim CMD: error: argument --n: must be an integer >= 1; got '0'`` with exit code 2, before
+any work starts. Output paths are checked the same way, so that a long run never ends in an
+unwritable folder.
+"""
+
+from __future__ import annotations
+
+import argparse
+import math
+from pathlib import Path
+
+__all__ = ["DefaultsHelpFormatter", "aware_time", "existing_file", "float_in", "int_at_least", "nonnegative_float",
+           "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
+           "seed"]
+
+class DefaultsHelpFormatter(argparse.HelpFormatter):
+    """Adds ``(default: X)`` to an option's help unless the help already speaks of its
+    default, or there is none to show (None, False)."""
+
+    def _get_help_string(self, action):
+        text = action.help or ""
+        if "default" in text or action.default is None or action.default is False \
+                or action.default == argparse.SUPPRESS or not action.option_strings:
+            return text
+        return text + " (default: %(default)s)"
+
+
+PANDAS_YEARS = (1678, 2261)
+"""Whole years inside pandas' nanosecond time range (1677-09-21 .. 2262-04-11)."""
+
+
+def _number(text: str) -> float:
+    try:
+        x = float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f"not a number: {text!r}") from None
+    if not math.isfinite(x):
+        raise argparse.ArgumentTypeError(f"must be a finite number; got {text!r}")
+    return x
+
+
+def _integer(text: str) -> int:
+    try:
+        return int(text)
+    except ValueError:
+        x = _number(text)  # accept 1e6 and 2000.0, refuse 2.5
+        if not x.is_integer():
+            raise argparse.ArgumentTypeError(f"must be a whole number; got {text!r}") from None
+        return int(x)
+
+
+def int_at_least(low: int):
+    """An integer ``>= low`` (``1e6`` is read as 1000000)."""
+    def parse(text: str) -> int:
+        n = _integer(text)
+        if n < low:
+            raise argparse.ArgumentTypeError(f"must be an integer >= {low}; got {text!r}")
+        return n
+    parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+positive_int = int_at_least(1)
+nonnegative_int = int_at_least(0)
+seed = int_at_least(0)
+"""A random seed: a non-negative integer (numpy's ``SeedSequence`` refuses negative ones)."""
+
+
+def float_in(low: float = -math.inf, high: float = math.inf, *, low_open: bool = False,
+             high_open: bool = False, unit: str = ""):
+    """A finite number in the interval from ``low`` to ``high`` (bounds optionally open)."""
+    lb, hb = "(" if low_open else "[", ")" if high_open else "]"
+    u = f" {unit}" if unit else ""
+    if math.isinf(high) and not math.isinf(low):
+        interval = f"{'>' if low_open else '>='} {low:g}{u}"
+    elif math.isinf(low) and not math.isinf(high):
+        interval = f"{'<' if high_open else '<='} {high:g}{u}"
+    else:
+        interval = f"in {lb}{low:g}, {high:g}{hb}{u}"
+
+    def parse(text: str) -> float:
+        x = _number(text)
+        below = x <= low if low_open else x < low
+        above = x >= high if high_open else x > high
+        if below or above:
+            raise argparse.ArgumentTypeError(f"must be {interval}; got {text!r}")
+        return x
+    parse.__name__ = f"number {interval}"
+    return parse
+
+
+positive_float = float_in(0.0, low_open=True)
+nonnegative_float = float_in(0.0)
+
+
+def aware_time(text: str):
+    """A timezone-aware ISO 8601 time (``2013-05-22T17:10+08:00``) as a pandas Timestamp."""
+    import pandas as pd
+    try:
+        t = pd.Timestamp(text)
+    except (ValueError, TypeError, OverflowError) as exc:
+        if isinstance(exc, pd.errors.OutOfBoundsDatetime) or "out of bounds" in str(exc).lower():
+            raise argparse.ArgumentTypeError(
+                f"{text!r} is outside the supported years {PANDAS_YEARS[0]}-"
+                f"{PANDAS_YEARS[1]}") from None
+        raise argparse.ArgumentTypeError(
+            f"cannot read {text!r} as a time; write ISO 8601 with a UTC offset, e.g. "
+            "2013-05-22T17:10:00+08:00") from None
+    if t is pd.NaT:
+        raise argparse.ArgumentTypeError(f"{text!r} is not a time")
+    if not PANDAS_YEARS[0] <= t.year <= PANDAS_YEARS[1]:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} is outside the supported years {PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}")
+    if t.tzinfo is None:
+        raise argparse.ArgumentTypeError(
+            f"{text!r} has no UTC offset; skysim never guesses the timezone: write e.g. "
+            f"{t.isoformat()}+08:00 (or Z for UTC)")
+    return t
+
+
+def existing_file(text: str) -> Path:
+    """An existing file (not a folder)."""
+    p = Path(text)
+    if p.is_dir():
+        raise argparse.ArgumentTypeError(f"{text} is a folder; give a file")
+    if not p.is_file():
+        raise argparse.ArgumentTypeError(f"no file {text}")
+    return p
+
+
+def _path_error(check, text: str, what: str) -> Path:
+    from skysim.io import OutputPathError
+    try:
+        return check(text, what)
+    except OutputPathError as exc:
+        raise argparse.ArgumentTypeError(str(exc)) from None
+
+
+def output_file(*suffixes: str):
+    """An output file that can be written, optionally with one of ``suffixes``."""
+    def parse(text: str) -> Path:
+        from skysim.io import check_output_file
+        if suffixes and Path(text).suffix.lower() not in suffixes:
+            raise argparse.ArgumentTypeError(
+                f"must end in {' or '.join(suffixes)}; got {Path(text).name!r}")
+        return _path_error(check_output_file, text, "output file")
+    parse.__name__ = "output file"
+    return parse
+
+
+def output_dir(text: str) -> Path:
+    """An output folder that exists or can be created, and is writable."""
+    from skysim.io import check_output_dir
+    return _path_error(check_output_dir, text, "output folder")
