@@ -216,7 +216,7 @@ def test_compare_folder_against_itself_passes(tmp_path):
     out = tmp_path / "gt"
     assert main(["generate", str(EXAMPLE), "--out", str(out)]) == 0
     report = compare_paths(out, out)
-    assert report["passed"] and len(report["files"]) == 5
+    assert report["passed"] and len(report["files"]) == 6
     assert main(["compare", str(out), str(out), "--report", str(tmp_path / "r.json")]) == 0
     assert json.loads((tmp_path / "r.json").read_text())["passed"] is True
 

@@ -72,7 +72,7 @@ def test_parquet_series_round_trip(tmp_path):
     assert row.time == times[3] and row.elevation_deg == EL[5]
     ref = sky.field(EL[5], AZ[5], SUN_EL[3], SUN_AZ[3])
     assert abs(row.dop - ref.dop) < 1e-6 and abs(row.aop_deg - ref.aop_deg) < 1e-4  # float32
-    side = json.loads((tmp_path / "s.json").read_text())
+    side = json.loads((tmp_path / "s.parquet.json").read_text())   # named after the file
     assert side["schema"] == SERIES_SCHEMA and side["sky"]["dtype"] == "float32"
 
 
