@@ -119,25 +119,53 @@ def _extend(theta_base, fwd_base: Forward, fwd: Forward, p_eff) -> np.ndarray:
     return t
 
 
+CLOCK_TIE = 0.005
+"""Clock-offset fits whose costs differ by less than this fraction are ties, resolved towards
+the smaller offset: with every sample stamped at one time, the per-sweep headings absorb the
+sun's azimuth, and a sky symmetric about the solar meridian looks the same with the sun at
+the same elevation before and after noon (the mirror time), so the data cannot tell them
+apart; a clock that is minutes off is likelier than one many hours off."""
+
+
+def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
+    """Starts of the clock offset: no offset, and the two best of the whole and half hours
+    (each with the per-sweep headings carried by the sun's azimuth change)."""
+    L = fwd.layout
+    sun = fwd.sun
+    t0 = float(np.mean(fwd.inst.t_s))
+    _, az0 = _sun_el_az(sun, t0)
+    scored = []
+    for dt in effect.COARSE_S:
+        el, az = _sun_el_az(sun, t0 + dt)
+        if el <= TWILIGHT_LIMIT_DEG + 0.5 or dt == 0.0:
+            continue
+        t = _extend(theta_base, fwd_base, fwd, [dt])
+        t[L.heading] = theta_base[fwd_base.layout.heading] + (az - az0)
+        scored.append((float(np.sum(fwd.residual(t) ** 2)), t))
+    scored.sort(key=lambda x: x[0])
+    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
+
+
+def _fit_effect(fe: Forward, starts, sigma):
+    """Fit from each start; the lowest cost wins, ties (:data:`CLOCK_TIE`) go to the start
+    nearest the effect's null (the smaller clock offset)."""
+    if not isinstance(starts, list):
+        return fit(fe, starts, sigma=sigma, max_iter=EFFECT_MAX_ITER)
+    fits = [fit(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER) for s in starts]
+    best = min(f.cost for f in fits)
+    L = fe.layout
+    close = [f for f in fits if f.cost <= best * (1 + CLOCK_TIE)]
+    return min(close, key=lambda f: float(np.sum(np.abs(f.theta[L.effect]
+                                                        - np.asarray(fe.effect.null)))))
+
+
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
-    """Best start of an effect: its coarse candidates scored with the headings carried."""
+    """Best start of an effect: its coarse candidates scored with the headings carried (a
+    list of starts for the clock offset, see :func:`_clock_starts`)."""
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
-        sun = fwd.sun
-        t0 = float(np.mean(fwd.inst.t_s))
-        _, az0 = _sun_el_az(sun, t0)
-        best = (np.inf, None)
-        for dt in effect.COARSE_S:
-            el, az = _sun_el_az(sun, t0 + dt)
-            if el <= TWILIGHT_LIMIT_DEG + 0.5:
-                continue
-            t = _extend(theta_base, fwd_base, fwd, [dt])
-            t[L.heading] = theta_base[fwd_base.layout.heading] + (az - az0)
-            c = float(np.sum(fwd.residual(t) ** 2))
-            if c < best[0]:
-                best = (c, t)
-        return best[1]
+        return _clock_starts(fwd, theta_base, fwd_base, effect)
     if len(starts) == 1:
         return _extend(theta_base, fwd_base, fwd, starts[0])
     obs0 = fwd_base.observe(theta_base) if not effect.observes else None
@@ -340,7 +368,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                 continue
             fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
             start = _start_effect(fe, btr.theta, ftr, e, sigma)
-            fr = fit(fe, start, sigma=sigma, max_iter=EFFECT_MAX_ITER)
+            fr = _fit_effect(fe, start, sigma)
             fold_params[e.name].append(fr.theta[fe.layout.effect])
             fold_converged[e.name].append(bool(fr.converged))
             feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
