@@ -45,7 +45,7 @@ import numpy as np
 from . import rayleigh
 from .geometry import wrap_axial_deg
 from .sky import Sky
-from .validation import check_dop, check_in_range
+from .validation import TWILIGHT_LIMIT_DEG, check_dop, check_in_range
 
 __all__ = ["BerrySky", "DOP_MAPPINGS", "berry_polarization", "berry_w", "singularities",
            "stereographic"]
@@ -168,6 +168,7 @@ class BerrySky(Sky):
     """
 
     name = "berry"
+    min_sun_elevation_deg = TWILIGHT_LIMIT_DEG   # a single-scattering pattern: holds in twilight
 
     def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0, dop_mapping: str = "paper"):
         self.delta_deg = float(check_in_range("delta_deg", delta_deg, 0.0, 90.0, high_open=True,

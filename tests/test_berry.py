@@ -117,3 +117,13 @@ def test_dop_mapping_paper_vs_rayleigh_and_validation():
     assert BerrySky(dop_mapping="rayleigh").describe()["dop_mapping"] == "rayleigh"
     with pytest.raises(ValueError, match="valid: paper, rayleigh"):
         BerrySky(dop_mapping="linear")
+
+
+def test_berry_in_twilight_keeps_the_zenith_e_vector():
+    """Sun 5 deg below the horizon: the zenith E-vector stays perpendicular to the solar
+    meridian (the singularities sit symmetrically on it), as in daylight."""
+    import numpy as np
+    from skysim.berry import BerrySky
+    from skysim.geometry import direction_vector
+    f = BerrySky().field(90.0, 0.0, -5.0, 120.0)
+    assert abs(float(f.e_vector.reshape(-1, 3)[0] @ direction_vector(0.0, 120.0))) < 1e-9
