@@ -223,3 +223,26 @@ def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
     assert doc["heading_error"]["base_deg"] < 1.0          # noise-free compass: sub-degree
     assert (out / "report.md").exists() and (out / "residuals_by_slice.png").exists()
     assert main(["diagnose", str(path), "--effects", "nope"]) == 2
+
+
+def test_injector_does_what_it_says(session):
+    """The blind-check injector (shares only the physics library with the fitter)."""
+    rng = np.random.default_rng(0)
+    d, truth = inject(session, "clock_offset", rng)
+    shift = (session.table["time"] - d.table["time"]).dt.total_seconds().to_numpy()
+    np.testing.assert_allclose(shift, truth["clock_offset_s"], atol=1e-6)
+    d, truth = inject(session, "yaw_scale", rng)
+    a = instrument_from_photodiodes(session)
+    b = instrument_from_photodiodes(d)
+    for s in range(3):
+        m = a.sweep == s
+        np.testing.assert_allclose(b.yaw_deg[m] - b.yaw_deg[m][0],
+                                   truth["factor"] * (a.yaw_deg[m] - a.yaw_deg[m][0]), atol=1e-9)
+    d, truth = inject(session, "stuck", rng)
+    assert d.table[truth["channel"]].nunique() == 1
+    d, truth = inject(session, "occlusion", rng)
+    u0 = [c for c in session.columns if c.startswith("u0_")]
+    changed = (d.table[u0] != session.table[u0]).any(axis=1)
+    assert 0.1 < changed.mean() < 0.45     # unit 0 looks into a 60-120 deg sector once a turn
+    with pytest.raises(ValueError, match="injectable"):
+        inject(session, "fov", rng)
