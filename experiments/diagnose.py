@@ -45,6 +45,9 @@ from sensor.opponent import OpponentSensor
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
+from .argtypes import (DefaultsHelpFormatter, existing_file, int_at_least, output_dir,
+                       positive_int, seed)
+
 from .yang2014 import ERROR_MODEL, SITE
 
 __all__ = [
@@ -537,8 +540,6 @@ def _real_benchmark_cmd(args) -> int:
 
 
 def _benchmark_cmd(args) -> int:
-    if args.n < 1:
-        raise ValueError(f"--n {args.n}: the number of data sets must be at least 1")
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
@@ -565,29 +566,35 @@ def _benchmark_cmd(args) -> int:
 
 
 def register(sub) -> None:
-    import argparse
     d = sub.add_parser("diagnose", help="sim-to-real gap: where, which effect, how far",
                        description="Fit the base model on calibration sweeps, measure the "
                                    "held-out gap, locate it, refit with each candidate effect "
                                    "and give a verdict (schema skysim.diagnosis/1).",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    d.add_argument("data", help="measurement table or photodiode data (.csv/.parquet + sidecar)")
+                       formatter_class=DefaultsHelpFormatter)
+    d.add_argument("data", type=existing_file,
+                   help="measurement table or photodiode data (.csv/.parquet + sidecar)")
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
-                   "multiple_scattering,fov,occlusion,yaw_scale,clock_offset,tilt")
-    d.add_argument("--out", help="output directory (default results/diagnose/<name>)")
-    d.add_argument("--seed", type=int, default=0, help="seed of the bootstrap")
-    d.add_argument("--folds", type=int, default=3, help="held-out folds (whole sweeps)")
+                   "multiple_scattering,fov,occlusion,yaw_scale,clock_offset,tilt,aureole,"
+                   "stray_light")
+    d.add_argument("--out", type=output_dir,
+                   help="output folder (default: results/diagnose/<name>)")
+    d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
+    d.add_argument("--folds", type=int_at_least(2), default=3,
+                   help="held-out folds (whole sweeps), 2 .. number of sweeps")
     d.set_defaults(func=_diagnose_cmd)
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
-                       formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    b.add_argument("--n", type=int, default=200, help="number of data sets")
+                       formatter_class=DefaultsHelpFormatter)
+    b.add_argument("--n", type=positive_int, default=200,
+                   help="number of data sets (with --real: of sessions, default 3)")
     b.add_argument("--quick", action="store_true", help="27 data sets (3 per label)")
-    b.add_argument("--seed", type=int, default=7)
-    b.add_argument("--out", help="output directory (default results/gap_benchmark)")
+    b.add_argument("--seed", type=seed, default=7, help="master seed, >= 0")
+    b.add_argument("--out", type=output_dir,
+                   help="output folder (default: results/gap_benchmark)")
     b.add_argument("--effects", help="comma-separated effects to hide and to try "
                    "(default: all)")
-    b.add_argument("--folds", type=int, default=3)
+    b.add_argument("--folds", type=int_at_least(2), default=3,
+                   help="held-out folds (whole sweeps)")
     b.add_argument("--real", metavar="DIR", help="inject clock offset, yaw scale, occlusion and "
                    "a stuck photodiode into the real photodiode sessions of DIR (--n: how "
                    "many sessions, default 3) and score the diagnosis")

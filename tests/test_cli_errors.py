@@ -99,9 +99,7 @@ def _help_texts():
     return {name: p.format_help() for name, p in sub.choices.items()}
 
 
-# diagnose and gap-benchmark (experiments/diagnose.py) are being rewritten for photodiode
-# instruments; their help is checked once that lands.
-@pytest.mark.parametrize("name", sorted(set(_help_texts()) - {"diagnose", "gap-benchmark"}))
+@pytest.mark.parametrize("name", sorted(_help_texts()))
 def test_help_speaks_to_users(name):
     text = " ".join(_help_texts()[name].split())
     assert not re.search(r"\bissue \d", text, flags=re.I), name
