@@ -245,6 +245,9 @@ def _score_case(name, truth, doc) -> dict:
         return row
     row["named"] = v["effect"] == e
     cand = next((c for c in doc["candidates"] if c.get("effect") == e), {})
+    row["excess_removed"] = cand.get("excess_removed")
+    row["rank"] = next((i + 1 for i, c in enumerate(doc["candidates"]) if c.get("effect") == e),
+                       None)
     p = cand.get("params", {})
     if e == "clock_offset" and p:
         row["error"] = abs(p["clock_offset_s"]["value"] - truth["clock_offset_s"])

@@ -51,6 +51,8 @@ class Priors:
         mu[L.delta], sd[L.delta], step[L.delta] = 0.0, 20.0, 1e-3
         mu[L.scale], sd[L.scale], step[L.scale] = 0.6, 1.0, 1e-4
         lo[L.scale], hi[L.scale] = 0.0, 1.0
+        mu[L.pointing], sd[L.pointing], step[L.pointing] = 0.0, 5.0, 1e-3
+        lo[L.pointing], hi[L.pointing] = -20.0, 20.0
         sd[L.heading], step[L.heading] = np.inf, 1e-3
         if e is not None:
             mu[L.effect], sd[L.effect] = e.prior_mean, e.prior_sd
@@ -86,6 +88,10 @@ def _groups(fwd: Forward, free: np.ndarray):
     groups.append((list(range(L.delta.start, L.delta.stop)), "output",
                    [("cols", cols_of_unit[u]) for u in range(inst.n_units)]))
     groups.append(([L.scale], "output", [("all", None)]))
+    for half in range(2):   # elevation offsets of all units, then azimuth offsets
+        start = L.pointing.start + half * inst.n_units
+        groups.append((list(range(start, start + inst.n_units)), "geometry",
+                       [("cols", cols_of_unit[u]) for u in range(inst.n_units)]))
     h = list(range(L.heading.start, L.heading.stop))
     if inst.absolute_yaw:
         groups.append((h, "geometry", [("all", None)]))

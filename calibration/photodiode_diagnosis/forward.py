@@ -17,8 +17,9 @@ polarization compass does not use it, and the single-scattering radiance misses 
 sky's aerosol brightening near the sun and horizon by factors of several, which would bury
 every polarization effect. Residuals are relative: ``(r - r_hat) / mean_u(r)``.
 
-Which parameters are shared and which are per sweep: gains, offsets, polarizer offsets and the
-DoP scale belong to the instrument and the sky of a session, so they are shared by all sweeps
+Which parameters are shared and which are per sweep: gains, offsets, polarizer offsets, the
+pointing of every unit's axis (elevation and azimuth offsets from nominal) and the DoP scale
+belong to the instrument and the sky of a session, so they are shared by all sweeps
 (fitted on the training sweeps, held fixed on the held-out ones). The heading offset between
 the recorded (relative) yaw and the true heading is re-fitted for every sweep, training and
 held-out alike, because the platform's IMU is re-zeroed between recordings; with absolute
@@ -34,7 +35,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -57,7 +58,8 @@ class Layout:
     """Positions of the parameter groups in the parameter vector.
 
     Order: ``lambda_p`` (P log-gains), ``o_p`` (P offsets, in units of the session's median
-    reading), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``h_k`` (one heading
+    reading), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``epsilon_u``,
+    ``alpha_u`` (U elevation and U azimuth offsets of the unit axes [deg]), ``h_k`` (one heading
     offset per sweep [deg]; one shared offset for absolute yaw), effect parameters.
     """
 
@@ -83,8 +85,13 @@ class Layout:
         return 2 * self.n_pd + self.n_units
 
     @property
+    def pointing(self):
+        """Per-unit elevation offsets (U) then azimuth offsets (U) of the optical axes [deg]."""
+        return slice(self.scale + 1, self.scale + 1 + 2 * self.n_units)
+
+    @property
     def heading(self):
-        return slice(self.scale + 1, self.scale + 1 + self.n_heading)
+        return slice(self.pointing.stop, self.pointing.stop + self.n_heading)
 
     @property
     def effect(self):
@@ -188,10 +195,23 @@ class Forward:
         att = body_attitude(self.headings(theta), pitch, roll)
         sun = self.sun(t)
         sky = self._sky if e is None else e.sky(pe, self._sky, sun)
+        sensor = self.pointed_sensor(theta)
         if e is not None and e.observes:
-            return e.observe(inst.sensor, sky, att, sun, pe)
-        obs = inst.sensor.observe(sky, att, sun)
+            return e.observe(sensor, sky, att, sun, pe)
+        obs = sensor.observe(sky, att, sun)
         return obs if e is None else e.modify(obs, pe, sun)
+
+    def pointed_sensor(self, theta):
+        """The sensor with every unit's axis at its nominal elevation and azimuth plus the
+        fitted pointing offsets (a hand-built ring's mounting angles differ from nominal)."""
+        p = theta[self.layout.pointing]
+        if not np.any(p):
+            return self.inst.sensor
+        U = self.layout.n_units
+        units = tuple(replace(u, elevation_deg=float(min(max(u.elevation_deg + p[i], 0.0), 90.0)),
+                              azimuth_deg=float(u.azimuth_deg + p[U + i]))
+                      for i, u in enumerate(self.inst.sensor.units))
+        return replace(self.inst.sensor, units=units)
 
     # ---------------------------------------------------------------- output stage
     def channel_model(self, theta, obs: SkySample) -> np.ndarray:

@@ -471,6 +471,10 @@ def _base_fit_report(theta, L, fwd, inst, sign):
     return {"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
             "dop_scale": float(theta[L.scale]),
             "polarizer_offset_deg": {f"u{u}": float(d) for u, d in enumerate(theta[L.delta])},
+            "elevation_offset_deg": {f"u{u}": float(d) for u, d in
+                                     enumerate(theta[L.pointing][:L.n_units])},
+            "azimuth_offset_deg": {f"u{u}": float(d) for u, d in
+                                   enumerate(theta[L.pointing][L.n_units:])},
             "gain": {c: float(np.exp(g)) for c, g in zip(inst.columns, theta[L.lam])},
             "offset": {c: float(o * fwd.level) for c, o in zip(inst.columns, theta[L.off])},
             "heading_offset_deg": [float(h) for h in theta[L.heading]]}
