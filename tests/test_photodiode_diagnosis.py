@@ -246,3 +246,17 @@ def test_injector_does_what_it_says(session):
     assert 0.1 < changed.mean() < 0.45     # unit 0 looks into a 60-120 deg sector once a turn
     with pytest.raises(ValueError, match="injectable"):
         inject(session, "fov", rng)
+
+
+@pytest.mark.skipif(not REAL.is_dir(), reason="reference recordings ../shared/reference/"
+                    "gkanias2023 not present")
+def test_real_dark_twilight_session_reports_its_faults():
+    """Sun at -6.5 deg: the ring's converter reads 0/1 counts; the diagnosis still reports,
+    with every channel's fault named (no fit is possible, and none is pretended)."""
+    from sensor.photodiodes_io import read_photodiodes
+    data = read_photodiodes(REAL / "tod_Thursday_12-05-22_21-03-00_CEST.csv")
+    doc = diagnose_photodiodes(data, ("yaw_scale",))
+    assert doc["verdict"]["effect"] == "unexplained" and doc["verdict"]["gap_before"] is None
+    kinds = {f["channel"]: f["kind"] for f in doc["faults"]}
+    assert sum(k == "zero" for k in kinds.values()) >= 24
+    assert all(kinds.get(f"u{u}") == "too_few" for u in range(8))
