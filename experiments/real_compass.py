@@ -61,10 +61,20 @@ def session_row(name: str, doc: dict) -> dict:
             "gap_base": v.get("gap_before"), "verdict": v["effect"],
             "best": v.get("best_candidate"), "gap_best": best.get("gap_after"),
             "shrink": best.get("shrink"),
-            "params": "; ".join(f"{k}={p['value']:.4g}" for k, p in best.get("params", {}).items()),
+            "params": _params_text(best.get("params", {})),
             "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
             "top_where": "; ".join(f"{w['dimension']}={w['label']} ({100 * w['share']:.0f}%)"
                                    for w in doc["where"][:3])}
+
+
+def _params_text(params: dict) -> str:
+    """Fitted parameters for a table cell; per-photodiode ones as their largest value."""
+    per_pd = {k: p for k, p in params.items() if k.startswith("S_u")}
+    rest = [f"{k}={p['value']:.4g}" for k, p in params.items() if k not in per_pd]
+    if per_pd:
+        k, p = max(per_pd.items(), key=lambda kv: kv[1]["value"])
+        rest.insert(0, f"max S={p['value']:.3g} ({k[2:]})")
+    return "; ".join(rest)
 
 
 def _diagnose_file(path, effects, folds, seed):
