@@ -24,12 +24,15 @@ from .instrument import Instrument, instrument_from_photodiodes
 __all__ = ["EXCESS_FRACTION", "diagnose_instrument", "diagnose_photodiodes", "orient",
            "decode_headings", "held_out_folds"]
 
-EXCESS_FRACTION = 0.10
-"""A candidate is named when its complexity-penalised held-out score is negative and it
-removes at least this fraction of the excess held-out variance ``G_0^2 - floor^2``. A real
-sky is never reproduced to the noise floor by one effect (aerosols, clouds, the instrument's
-own optics all add), so the three-pair rule "down to the floor" would call every real
-session unexplained; 10 % keeps a candidate that only nibbles at the gap from being named."""
+EXCESS_FRACTION = 0.05
+"""A candidate is named when its complexity-penalised held-out score is negative, it removes
+at least this fraction of the excess held-out variance ``G_0^2 - floor^2``, and it lowers the
+held-out gap in at least :data:`SWEEP_CONSISTENCY` of the held-out sweeps. A real sky is
+never reproduced to the noise floor by one effect (aerosols, clouds, the instrument's own
+optics all add), so the three-pair rule "down to the floor" would call every real session
+unexplained; the sweep-by-sweep consistency keeps a candidate that wins on a few sweeps only
+from being named."""
+SWEEP_CONSISTENCY = 0.75
 NONE_MARGIN = 0.10
 FIT_SAMPLES = 1500
 """Fits use every k-th sample of a sweep so that about this many samples remain: a platform
@@ -62,6 +65,14 @@ def held_out_folds(sweep, n_folds: int) -> np.ndarray:
             "holds out whole sweeps")
     fold_of = {s: i % int(n_folds) for i, s in enumerate(ids)}
     return np.array([fold_of[s] for s in sweep])
+
+
+def _sweeps_improved(r0, r1, w, sweep) -> float:
+    """Fraction of sweeps whose held-out residual sum of squares the candidate lowers."""
+    ids = np.unique(sweep)
+    ss0 = np.array([np.sum(np.where(w[sweep == s], r0[sweep == s], 0.0) ** 2) for s in ids])
+    ss1 = np.array([np.sum(np.where(w[sweep == s], r1[sweep == s], 0.0) ** 2) for s in ids])
+    return float(np.mean(ss1 < ss0))
 
 
 def _rms(r, w) -> float:
@@ -387,10 +398,13 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         gc = _rms(res[e.name], w_ho)
         score = n_ho * np.log(gc ** 2 / g0 ** 2) + e.k * np.log(max(n_cal, 2))
         frac = (g0 ** 2 - gc ** 2) / max(g0 ** 2 - floor ** 2, 1e-300)
+        better = _sweeps_improved(res["base"], res[e.name], w_ho, work.sweep)
         P = np.array(fold_params[e.name])
         rows.append({"effect": e.name, "gap_after": gc, "shrink": 1 - gc / g0,
                      "score": float(score), "k": e.k, "excess_removed": float(frac),
-                     "explained": bool(frac >= EXCESS_FRACTION and score < 0),
+                     "sweeps_improved": better,
+                     "explained": bool(frac >= EXCESS_FRACTION and score < 0
+                                       and better >= SWEEP_CONSISTENCY),
                      "converged": all(fold_converged[e.name]),
                      "params": {n: {"value": float(np.mean(P[:, j])),
                                     "fold_spread": float(np.std(P[:, j])), "unit": un}
@@ -402,7 +416,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     elif avail and avail[0]["explained"]:
         verdict = avail[0]["effect"]
         reason = (f"best-ranked candidate removes {100 * avail[0]['excess_removed']:.0f} % of "
-                  "the excess held-out variance")
+                  "the excess held-out variance and lowers the gap in "
+                  f"{100 * avail[0]['sweeps_improved']:.0f} % of the held-out sweeps")
     else:
         verdict = "unexplained"
         reason = ("no candidate removes a significant part of the held-out gap"
