@@ -5,16 +5,19 @@ polarizer channels ``d`` (dark-subtracted [DN]) with their analysis vectors ``A`
 nominal polarizers or a per-pixel calibration, Powell & Gruev 2013 [1]_, eqs. 4-6) by least
 squares, ``S = (A^T A)^-1 A^T d``. The methods differ in where the four channels come from:
 
-- ``"superpixel"`` (default): each 2x2 block gives one Stokes vector at the block centre
+- ``"bilinear"`` (default): each channel and its analysis vectors are interpolated to every
+  pixel with the bilinear kernel ``[[1, 2, 1], [2, 4, 2], [1, 2, 1]] / 4`` as a normalised
+  convolution (masked pixels carry no weight) [2]_. Full resolution, and the four channels
+  meet at the same point, so no instantaneous-field-of-view error: on a smooth sky the
+  super-pixel's error biases the heading (0.7 deg at 70 deg sun elevation on a 128 x 128
+  fisheye image, halving with each doubling of the resolution), the bilinear one does not
+  (< 0.001 deg). Neighbouring outputs share raw pixels, so their noise is correlated.
+- ``"superpixel"``: each 2x2 block gives one Stokes vector at the block centre
   (half resolution). Each block uses only its own four pixels, so a calibrated pixel's
   analysis vector applies exactly, a saturated or masked pixel spoils only its block, and the
-  output samples have independent noise (which the heading uncertainty relies on). The four
-  pixels see directions half a pixel apart: on a smooth sky the error is the field's change
-  across one pixel (instantaneous-field-of-view error, [2]_).
-- ``"bilinear"``: each channel and its analysis vectors are interpolated to every pixel with
-  the bilinear kernel ``[[1, 2, 1], [2, 4, 2], [1, 2, 1]] / 4`` as a normalised convolution
-  (masked pixels carry no weight) [2]_: full resolution and a smaller geometric error on
-  smooth scenes, at the cost of noise correlated between neighbouring pixels.
+  output samples have independent noise; a quarter of the samples and faster. The four
+  pixels see directions half a pixel apart: the error is the field's change across one pixel
+  (instantaneous-field-of-view error, [2]_).
 
 AoP in the camera frame is measured from the camera's x axis towards its y axis
 (:mod:`sensor.camera.lens`); :func:`local_meridian_aop` converts it to skysim's local-meridian
@@ -46,7 +49,7 @@ from .mosaic import camera_basis
 __all__ = ["DEMOSAIC_METHODS", "StokesImage", "demosaic", "local_meridian_aop",
            "solve_stokes", "e_vectors_camera"]
 
-DEMOSAIC_METHODS = ("superpixel", "bilinear")
+DEMOSAIC_METHODS = ("bilinear", "superpixel")
 
 
 @dataclass(frozen=True, eq=False)
@@ -137,7 +140,7 @@ def _bilinear(d, analysis, good):
 
 
 def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
-             saturation_dn: float | None = None, method: str = "superpixel") -> StokesImage:
+             saturation_dn: float | None = None, method: str = "bilinear") -> StokesImage:
     """Stokes images from a raw mosaic.
 
     Parameters
@@ -154,7 +157,8 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
         Pixels that see the sky (e.g. the image circle above the horizon).
     saturation_dn : float or None
         Pixels at or above this value are excluded (with their super-pixel).
-    method : {"superpixel", "bilinear"}
+    method : {"bilinear", "superpixel"}
+        See the module doc (bilinear is the default: no instantaneous-field-of-view error).
 
     Raises
     ------
