@@ -357,20 +357,44 @@ class PolarizationCamera:
         return float(fill * self.sensor.full_well_e / np.percentile(per_s, percentile))
 
     def digitise(self, electrons: np.ndarray) -> np.ndarray:
-        """Clip electrons at the full well and convert to DN (uint16, black level added)."""
+        """Clip electrons at the full well and convert to DN (uint16, black level added; read
+        noise below zero electrons stays above 0 DN thanks to the black level)."""
         s = self.sensor
-        e = np.clip(electrons, 0.0, s.full_well_e)
+        e = np.minimum(electrons, s.full_well_e)
         dn = np.rint(e / s.e_per_dn) + s.black_level_dn
         return np.clip(dn, 0, s.max_dn).astype(np.uint16)
 
-    def capture(self, scene: Scene, exposure_s: float, rng: np.random.Generator) -> np.ndarray:
-        """A raw mosaic image (H, W) uint16 [DN]: shot, dark-current and read noise drawn from
-        ``rng``, full-well clipping, ADC."""
-        mean = self.expected_electrons(scene, exposure_s)
-        e = rng.poisson(mean).astype(float)
-        e += self.sensor.read_noise_e * rng.standard_normal(mean.shape)
-        e[scene.sun] = self.sensor.full_well_e
+    def noisy_frames(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Raw frames (..., H, W) uint16 [DN] for mean electrons (..., H, W): photon and
+        dark-current shot noise (Poisson) and read noise (Gaussian) from ``rng``, full-well
+        clipping, ADC."""
+        e = rng.poisson(mean_electrons).astype(float)
+        e += self.sensor.read_noise_e * rng.standard_normal(e.shape)
         return self.digitise(e)
+
+    def capture(self, scene: Scene, exposure_s: float, rng: np.random.Generator) -> np.ndarray:
+        """A raw mosaic image (H, W) uint16 [DN] of ``scene`` (:meth:`noisy_frames`); the sun
+        disk saturated."""
+        raw = self.noisy_frames(self.expected_electrons(scene, exposure_s), rng)
+        raw[scene.sun] = self.sensor.max_dn
+        return raw
+
+    def calibration_frames(self, angles_deg, radiance: float, exposure_s: float,
+                           n_frames: int, rng: np.random.Generator):
+        """Flat-field calibration data: the mean of ``n_frames`` raw frames [DN] of a fully
+        polarized uniform source of ``radiance`` at each polarizer angle [deg] (camera
+        frame), shape (K, H, W), and the mean dark frame (H, W) (source off)."""
+        a = np.radians(2.0 * np.asarray(angles_deg, dtype=float))
+        if a.ndim != 1 or n_frames < 1:
+            raise InvalidParameterError(f"angles_deg must be 1-D and n_frames >= 1; got "
+                                        f"shape {a.shape}, n_frames={n_frames!r}")
+        scenes = [(radiance, radiance * np.cos(x), radiance * np.sin(x)) for x in a] + [(0, 0, 0)]
+        mean = np.stack([self.expected_electrons(self.uniform_scene(s), exposure_s)
+                         for s in scenes])  # K + 1 sources, not samples
+        frames = self.noisy_frames(np.broadcast_to(mean[:, None], (len(scenes), n_frames)
+                                                   + mean.shape[1:]), rng)
+        avg = frames.mean(axis=1)
+        return avg[:-1], avg[-1]
 
     def uniform_scene(self, stokes) -> Scene:
         """A flat scene of camera-frame Stokes ``(I, Q, U)`` filling the image circle (an
