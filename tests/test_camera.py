@@ -191,3 +191,15 @@ def test_bad_inputs_raise():
     with pytest.raises(InvalidParameterError, match="exposure_s"):
         cam.expected_electrons(cam.uniform_scene((1, 0, 0)), -1.0)
     assert isinstance(camera_attitude(10.0), Rotation)
+
+
+def test_missing_tifffile_gives_install_hint(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from experiments.cli import main
+    monkeypatch.setitem(sys.modules, "tifffile", None)  # import fails as if not installed
+    assert main(["camera", "--lat", "34", "--lon", "108", "--time", "2013-05-22T12:00+08:00",
+                 "--width", "32", "--height", "32", "--out", str(tmp_path / "x.tiff")]) == 2
+    err = capsys.readouterr().err
+    assert "'camera'" in err and "pip install -e" in err
+    assert not (tmp_path / "x.tiff").exists()

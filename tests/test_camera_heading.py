@@ -5,16 +5,13 @@ import pytest
 
 from calibration.camera_heading import heading_from_image
 from calibration.exceptions import TooFewSamplesError
-from sensor.camera import PolarizationCamera, camera_attitude, demosaic
+from sensor.camera import PolarizationCamera, camera_attitude, camera_stokes, demosaic
 from skysim.geometry import wrap_deg
 from skysim.sky import RayleighSky
 
 
 def _stokes(cam, scene, raw, exposure_s, method="bilinear"):
-    s = cam.sensor
-    dark = s.black_level_dn + s.dark_current_e_s * exposure_s / s.e_per_dn
-    return demosaic(raw, cam.analysis_dn(exposure_s, ideal=True), black_level_dn=dark,
-                    valid=scene.valid, saturation_dn=s.max_dn, method=method)
+    return camera_stokes(cam, raw, exposure_s, valid=scene.valid, method=method)
 
 
 @pytest.mark.parametrize("yaw, pitch, roll, sun_el", [(30.0, 0.0, 0.0, 20.0),

@@ -46,7 +46,7 @@ from skysim.geometry import aop_from_e_vector, elevation_azimuth, wrap_axial_deg
 
 from .mosaic import camera_basis
 
-__all__ = ["DEMOSAIC_METHODS", "StokesImage", "demosaic", "local_meridian_aop",
+__all__ = ["DEMOSAIC_METHODS", "StokesImage", "camera_stokes", "demosaic", "local_meridian_aop",
            "solve_stokes", "e_vectors_camera"]
 
 DEMOSAIC_METHODS = ("bilinear", "superpixel")
@@ -212,3 +212,21 @@ def local_meridian_aop(stokes: StokesImage, lens, attitude: Rotation):
     aop = aop_from_e_vector(el, az, e_n)
     bad = ~stokes.valid
     return (np.where(bad, np.nan, el), np.where(bad, np.nan, az), np.where(bad, np.nan, aop))
+
+
+def camera_stokes(camera, raw_dn, exposure_s: float, *, valid=None, method: str = "bilinear",
+                  analysis_dn=None, dark_dn=None) -> StokesImage:
+    """Stokes image of a raw frame from ``camera`` (:class:`PolarizationCamera`).
+
+    Without ``analysis_dn`` the nominal polarizers of the camera (what an uncalibrated camera
+    assumes) and its black level plus nominal dark current are used; with a calibration pass
+    its per-pixel ``analysis_dn`` and dark frame ``dark_dn`` [DN] (at this exposure).
+    Saturated pixels are excluded.
+    """
+    s = camera.sensor
+    if analysis_dn is None:
+        analysis_dn = camera.analysis_dn(exposure_s, ideal=True)
+    if dark_dn is None:
+        dark_dn = s.black_level_dn + s.dark_current_e_s * exposure_s / s.e_per_dn
+    return demosaic(raw_dn, analysis_dn, black_level_dn=dark_dn, valid=valid,
+                    saturation_dn=s.max_dn, method=method)
