@@ -225,3 +225,174 @@ def register(sub) -> None:
     h.add_argument("--figure", type=output_file(".png"), default=None,
                    help="also write DoLP/AoP images (.png)")
     h.set_defaults(func=_heading_command)
+
+
+# --- skysim reproduce camera ------------------------------------------------------------
+
+SUN_AZIMUTH_DEG = 135.0
+
+
+def heading_trials(cam, sky, sun_elevation_deg: float, yaws_deg, rng, *, fill: float = 0.6,
+                   calibration=None, method: str = "bilinear"):
+    """Heading errors and reported standard errors [deg] of one image per yaw [deg] (each
+    trial is a whole image, vectorised over its pixels). ``calibration``: ``(cal, t_cal)``
+    from the flat-field calibration, else the nominal camera model."""
+    from calibration.camera_heading import heading_from_image
+    from sensor.camera import camera_attitude, camera_stokes
+    errors, sigmas = [], []
+    for yaw in yaws_deg:  # one image per trial
+        scene = cam.scene(sky, camera_attitude(yaw), sun_elevation_deg, SUN_AZIMUTH_DEG)
+        t = fill / 0.6 * cam.auto_exposure_s(scene)
+        raw = cam.capture(scene, t, rng)
+        extra = {}
+        if calibration is not None:
+            extra = dict(zip(("analysis_dn", "dark_dn"), _calibrated_inputs(cam, *calibration,
+                                                                            t)))
+        st = camera_stokes(cam, raw, t, valid=scene.valid, method=method, **extra)
+        h = heading_from_image(st, cam.lens, sun_elevation_deg, SUN_AZIMUTH_DEG)
+        errors.append((h.heading_deg - yaw + 180.0) % 360.0 - 180.0)
+        sigmas.append(h.sigma_deg)
+    return np.array(errors), np.array(sigmas)
+
+
+def _row(study, sky_name, camera, sun_el, fill, er, errors, sigmas):
+    return {"study": study, "sky": sky_name, "camera": camera, "sun_elevation_deg": sun_el,
+            "fill": fill, "extinction_ratio": er, "trials": len(errors),
+            "rms_error_deg": float(np.sqrt(np.mean(errors ** 2))),
+            "mean_error_deg": float(np.mean(errors)),
+            "max_abs_error_deg": float(np.max(np.abs(errors))),
+            "mean_sigma_deg": float(np.mean(sigmas))}
+
+
+def run(*, quick: bool = False, trials: int | None = None, seed: int = DEFAULT_SEED,
+        out: Path = Path("results/camera")) -> dict:
+    """The camera-compass study; writes ``table.md``, ``table.csv``, ``summary.json`` and
+    figures under ``out`` and returns ``{"table": DataFrame, "summary": dict}``."""
+    import pandas as pd
+
+    from skysim.multiple import MultipleScatteringSky
+    from skysim.sky import RayleighSky
+
+    start = time.perf_counter()
+    size = 128 if quick else 256
+    trials = trials or (3 if quick else 10)
+    elevations = (10.0, 40.0, 70.0) if quick else (5.0, 15.0, 30.0, 45.0, 60.0, 75.0)
+    rng = np.random.default_rng(seed)
+    skies = {"rayleigh": RayleighSky(SKY_DMAX),
+             "multiple": MultipleScatteringSky(tau=0.1, albedo=0.1)}
+    ideal = _camera(size)
+    faulty = _camera(size, faults=FAULTS, rng=rng)
+    cal = _calibrate(faulty, rng)
+    cameras = {"ideal": (ideal, None), "uncalibrated": (faulty, None),
+               "calibrated": (faulty, cal)}
+    rows = []
+    for sky_name, sky in skies.items():
+        for cam_name, (cam, c) in cameras.items():
+            for el in elevations:
+                e, s = heading_trials(cam, sky, el, rng.uniform(0, 360, trials), rng,
+                                      calibration=c)
+                rows.append(_row("sun elevation", sky_name, cam_name, el, 0.6, np.inf, e, s))
+    fills = (0.02, 0.1, 0.6) if quick else (0.01, 0.03, 0.1, 0.3, 0.6, 0.95)
+    for fill in fills:
+        e, s = heading_trials(ideal, skies["rayleigh"], 40.0, rng.uniform(0, 360, trials), rng,
+                              fill=fill)
+        rows.append(_row("exposure", "rayleigh", "ideal", 40.0, fill, np.inf, e, s))
+    ratios = (5.0, 30.0, np.inf) if quick else (3.0, 10.0, 30.0, 100.0, np.inf)
+    for er in ratios:
+        faults = {"extinction_ratio": er, "extinction_ratio_rel_std": 0.2}
+        cam = _camera(size, faults=faults, rng=rng)
+        for cam_name, c in (("uncalibrated", None), ("calibrated", _calibrate(cam, rng))):
+            e, s = heading_trials(cam, skies["rayleigh"], 40.0, rng.uniform(0, 360, trials),
+                                  rng, calibration=c)
+            rows.append(_row("extinction ratio", "rayleigh", cam_name, 40.0, 0.6, er, e, s))
+    table = pd.DataFrame(rows)
+    summary = {"image_px": size, "trials_per_condition": trials, "seed": seed,
+               "demosaicing": "bilinear", "sun_azimuth_deg": SUN_AZIMUTH_DEG,
+               "rayleigh_dmax": SKY_DMAX, "multiple": skies["multiple"].describe(),
+               "faulty_camera": FAULTS, "calibration_angles_deg": list(CAL_ANGLES_DEG),
+               "elapsed_s": time.perf_counter() - start}
+    _write_outputs(Path(out), table, summary, skies, ideal, size)
+    summary["elapsed_s"] = time.perf_counter() - start
+    return {"table": table, "summary": summary}
+
+
+def format_table(table) -> str:
+    """Markdown table of the study."""
+    cols = ["study", "sky", "camera", "sun_elevation_deg", "fill", "extinction_ratio", "trials",
+            "rms_error_deg", "mean_error_deg", "mean_sigma_deg"]
+    head = ("| study | sky | camera | sun el [deg] | fill | ER | trials | RMS error [deg] | "
+            "mean error [deg] | mean 1σ [deg] |")
+    lines = [head, "|" + "---|" * len(cols)]
+    for r in table[cols].itertuples(index=False):
+        lines.append(f"| {r.study} | {r.sky} | {r.camera} | {r.sun_elevation_deg:.0f} | "
+                     f"{r.fill:.2f} | {r.extinction_ratio:g} | {r.trials} | "
+                     f"{r.rms_error_deg:.4f} | {r.mean_error_deg:+.4f} | "
+                     f"{r.mean_sigma_deg:.4f} |")
+    return "\n".join(lines)
+
+
+def _write_outputs(out: Path, table, summary, skies, cam, size) -> None:
+    from sensor.camera import camera_attitude, camera_stokes
+    from skysim.io import atomic_write, write_json_atomic
+
+    from .figures import pyplot, save_png
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "figures").mkdir(exist_ok=True)
+    atomic_write(out / "table.csv", lambda tmp: table.to_csv(tmp, index=False))
+    md = ("Heading error of a fisheye polarization camera, one image per trial "
+          f"({size}x{size} px, bilinear demosaicing, sun azimuth {SUN_AZIMUTH_DEG:g} deg, "
+          "random yaw).\n\n" + format_table(table) + "\n")
+    atomic_write(out / "table.md", lambda tmp: tmp.write_text(md))
+    write_json_atomic(out / "summary.json", summary)
+    plt = pyplot()
+    el = table[table.study == "sun elevation"]
+    fig, ax = plt.subplots(figsize=(6.5, 4.2))
+    for (sky, camera), g in el.groupby(["sky", "camera"]):
+        ax.semilogy(g.sun_elevation_deg, g.rms_error_deg, "o-" if sky == "rayleigh" else "s--",
+                    label=f"{camera}, {sky} sky")
+    ax.set_xlabel("sun elevation [deg]")
+    ax.set_ylabel("heading RMS error [deg]")
+    ax.legend(fontsize=8)
+    ax.grid(alpha=0.3, which="both")
+    save_png(fig, out / "figures" / "heading_vs_sun_elevation.png")
+    fig, (a1, a2) = plt.subplots(1, 2, figsize=(10, 4))
+    ex = table[table.study == "exposure"]
+    a1.loglog(ex.fill, ex.rms_error_deg, "o-", label="RMS error")
+    a1.loglog(ex.fill, ex.mean_sigma_deg, "k:", label="mean reported 1σ")
+    a1.set_xlabel("exposure: 99th percentile of the sky / full well")
+    a1.set_ylabel("heading error [deg]")
+    a1.legend(fontsize=8)
+    er = table[table.study == "extinction ratio"]
+    for camera, g in er.groupby("camera"):
+        x = np.where(np.isfinite(g.extinction_ratio), g.extinction_ratio, 1e3)
+        a2.loglog(x, g.rms_error_deg, "o-", label=camera)
+    a2.set_xlabel("extinction ratio (1000 = ideal polarizer)")
+    a2.set_ylabel("heading RMS error [deg]")
+    a2.legend(fontsize=8)
+    for a in (a1, a2):
+        a.grid(alpha=0.3, which="both")
+    fig.tight_layout()
+    save_png(fig, out / "figures" / "heading_vs_exposure_and_extinction.png")
+    rng = np.random.default_rng(0)
+    for name, sky in skies.items():
+        att = camera_attitude(0.0)
+        scene = cam.scene(sky, att, 40.0, SUN_AZIMUTH_DEG)
+        t = cam.auto_exposure_s(scene)
+        st = camera_stokes(cam, cam.capture(scene, t, rng), t, valid=scene.valid)
+        stokes_figure(st, cam.lens, att, out / "figures" / f"dolp_aop_{name}.png",
+                      f"{name} sky, sun at 40 deg elevation, image top north")
+
+
+def _reproduce(args) -> int:
+    out = Path(args.out or "results/camera")
+    result = run(quick=args.quick, trials=args.trials, seed=args.seed, out=out)
+    s = result["summary"]
+    print(f"Polarization-camera compass — {s['image_px']} px images, "
+          f"{s['trials_per_condition']} trials per condition, seed {s['seed']}")
+    print(format_table(result["table"]))
+    print(f"{s['elapsed_s']:.1f} s; wrote {out}/table.md, table.csv, summary.json, figures")
+    return 0
+
+
+def register_reproduce(targets: dict) -> None:
+    targets["camera"] = _reproduce
