@@ -147,7 +147,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     u = prior.copy()
     alpha, scale = None, np.nan
     for it in range(1, max_iter + 1):
-        m = np.einsum("n,ni,nj->ij", u, a, a)
+        m = (a * u[:, None]).T @ a
         if alpha is None:
             grid_cost = _cost(m, _GRID)
             alpha0 = _GRID[np.argmin(grid_cost)]
@@ -158,14 +158,14 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         z = r * np.sqrt(prior)
         scale = 1.4826 * np.median(np.abs(z - np.median(z)))
         u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
-        done = alpha is not None and abs(new - alpha) < 1e-10
+        done = alpha is not None and abs(new - alpha) < 1e-9
         alpha = new
         if done:
             break
     else:
         raise ConvergenceError(f"heading did not settle in {max_iter} reweighting iterations",
                                iterations=max_iter)
-    m = np.einsum("n,ni,nj->ij", u, a, a)
+    m = (a * u[:, None]).T @ a
     best = _cost(m, np.array([alpha]))[0]
     other = _cost(m, np.array([_newton(m, alpha + np.pi)]))[0]
     jac = a @ np.array([np.cos(alpha), -np.sin(alpha), 0.0])

@@ -91,14 +91,14 @@ class StokesImage:
 def solve_stokes(analysis: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Least-squares Stokes ``(..., 3)`` from channel values ``(..., n)`` and analysis
     vectors ``(..., n, 3)`` (normal equations, closed-form 3x3 inverse; NaN where singular)."""
-    m = np.einsum("...ki,...kj->...ij", analysis, analysis)
-    b = np.einsum("...ki,...k->...i", analysis, values)
+    m = np.matmul(np.swapaxes(analysis, -1, -2), analysis)
+    b = np.matmul(np.swapaxes(analysis, -1, -2), values[..., None])[..., 0]
     cof = np.stack([np.cross(m[..., 1, :], m[..., 2, :]), np.cross(m[..., 2, :], m[..., 0, :]),
                     np.cross(m[..., 0, :], m[..., 1, :])], axis=-2)  # rows of adj(m)^T
-    det = np.einsum("...i,...i->...", m[..., 0, :], cof[..., 0, :])
+    det = np.sum(m[..., 0, :] * cof[..., 0, :], axis=-1)
     with np.errstate(invalid="ignore", divide="ignore"):
         # m is symmetric, so adj(m) = cof^T = cof
-        return np.einsum("...ij,...j->...i", cof, b) / det[..., None]
+        return np.matmul(cof, b[..., None])[..., 0] / det[..., None]
 
 
 def _blocks(a: np.ndarray) -> np.ndarray:
@@ -116,7 +116,12 @@ def _superpixel(d, analysis, good):
     return s, valid, row, col
 
 
-_KERNEL = np.array([[1.0, 2.0, 1.0], [2.0, 4.0, 2.0], [1.0, 2.0, 1.0]]) / 4.0
+_KERNEL_1D = np.array([1.0, 2.0, 1.0]) / 2.0  # the 3x3 bilinear kernel is its outer square
+
+
+def _smooth(a):
+    return ndimage.correlate1d(ndimage.correlate1d(a, _KERNEL_1D, 0, mode="constant"),
+                               _KERNEL_1D, 1, mode="constant")
 
 
 def _bilinear(d, analysis, good):
@@ -127,13 +132,12 @@ def _bilinear(d, analysis, good):
     for k, (i, j) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):  # four channels, not pixels
         m = np.zeros((h, w))
         m[i::2, j::2] = good[i::2, j::2]
-        wsum = ndimage.correlate(m, _KERNEL, mode="constant")
+        wsum = _smooth(m)
         support &= wsum > 0
         inv = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 0)
-        chan_d[..., k] = ndimage.correlate(m * d, _KERNEL, mode="constant") * inv
-        for c in range(3):
-            chan_a[..., k, c] = ndimage.correlate(m * analysis[..., c], _KERNEL,
-                                                  mode="constant") * inv
+        chan_d[..., k] = _smooth(m * d) * inv
+        for c in range(3):  # three Stokes components
+            chan_a[..., k, c] = _smooth(m * analysis[..., c]) * inv
     s = solve_stokes(chan_a, chan_d)
     row, col = np.indices((h, w), dtype=float)
     return s, support & good, row, col

@@ -42,7 +42,6 @@ import numpy as np
 from scipy.spatial.transform import Rotation
 
 from skysim.exceptions import InvalidParameterError
-from skysim.geometry import local_basis
 
 from .lens import FisheyeLens
 
@@ -299,6 +298,18 @@ class PolarizationCamera:
         rows, cols = np.indices(self.sensor.shape, dtype=float)
         return self.lens.back_project(rows, cols)
 
+    @functools.cached_property
+    def _rays(self):
+        """Flat indices of the pixels in the image circle and their camera basis."""
+        d_c, in_circle = self.pixel_directions
+        rays = np.flatnonzero(in_circle)
+        return rays, camera_basis(d_c.reshape(-1, 3)[rays])
+
+    @functools.cached_property
+    def _analysis(self) -> dict:
+        v = self.vignetting()[..., None]
+        return {ideal: self.sensor.analysis_vectors(ideal) * v for ideal in (False, True)}
+
     def vignetting(self, rows=None, cols=None) -> np.ndarray:
         """Relative illumination ``V`` at pixel coordinates (default: every pixel centre)."""
         if rows is None:
@@ -313,7 +324,7 @@ class PolarizationCamera:
         included: the expected dark-subtracted pixel value is ``analysis_dn . S``.
         ``ideal``: the nominal polarizers (what a camera without calibration assumes)."""
         scale = self.photoelectrons_per_s * exposure_s / self.sensor.e_per_dn
-        return self.sensor.analysis_vectors(ideal) * (scale * self.vignetting())[..., None]
+        return self._analysis[bool(ideal)] * scale
 
     def scene(self, sky, attitude: Rotation, sun_elevation_deg: float,
               sun_azimuth_deg: float) -> Scene:
@@ -321,9 +332,11 @@ class PolarizationCamera:
         (camera-to-ENU rotation, :func:`camera_attitude`) and the given sun [deg]."""
         d_c, in_circle = self.pixel_directions
         shape = self.sensor.shape
+        rays, basis = self._rays
         idx, stokes, el, az = sky_stokes_camera(sky, attitude, sun_elevation_deg,
-                                                sun_azimuth_deg, d_c.reshape(-1, 3),
-                                                in_circle.reshape(-1))
+                                                sun_azimuth_deg, d_c.reshape(-1, 3)[rays],
+                                                np.ones(rays.size, bool), basis=basis)
+        idx = rays[idx]
         out = {k: np.zeros(shape) for k in ("I", "Q", "U", "el", "az")}
         for k, v in (("I", stokes[:, 0]), ("Q", stokes[:, 1]), ("U", stokes[:, 2]),
                      ("el", el), ("az", az)):
@@ -331,18 +344,19 @@ class PolarizationCamera:
         valid = np.zeros(shape, bool)
         valid.reshape(-1)[idx] = True
         s_c = attitude.inv().apply(_enu(sun_elevation_deg, sun_azimuth_deg))
-        cos_sun = np.clip(np.sum(d_c * s_c, -1), -1.0, 1.0)
         sun_theta = np.arctan2(np.hypot(s_c[0], s_c[1]), s_c[2])
         reach = np.radians(self.sun_radius_deg) + 0.5 * float(self.lens.dtheta_dr(sun_theta))
-        sun = in_circle & (np.arccos(np.where(in_circle, cos_sun, -1.0)) <= reach)
+        sun = np.zeros(shape, bool)
+        sun.reshape(-1)[rays] = d_c.reshape(-1, 3)[rays] @ s_c >= np.cos(reach)
         return Scene(out["I"], out["Q"], out["U"], valid, sun, out["el"], out["az"])
 
     def expected_electrons(self, scene: Scene, exposure_s: float) -> np.ndarray:
         """Mean photo- and dark electrons of every pixel (H, W) before noise and clipping; the
         sun disk at the full well."""
         _check_positive("exposure_s", exposure_s)
-        a = self.sensor.analysis_vectors() * self.vignetting()[..., None]
-        e = self.photoelectrons_per_s * exposure_s * np.einsum("hwk,hwk->hw", a, scene.stokes)
+        a = self._analysis[False]
+        e = a[..., 0] * scene.I + a[..., 1] * scene.Q + a[..., 2] * scene.U
+        e *= self.photoelectrons_per_s * exposure_s
         e += self.sensor.dark_current_e_s * exposure_s
         e[scene.sun] = np.maximum(e[scene.sun], self.sensor.full_well_e)
         return e
@@ -415,26 +429,31 @@ class PolarizationCamera:
 
 
 def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azimuth_deg: float,
-                      directions, in_view):
+                      directions, in_view, basis=None):
     """Camera-frame Stokes ``(n, 3)`` of ``sky`` along camera-frame unit ``directions``
     ``(N, 3)`` where ``in_view`` (N,) holds and the ray looks above the horizon.
 
-    Returns ``(index, stokes, elevation_deg, azimuth_deg)`` of those ``n`` rays.
+    ``basis``: :func:`camera_basis` of ``directions`` if already known. Returns
+    ``(index, stokes, elevation_deg, azimuth_deg)`` of those ``n`` rays.
     """
-    idx = np.flatnonzero(in_view)
-    d_c = directions[idx]
-    d_n = attitude.apply(d_c)
-    el = np.degrees(np.arcsin(np.clip(d_n[:, 2], -1.0, 1.0)))
-    az = np.mod(np.degrees(np.arctan2(d_n[:, 0], d_n[:, 1])), 360.0)
-    up = el >= 0.0
-    idx, d_c, el, az = idx[up], d_c[up], el[up], az[up]
+    east, north, up = attitude.inv().apply(np.eye(3))  # ENU axes in the camera frame
+    sin_el = np.clip(directions @ up, -1.0, 1.0)
+    keep = np.asarray(in_view, bool) & (sin_el >= 0.0)
+    if keep.all():  # a level camera: no copies
+        idx, d_c = np.arange(len(keep)), directions
+    else:
+        idx = np.flatnonzero(keep)
+        d_c, sin_el = directions[idx], sin_el[idx]
+    el = np.degrees(np.arcsin(sin_el))
+    az = np.mod(np.degrees(np.arctan2(d_c @ east, d_c @ north)), 360.0)
     fld = sky.field(el, az, sun_elevation_deg, sun_azimuth_deg)
+    if basis is None:
+        basis = camera_basis(directions)
+    _, psi, e_th, e_ps = basis if keep.all() else (b[idx] for b in basis)
     # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y: the
-    # camera-plane angle of e_el (both bases are right-handed about the ray)
-    _, e_el, _ = local_basis(el, az)
-    _, psi, e_th, e_ps = camera_basis(d_c)
-    e_el_c = attitude.inv().apply(e_el)
-    delta = np.arctan2(np.sum(e_el_c * e_ps, -1), np.sum(e_el_c * e_th, -1)) + psi
+    # camera-plane angle of e_el, the zenith's component across the ray (both bases are
+    # right-handed about the ray)
+    delta = np.arctan2(e_ps @ up, e_th @ up) + psi
     c2, s2 = np.cos(2 * delta), np.sin(2 * delta)
     stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
     return idx, stokes, el, az
