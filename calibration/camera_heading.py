@@ -158,7 +158,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         z = r * np.sqrt(prior)
         scale = 1.4826 * np.median(np.abs(z - np.median(z)))
         u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
-        done = alpha is not None and abs(new - alpha) < 1e-9
+        done = alpha is not None and abs(new - alpha) < 1e-8  # rad: 6e-7 deg
         alpha = new
         if done:
             break

@@ -38,7 +38,6 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
-from scipy import ndimage
 from scipy.spatial.transform import Rotation
 
 from skysim.exceptions import InvalidParameterError
@@ -90,15 +89,34 @@ class StokesImage:
 
 def solve_stokes(analysis: np.ndarray, values: np.ndarray) -> np.ndarray:
     """Least-squares Stokes ``(..., 3)`` from channel values ``(..., n)`` and analysis
-    vectors ``(..., n, 3)`` (normal equations, closed-form 3x3 inverse; NaN where singular)."""
-    m = np.matmul(np.swapaxes(analysis, -1, -2), analysis)
-    b = np.matmul(np.swapaxes(analysis, -1, -2), values[..., None])[..., 0]
-    cof = np.stack([np.cross(m[..., 1, :], m[..., 2, :]), np.cross(m[..., 2, :], m[..., 0, :]),
-                    np.cross(m[..., 0, :], m[..., 1, :])], axis=-2)  # rows of adj(m)^T
-    det = np.sum(m[..., 0, :] * cof[..., 0, :], axis=-1)
+    vectors ``(..., n, 3)`` (normal equations, closed-form symmetric 3x3 inverse; NaN where
+    singular)."""
+    return _solve_normal(np.moveaxis(analysis, (-2, -1), (0, 1)), np.moveaxis(values, -1, 0))
+
+
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _solve_normal(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """:func:`solve_stokes` for channel-first arrays: ``a`` (n, 3, ...), ``d`` (n, ...)."""
+    m = [np.sum(a[:, i] * a[:, j], axis=0) for i, j in _PAIRS]
+    b = [np.sum(a[:, i] * d, axis=0) for i in range(3)]
+    return _solve_terms(m, b)
+
+
+def _solve_terms(m, b) -> np.ndarray:
+    """Solve the symmetric 3x3 normal equations given as ``m = (m00, m11, m22, m01, m02,
+    m12)`` and ``b = (b0, b1, b2)`` (arrays) by the adjugate: elementwise arithmetic only."""
+    m00, m11, m22, m01, m02, m12 = m
+    b0, b1, b2 = b
+    c00, c11, c22 = m11 * m22 - m12 * m12, m00 * m22 - m02 * m02, m00 * m11 - m01 * m01
+    c01, c02, c12 = m02 * m12 - m01 * m22, m01 * m12 - m02 * m11, m01 * m02 - m00 * m12
+    det = m00 * c00 + m01 * c01 + m02 * c02
     with np.errstate(invalid="ignore", divide="ignore"):
-        # m is symmetric, so adj(m) = cof^T = cof
-        return np.matmul(cof, b[..., None])[..., 0] / det[..., None]
+        inv = 1.0 / det
+        return np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
+                         (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+                         (c02 * b0 + c12 * b1 + c22 * b2) * inv], axis=-1)
 
 
 def _blocks(a: np.ndarray) -> np.ndarray:
@@ -116,29 +134,47 @@ def _superpixel(d, analysis, good):
     return s, valid, row, col
 
 
-_KERNEL_1D = np.array([1.0, 2.0, 1.0]) / 2.0  # the 3x3 bilinear kernel is its outer square
-
-
-def _smooth(a):
-    return ndimage.correlate1d(ndimage.correlate1d(a, _KERNEL_1D, 0, mode="constant"),
-                               _KERNEL_1D, 1, mode="constant")
+def _upsample(v: np.ndarray, offset: int, axis: int) -> np.ndarray:
+    """Bilinear 2x upsampling along ``axis`` of one channel's sub-grid ``v`` (indices
+    ``offset``, ``offset + 2``, ... of the full grid): the zero-filled full grid correlated
+    with ``[1, 2, 1] / 2``, i.e. own samples copied and those between averaged (zero beyond the
+    border), by slicing instead of a convolution over the zeros."""
+    def at(sl):
+        return (slice(None),) * (axis % v.ndim) + (sl,)
+    shape = list(v.shape)
+    shape[axis] *= 2
+    out = np.empty(shape)
+    out[at(slice(offset, None, 2))] = v
+    between = out[at(slice(1 - offset, None, 2))]
+    pairs = 0.5 * (v[at(slice(None, -1))] + v[at(slice(1, None))])
+    if offset == 0:  # index 2k+1 lies between sub-grid samples k and k+1
+        between[at(slice(None, -1))] = pairs
+        between[at(-1)] = 0.5 * v[at(-1)]
+    else:  # index 2k lies between sub-grid samples k-1 and k
+        between[at(slice(1, None))] = pairs
+        between[at(0)] = 0.5 * v[at(0)]
+    return out
 
 
 def _bilinear(d, analysis, good):
+    """Each channel's weight, weighted value and weighted analysis vector, upsampled
+    bilinearly from its sub-grid, then normalised (a normalised convolution with the kernel
+    ``[[1, 2, 1], [2, 4, 2], [1, 2, 1]] / 4``)."""
     h, w = d.shape
-    chan_d = np.empty((h, w, 4))
-    chan_a = np.empty((h, w, 4, 3))
+    g = good.astype(float)
+    stack = np.stack([g, g * d, *(g * analysis[..., c] for c in range(3))])  # (5, h, w)
+    m = [np.zeros((h, w)) for _ in _PAIRS]
+    b = [np.zeros((h, w)) for _ in range(3)]
     support = np.ones((h, w), bool)
-    for k, (i, j) in enumerate(((0, 0), (0, 1), (1, 0), (1, 1))):  # four channels, not pixels
-        m = np.zeros((h, w))
-        m[i::2, j::2] = good[i::2, j::2]
-        wsum = _smooth(m)
-        support &= wsum > 0
-        inv = np.divide(1.0, wsum, out=np.zeros_like(wsum), where=wsum > 0)
-        chan_d[..., k] = _smooth(m * d) * inv
-        for c in range(3):  # three Stokes components
-            chan_a[..., k, c] = _smooth(m * analysis[..., c]) * inv
-    s = solve_stokes(chan_a, chan_d)
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):  # four channels, accumulated one at a time
+        q = _upsample(_upsample(stack[:, i::2, j::2], i, 1), j, 2)
+        support &= q[0] > 0
+        q[1:] *= np.divide(1.0, q[0], out=np.zeros_like(q[0]), where=q[0] > 0)
+        for t, (u, v) in zip(m, _PAIRS):
+            t += q[2 + u] * q[2 + v]
+        for c, t in enumerate(b):
+            t += q[2 + c] * q[1]
+    s = _solve_terms(m, b)
     row, col = np.indices((h, w), dtype=float)
     return s, support & good, row, col
 

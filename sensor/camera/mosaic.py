@@ -450,11 +450,16 @@ def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azi
     if basis is None:
         basis = camera_basis(directions)
     _, psi, e_th, e_ps = basis if keep.all() else (b[idx] for b in basis)
-    # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y: the
-    # camera-plane angle of e_el, the zenith's component across the ray (both bases are
-    # right-handed about the ray)
-    delta = np.arctan2(e_ps @ up, e_th @ up) + psi
-    c2, s2 = np.cos(2 * delta), np.sin(2 * delta)
+    # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y by the
+    # camera-plane angle delta = beta + psi of e_el, where beta is the angle of the zenith's
+    # component across the ray, (p, q) = (up . e_theta, up . e_psi), from e_theta (both bases
+    # are right-handed about the ray); double angles without trigonometry
+    p, q = e_th @ up, e_ps @ up
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r2 = 1.0 / (p * p + q * q)
+    c2b, s2b = (p * p - q * q) * r2, 2.0 * p * q * r2
+    c2p, s2p = np.cos(2.0 * psi), np.sin(2.0 * psi)
+    c2, s2 = c2b * c2p - s2b * s2p, s2b * c2p + c2b * s2p
     stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
     return idx, stokes, el, az
 
