@@ -231,7 +231,10 @@ class MosaicSensor:
                 "full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e),
                 "dark_current_e_s": float(self.dark_current_e_s), "adc_bits": int(self.adc_bits),
                 "black_level_dn": int(self.black_level_dn), "saturation_dn": self.max_dn,
-                "e_per_dn": self.e_per_dn, "errors": dict(self.error_parameters)}
+                "e_per_dn": self.e_per_dn,
+                # JSON has no infinity: an ideal polarizer's extinction ratio is written null
+                "errors": {k: (v if np.isfinite(v) else None)
+                           for k, v in self.error_parameters.items()}}
 
 
 @dataclass(frozen=True, eq=False)
