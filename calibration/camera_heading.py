@@ -132,13 +132,14 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     """
     check_in_range("sun_elevation_deg", sun_elevation_deg, -10.0, 90.0)
     check_in_range("min_dolp", min_dolp, 0.0, 1.0, high_open=True)
-    use = stokes.valid & (stokes.dolp >= min_dolp) & np.isfinite(stokes.aop_camera_deg)
+    use = stokes.valid & (stokes.dolp >= min_dolp)
     n = int(use.sum())
     if n < 10:
         raise TooFewSamplesError(f"only {n} samples with DoLP >= {min_dolp} (need 10): the "
                                  "sky is overcast, blocked or saturated; lower the exposure "
                                  "or min_dolp")
-    e_c, _ = e_vectors_camera(lens, stokes.row[use], stokes.col[use], stokes.aop_camera_deg[use])
+    e_c, _ = e_vectors_camera(lens, stokes.row[use], stokes.col[use], stokes.S1[use],
+                              stokes.S2[use])
     w = camera_attitude(0.0, pitch_deg, roll_deg).apply(e_c)
     el = np.radians(sun_elevation_deg)
     a = np.c_[np.cos(el) * w[:, 0], np.cos(el) * w[:, 1], np.sin(el) * w[:, 2]]

@@ -231,20 +231,36 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
     return StokesImage(s[..., 0], s[..., 1], s[..., 2], ok, row, col, method)
 
 
-def e_vectors_camera(lens, row, col, aop_camera_deg):
+def e_vectors_camera(lens, row, col, s1, s2):
     """Camera-frame unit E-vectors (..., 3) and ray directions (..., 3) at pixel coordinates
-    for AoPs in the camera frame [deg] (an ideal rotationally symmetric lens keeps the angle
-    from the image radius as the angle from ``e_theta``, see :mod:`sensor.camera.mosaic`)."""
-    d, _ = lens.back_project(row, col)
-    _, psi, e_th, e_ps = camera_basis(d)
-    beta = np.radians(aop_camera_deg) - psi
-    return np.cos(beta)[..., None] * e_th + np.sin(beta)[..., None] * e_ps, d
+    for the linear Stokes ``s1``, ``s2`` there (an ideal rotationally symmetric lens keeps the
+    angle from the image radius as the angle from ``e_theta``, see
+    :mod:`sensor.camera.mosaic`). Half-angle identities instead of an arctangent: with
+    ``chi`` the camera-frame AoP in [-90, 90], ``cos chi = sqrt((1 + cos 2chi) / 2) >= 0``."""
+    x = np.asarray(col, dtype=float) - lens.cx
+    y = lens.cy - np.asarray(row, dtype=float)
+    rho = np.hypot(x, y)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c_psi = np.where(rho > 0, x / rho, 1.0)
+        s_psi = np.where(rho > 0, y / rho, 0.0)
+        p = np.hypot(s1, s2)
+        c2 = s1 / p
+    c_chi = np.sqrt(np.clip(0.5 * (1.0 + c2), 0.0, 1.0))
+    s_chi = np.copysign(np.sqrt(np.clip(0.5 * (1.0 - c2), 0.0, 1.0)), s2)
+    c_beta = c_chi * c_psi + s_chi * s_psi  # beta = chi - psi
+    s_beta = s_chi * c_psi - c_chi * s_psi
+    theta = lens.theta_rad(rho)
+    c_th, s_th = np.cos(theta), np.sin(theta)
+    e = np.stack([c_beta * c_th * c_psi - s_beta * s_psi, c_beta * c_th * s_psi + s_beta * c_psi,
+                  -c_beta * s_th], axis=-1)
+    d = np.stack([s_th * c_psi, s_th * s_psi, c_th], axis=-1)
+    return e, d
 
 
 def local_meridian_aop(stokes: StokesImage, lens, attitude: Rotation):
     """View elevation, azimuth and AoP in skysim's local-meridian convention [deg] of each
     sample of a Stokes image taken at ``attitude`` (camera-to-ENU); NaN where not valid."""
-    e_c, d_c = e_vectors_camera(lens, stokes.row, stokes.col, stokes.aop_camera_deg)
+    e_c, d_c = e_vectors_camera(lens, stokes.row, stokes.col, stokes.S1, stokes.S2)
     shape = stokes.row.shape
     d_n = attitude.apply(d_c.reshape(-1, 3)).reshape(shape + (3,))
     e_n = attitude.apply(np.nan_to_num(e_c).reshape(-1, 3)).reshape(shape + (3,))
