@@ -21,7 +21,7 @@ $(VENV)/.installed-run: pyproject.toml Makefile | $(BIN)/python
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml | $(BIN)/python
-	$(PIP) install --quiet -e '.[test,rt,sweep,series]'
+	$(PIP) install --quiet -e '.[test,rt,sweep,series,camera]'
 	@touch $@ $(VENV)/.installed-run
 
 venv: $(VENV)/.installed-run

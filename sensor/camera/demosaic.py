@@ -1,0 +1,288 @@
+"""Demosaicing a raw DoFP mosaic into Stokes images, DoLP and AoP.
+
+Every method solves, for each output sample, the linear system ``d = A S`` of the four
+polarizer channels ``d`` (dark-subtracted [DN]) with their analysis vectors ``A`` (4 x 3; the
+nominal polarizers or a per-pixel calibration, Powell & Gruev 2013 [1]_, eqs. 4-6) by least
+squares, ``S = (A^T A)^-1 A^T d``. The methods differ in where the four channels come from:
+
+- ``"bilinear"`` (default): each channel and its analysis vectors are interpolated to every
+  pixel with the bilinear kernel ``[[1, 2, 1], [2, 4, 2], [1, 2, 1]] / 4`` as a normalised
+  convolution (masked pixels carry no weight) [2]_. Full resolution, and the four channels
+  meet at the same point, so no instantaneous-field-of-view error: on a smooth sky the
+  super-pixel's error biases the heading (0.7 deg at 70 deg sun elevation on a 128 x 128
+  fisheye image, halving with each doubling of the resolution), the bilinear one does not
+  (< 0.001 deg). Neighbouring outputs share raw pixels, so their noise is correlated.
+- ``"superpixel"``: each 2x2 block gives one Stokes vector at the block centre
+  (half resolution). Each block uses only its own four pixels, so a calibrated pixel's
+  analysis vector applies exactly, a saturated or masked pixel spoils only its block, and the
+  output samples have independent noise; a quarter of the samples and faster. The four
+  pixels see directions half a pixel apart: the error is the field's change across one pixel
+  (instantaneous-field-of-view error, [2]_).
+
+AoP in the camera frame is measured from the camera's x axis towards its y axis
+(:mod:`sensor.camera.lens`); :func:`local_meridian_aop` converts it to skysim's local-meridian
+convention (docs/conventions.md).
+
+References
+----------
+.. [1] S. B. Powell, V. Gruev, "Calibration methods for division-of-focal-plane
+   polarimeters", Opt. Express 21(18):21039-21055 (2013), doi:10.1364/OE.21.021039.
+.. [2] S. Gao, V. Gruev, "Bilinear and bicubic interpolation methods for division of
+   focal plane polarimeters", Opt. Express 19(27):26161-26173 (2011),
+   doi:10.1364/OE.19.026161.
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from skysim.exceptions import InvalidParameterError
+from skysim.geometry import aop_from_e_vector, elevation_azimuth, wrap_axial_deg
+
+from .mosaic import camera_basis
+
+__all__ = ["DEMOSAIC_METHODS", "StokesImage", "camera_stokes", "demosaic", "local_meridian_aop",
+           "solve_stokes", "e_vectors_camera"]
+
+DEMOSAIC_METHODS = ("bilinear", "superpixel")
+
+
+@dataclass(frozen=True, eq=False)
+class StokesImage:
+    """Linear Stokes images in the camera frame.
+
+    Attributes
+    ----------
+    S0, S1, S2 : ndarray (h, w)
+        Stokes parameters in the unit of the analysis vectors' inverse (scene radiance when
+        the analysis is in DN per radiance); NaN where not ``valid``.
+    valid : ndarray of bool (h, w)
+        All four channels measured, none saturated or masked.
+    row, col : ndarray (h, w)
+        Sensor pixel coordinates [px] of each sample.
+    method : str
+    """
+
+    S0: np.ndarray
+    S1: np.ndarray
+    S2: np.ndarray
+    valid: np.ndarray
+    row: np.ndarray
+    col: np.ndarray
+    method: str
+
+    @functools.cached_property
+    def dolp(self) -> np.ndarray:
+        """Degree of linear polarization ``sqrt(S1^2 + S2^2) / S0``."""
+        with np.errstate(invalid="ignore", divide="ignore"):
+            return np.hypot(self.S1, self.S2) / self.S0
+
+    @functools.cached_property
+    def aop_camera_deg(self) -> np.ndarray:
+        """AoP [deg, in [-90, 90)] from the camera's x axis towards its y axis."""
+        return wrap_axial_deg(0.5 * np.degrees(np.arctan2(self.S2, self.S1)))
+
+
+def solve_stokes(analysis: np.ndarray, values: np.ndarray) -> np.ndarray:
+    """Least-squares Stokes ``(..., 3)`` from channel values ``(..., n)`` and analysis
+    vectors ``(..., n, 3)`` (normal equations, closed-form symmetric 3x3 inverse; NaN where
+    singular)."""
+    return _solve_normal(np.moveaxis(analysis, (-2, -1), (0, 1)), np.moveaxis(values, -1, 0))
+
+
+_PAIRS = ((0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2))
+
+
+def _solve_normal(a: np.ndarray, d: np.ndarray) -> np.ndarray:
+    """:func:`solve_stokes` for channel-first arrays: ``a`` (n, 3, ...), ``d`` (n, ...)."""
+    m = [np.sum(a[:, i] * a[:, j], axis=0) for i, j in _PAIRS]
+    b = [np.sum(a[:, i] * d, axis=0) for i in range(3)]
+    return _solve_terms(m, b)
+
+
+def _solve_terms(m, b) -> np.ndarray:
+    """Solve the symmetric 3x3 normal equations given as ``m = (m00, m11, m22, m01, m02,
+    m12)`` and ``b = (b0, b1, b2)`` (arrays) by the adjugate: elementwise arithmetic only."""
+    m00, m11, m22, m01, m02, m12 = m
+    b0, b1, b2 = b
+    c00, c11, c22 = m11 * m22 - m12 * m12, m00 * m22 - m02 * m02, m00 * m11 - m01 * m01
+    c01, c02, c12 = m02 * m12 - m01 * m22, m01 * m12 - m02 * m11, m01 * m02 - m00 * m12
+    det = m00 * c00 + m01 * c01 + m02 * c02
+    with np.errstate(invalid="ignore", divide="ignore"):
+        inv = 1.0 / det
+        return np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
+                         (c01 * b0 + c11 * b1 + c12 * b2) * inv,
+                         (c02 * b0 + c12 * b1 + c22 * b2) * inv], axis=-1)
+
+
+def _blocks(a: np.ndarray) -> np.ndarray:
+    """(H, W, ...) -> (H/2, W/2, 4, ...) in the order (0,0), (0,1), (1,0), (1,1)."""
+    h, w = a.shape[:2]
+    b = a.reshape(h // 2, 2, w // 2, 2, *a.shape[2:]).swapaxes(1, 2)
+    return b.reshape(h // 2, w // 2, 4, *a.shape[2:])
+
+
+def _superpixel(d, analysis, good):
+    s = solve_stokes(_blocks(analysis), _blocks(d))
+    valid = _blocks(good).all(axis=2)
+    h, w = valid.shape
+    row, col = np.meshgrid(2.0 * np.arange(h) + 0.5, 2.0 * np.arange(w) + 0.5, indexing="ij")
+    return s, valid, row, col
+
+
+def _upsample(v: np.ndarray, offset: int, axis: int) -> np.ndarray:
+    """Bilinear 2x upsampling along ``axis`` of one channel's sub-grid ``v`` (indices
+    ``offset``, ``offset + 2``, ... of the full grid): the zero-filled full grid correlated
+    with ``[1, 2, 1] / 2``, i.e. own samples copied and those between averaged (zero beyond the
+    border), by slicing instead of a convolution over the zeros."""
+    def at(sl):
+        return (slice(None),) * (axis % v.ndim) + (sl,)
+    shape = list(v.shape)
+    shape[axis] *= 2
+    out = np.empty(shape)
+    out[at(slice(offset, None, 2))] = v
+    between = out[at(slice(1 - offset, None, 2))]
+    pairs = 0.5 * (v[at(slice(None, -1))] + v[at(slice(1, None))])
+    if offset == 0:  # index 2k+1 lies between sub-grid samples k and k+1
+        between[at(slice(None, -1))] = pairs
+        between[at(-1)] = 0.5 * v[at(-1)]
+    else:  # index 2k lies between sub-grid samples k-1 and k
+        between[at(slice(1, None))] = pairs
+        between[at(0)] = 0.5 * v[at(0)]
+    return out
+
+
+def _bilinear(d, analysis, good):
+    """Each channel's weight, weighted value and weighted analysis vector, upsampled
+    bilinearly from its sub-grid, then normalised (a normalised convolution with the kernel
+    ``[[1, 2, 1], [2, 4, 2], [1, 2, 1]] / 4``)."""
+    h, w = d.shape
+    g = good.astype(float)
+    stack = np.stack([g, g * d, *(g * analysis[..., c] for c in range(3))])  # (5, h, w)
+    m = [np.zeros((h, w)) for _ in _PAIRS]
+    b = [np.zeros((h, w)) for _ in range(3)]
+    support = np.ones((h, w), bool)
+    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):  # four channels, accumulated one at a time
+        q = _upsample(_upsample(stack[:, i::2, j::2], i, 1), j, 2)
+        support &= q[0] > 0
+        q[1:] *= np.divide(1.0, q[0], out=np.zeros_like(q[0]), where=q[0] > 0)
+        for t, (u, v) in zip(m, _PAIRS):
+            t += q[2 + u] * q[2 + v]
+        for c, t in enumerate(b):
+            t += q[2 + c] * q[1]
+    s = _solve_terms(m, b)
+    row, col = np.indices((h, w), dtype=float)
+    return s, support & good, row, col
+
+
+def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
+             saturation_dn: float | None = None, method: str = "bilinear") -> StokesImage:
+    """Stokes images from a raw mosaic.
+
+    Parameters
+    ----------
+    raw_dn : ndarray (H, W)
+        Raw image [DN].
+    analysis_dn : ndarray (H, W, 3)
+        Per-pixel analysis vectors [DN per unit radiance], e.g.
+        :meth:`PolarizationCamera.analysis_dn` (nominal) or a calibration's.
+    black_level_dn : float or ndarray (H, W)
+        Dark offset subtracted first [DN] (a calibration's per-pixel dark frame, or the black
+        level).
+    valid : ndarray of bool (H, W) or None
+        Pixels that see the sky (e.g. the image circle above the horizon).
+    saturation_dn : float or None
+        Pixels at or above this value are excluded (with their super-pixel).
+    method : {"bilinear", "superpixel"}
+        See the module doc (bilinear is the default: no instantaneous-field-of-view error).
+
+    Raises
+    ------
+    ValueError
+        For an unknown method (the message lists the valid ones).
+    InvalidParameterError
+        For shapes that do not match or an odd image size.
+    """
+    if method not in DEMOSAIC_METHODS:
+        raise ValueError(f"demosaicing method must be one of {', '.join(DEMOSAIC_METHODS)}; "
+                         f"got {method!r}")
+    raw = np.asarray(raw_dn, dtype=float)
+    if raw.ndim != 2 or raw.shape[0] % 2 or raw.shape[1] % 2:
+        raise InvalidParameterError(f"raw image must be 2-D with even sides; got shape "
+                                    f"{raw.shape}")
+    analysis = np.asarray(analysis_dn, dtype=float)
+    if analysis.shape != raw.shape + (3,):
+        raise InvalidParameterError(f"analysis_dn must have shape {raw.shape + (3,)}; got "
+                                    f"{analysis.shape}")
+    good = np.isfinite(analysis).all(-1) & np.isfinite(raw)
+    if valid is not None:
+        good &= np.asarray(valid, bool)
+    if saturation_dn is not None:
+        good &= raw < saturation_dn
+    d = np.where(good, raw - black_level_dn, 0.0)
+    analysis = np.where(good[..., None], analysis, 0.0)
+    s, ok, row, col = (_superpixel if method == "superpixel" else _bilinear)(d, analysis, good)
+    ok &= np.isfinite(s).all(-1)
+    s = np.where(ok[..., None], s, np.nan)
+    return StokesImage(s[..., 0], s[..., 1], s[..., 2], ok, row, col, method)
+
+
+def e_vectors_camera(lens, row, col, s1, s2):
+    """Camera-frame unit E-vectors (..., 3) and ray directions (..., 3) at pixel coordinates
+    for the linear Stokes ``s1``, ``s2`` there (an ideal rotationally symmetric lens keeps the
+    angle from the image radius as the angle from ``e_theta``, see
+    :mod:`sensor.camera.mosaic`). Half-angle identities instead of an arctangent: with
+    ``chi`` the camera-frame AoP in [-90, 90], ``cos chi = sqrt((1 + cos 2chi) / 2) >= 0``."""
+    x = np.asarray(col, dtype=float) - lens.cx
+    y = lens.cy - np.asarray(row, dtype=float)
+    rho = np.hypot(x, y)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        c_psi = np.where(rho > 0, x / rho, 1.0)
+        s_psi = np.where(rho > 0, y / rho, 0.0)
+        p = np.hypot(s1, s2)
+        c2 = s1 / p
+    c_chi = np.sqrt(np.clip(0.5 * (1.0 + c2), 0.0, 1.0))
+    s_chi = np.copysign(np.sqrt(np.clip(0.5 * (1.0 - c2), 0.0, 1.0)), s2)
+    c_beta = c_chi * c_psi + s_chi * s_psi  # beta = chi - psi
+    s_beta = s_chi * c_psi - c_chi * s_psi
+    theta = lens.theta_rad(rho)
+    c_th, s_th = np.cos(theta), np.sin(theta)
+    e = np.stack([c_beta * c_th * c_psi - s_beta * s_psi, c_beta * c_th * s_psi + s_beta * c_psi,
+                  -c_beta * s_th], axis=-1)
+    d = np.stack([s_th * c_psi, s_th * s_psi, c_th], axis=-1)
+    return e, d
+
+
+def local_meridian_aop(stokes: StokesImage, lens, attitude: Rotation):
+    """View elevation, azimuth and AoP in skysim's local-meridian convention [deg] of each
+    sample of a Stokes image taken at ``attitude`` (camera-to-ENU); NaN where not valid."""
+    e_c, d_c = e_vectors_camera(lens, stokes.row, stokes.col, stokes.S1, stokes.S2)
+    shape = stokes.row.shape
+    d_n = attitude.apply(d_c.reshape(-1, 3)).reshape(shape + (3,))
+    e_n = attitude.apply(np.nan_to_num(e_c).reshape(-1, 3)).reshape(shape + (3,))
+    el, az = elevation_azimuth(d_n)
+    aop = aop_from_e_vector(el, az, e_n)
+    bad = ~stokes.valid
+    return (np.where(bad, np.nan, el), np.where(bad, np.nan, az), np.where(bad, np.nan, aop))
+
+
+def camera_stokes(camera, raw_dn, exposure_s: float, *, valid=None, method: str = "bilinear",
+                  analysis_dn=None, dark_dn=None) -> StokesImage:
+    """Stokes image of a raw frame from ``camera`` (:class:`PolarizationCamera`).
+
+    Without ``analysis_dn`` the nominal polarizers of the camera (what an uncalibrated camera
+    assumes) and its black level plus nominal dark current are used; with a calibration pass
+    its per-pixel ``analysis_dn`` and dark frame ``dark_dn`` [DN] (at this exposure).
+    Saturated pixels are excluded.
+    """
+    s = camera.sensor
+    if analysis_dn is None:
+        analysis_dn = camera.analysis_dn(exposure_s, ideal=True)
+    if dark_dn is None:
+        dark_dn = s.black_level_dn + s.dark_current_e_s * exposure_s / s.e_per_dn
+    return demosaic(raw_dn, analysis_dn, black_level_dn=dark_dn, valid=valid,
+                    saturation_dn=s.max_dn, method=method)

@@ -1,0 +1,146 @@
+"""Fisheye lens projection of a polarization camera.
+
+Camera frame c (right-handed): z along the optical axis, x towards the image's right, y
+towards the image's top. The camera is mounted looking up: at zero attitude the camera frame
+is the body frame of :mod:`sensor.compound_eye` (x right, y forward, z up), so the image's top
+points along the heading reference axis. Pixel ``(row, col)`` has its centre at integer
+indices; the image-plane coordinates are ``x = col - cx``, ``y = cy - row`` [px].
+
+A ray from the camera into direction ``d`` (unit, camera frame) makes the angle
+``theta = angle(d, z)`` with the optical axis and the azimuth ``psi = atan2(d_y, d_x)`` in the
+image plane; the lens maps it to the radius ``r(theta)`` [px] at the image azimuth ``psi``:
+
+- ``"equidistant"``: ``r = f theta``;
+- ``"equisolid"``: ``r = 2 f sin(theta / 2)``
+
+with the focal length ``f`` [px] (Kannala & Brandt 2006 [1]_, eqs. 1b and 1c).
+
+References
+----------
+.. [1] J. Kannala, S. S. Brandt, "A generic camera model and calibration method for
+   conventional, wide-angle, and fish-eye lenses", IEEE Trans. Pattern Anal. Mach. Intell.
+   28(8):1335-1340 (2006), doi:10.1109/TPAMI.2006.153.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from skysim.exceptions import InvalidParameterError
+
+__all__ = ["LENS_MODELS", "FisheyeLens"]
+
+LENS_MODELS = ("equidistant", "equisolid")
+"""Fisheye projections by name."""
+
+
+@dataclass(frozen=True)
+class FisheyeLens:
+    """A rotationally symmetric fisheye lens.
+
+    Parameters
+    ----------
+    focal_px : float
+        Focal length [px], > 0.
+    cx, cy : float
+        Principal point [px]: column and row of the optical axis.
+    fov_deg : float
+        Full field of view [deg], in (0, 360); rays farther than ``fov_deg / 2`` from the
+        optical axis do not reach the sensor. The equisolid model reaches at most 360 deg.
+    model : {"equidistant", "equisolid"}
+        Projection (see module doc).
+    """
+
+    focal_px: float
+    cx: float
+    cy: float
+    fov_deg: float = 180.0
+    model: str = "equidistant"
+
+    def __post_init__(self):
+        if self.model not in LENS_MODELS:
+            raise ValueError(f"lens model must be one of {', '.join(LENS_MODELS)}; "
+                             f"got {self.model!r}")
+        if not (np.isfinite(self.focal_px) and self.focal_px > 0):
+            raise InvalidParameterError(f"focal_px must be > 0; got {self.focal_px!r}")
+        if not (0.0 < self.fov_deg < 360.0):
+            raise InvalidParameterError(f"fov_deg must be in (0, 360); got {self.fov_deg!r}")
+        for name in ("cx", "cy"):
+            if not np.isfinite(getattr(self, name)):
+                raise InvalidParameterError(f"{name} must be finite; got {getattr(self, name)!r}")
+
+    @classmethod
+    def fitting(cls, width: int, height: int, fov_deg: float = 180.0,
+                model: str = "equidistant") -> "FisheyeLens":
+        """The lens whose image circle of ``fov_deg`` just fits the sensor's short side,
+        centred on a ``width`` x ``height`` [px] sensor."""
+        radius = 0.5 * min(width, height)
+        half = np.radians(0.5 * fov_deg)
+        unit_r = half if model == "equidistant" else 2.0 * np.sin(0.5 * half)
+        return cls(focal_px=radius / unit_r, cx=0.5 * (width - 1), cy=0.5 * (height - 1),
+                   fov_deg=fov_deg, model=model)
+
+    @property
+    def max_theta_rad(self) -> float:
+        """Largest angle from the optical axis that reaches the sensor [rad]."""
+        return np.radians(0.5 * self.fov_deg)
+
+    def radius_px(self, theta_rad):
+        """Image radius [px] of rays at ``theta_rad`` [rad] from the optical axis."""
+        t = np.asarray(theta_rad, dtype=float)
+        if self.model == "equidistant":
+            return self.focal_px * t
+        return 2.0 * self.focal_px * np.sin(0.5 * t)
+
+    def theta_rad(self, radius_px):
+        """Inverse of :meth:`radius_px` [rad]; NaN where no ray maps to the radius."""
+        r = np.asarray(radius_px, dtype=float)
+        if self.model == "equidistant":
+            return r / self.focal_px
+        with np.errstate(invalid="ignore"):
+            return 2.0 * np.arcsin(r / (2.0 * self.focal_px))
+
+    def dtheta_dr(self, theta_rad):
+        """Angular size of one pixel along the radius [rad/px] at ``theta_rad``."""
+        t = np.asarray(theta_rad, dtype=float)
+        if self.model == "equidistant":
+            return np.full_like(t, 1.0 / self.focal_px)
+        return 1.0 / (self.focal_px * np.cos(0.5 * t))
+
+    def project(self, directions):
+        """Pixel coordinates ``(row, col)`` [px] of camera-frame directions ``(..., 3)``.
+
+        Directions need not be normalised. Rays outside the field of view get NaN.
+        """
+        d = np.asarray(directions, dtype=float)
+        rho = np.hypot(d[..., 0], d[..., 1])
+        theta = np.arctan2(rho, d[..., 2])
+        psi = np.arctan2(d[..., 1], d[..., 0])
+        r = np.where(theta <= self.max_theta_rad, self.radius_px(theta), np.nan)
+        return self.cy - r * np.sin(psi), self.cx + r * np.cos(psi)
+
+    def back_project(self, row, col):
+        """Unit camera-frame directions ``(..., 3)`` of pixel coordinates, and a validity mask.
+
+        Returns
+        -------
+        directions : ndarray, shape ``broadcast(row, col).shape + (3,)``
+            NaN where the pixel lies outside the image circle of the field of view.
+        valid : ndarray of bool
+        """
+        x = np.asarray(col, dtype=float) - self.cx
+        y = self.cy - np.asarray(row, dtype=float)
+        theta = self.theta_rad(np.hypot(x, y))
+        valid = np.isfinite(theta) & (theta <= self.max_theta_rad)
+        psi = np.arctan2(y, x)
+        st = np.sin(theta)
+        d = np.stack([st * np.cos(psi), st * np.sin(psi), np.cos(theta)], axis=-1)
+        d[~valid] = np.nan
+        return d, valid
+
+    def describe(self) -> dict:
+        """Lens parameters for sidecars."""
+        return {"model": self.model, "focal_px": float(self.focal_px), "cx": float(self.cx),
+                "cy": float(self.cy), "fov_deg": float(self.fov_deg)}

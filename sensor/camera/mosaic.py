@@ -1,0 +1,472 @@
+"""Division-of-focal-plane (DoFP) polarization camera: micro-polarizer mosaic sensor behind a
+fisheye lens, imaging any :class:`skysim.sky.Sky`.
+
+Signal chain of one pixel (Powell & Gruev 2013 [1]_, eq. 1; the analysis vector of a pixel
+behind a partial polarizer):
+
+``e = t * q * V(r) * (A . S) + t * i_dark``, then photon shot noise (Poisson), read noise
+(Gaussian), clipping at the full well and an ADC of ``adc_bits`` bits with a black level.
+
+- ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector rotated into the camera frame
+  (angles from the camera's x axis towards its y axis, see :mod:`sensor.camera.lens`). An ideal
+  rotationally symmetric lens maps the sky's local basis ``(e_theta, e_psi)`` of a ray onto
+  the image's radial and tangential directions, so the E-vector angle from the image radius
+  equals its angle from ``e_theta`` on the sky.
+- ``A = g/2 * (1 + 1/ER, (1 - 1/ER) cos 2a, (1 - 1/ER) sin 2a)``: polarizer at angle
+  ``a = a_nominal + error`` [deg] with extinction ratio ``ER`` (transmittance ``g`` along its
+  axis, ``g / ER`` across it; ``g`` also carries the pixel's response non-uniformity). An
+  ideal polarizer (``ER = inf``, ``g = 1``) gives Malus's law ``I/2 (1 + p cos 2(chi - a))``.
+- ``V(r) = (1 + (r / p)^2)^-2``: the cos^4 law of natural vignetting with the chief ray's angle
+  in image space, ``atan(r / p)`` for an exit pupil ``p`` [px] from the sensor (``p = inf``:
+  no vignetting) [2]_.
+- ``q`` [e-/s]: photoelectron rate of a pixel with ``A = (1, 0, 0)`` for a scene radiance 1
+  (in the sky model's unit); ``t`` [s] the exposure; ``i_dark`` [e-/s] the dark current.
+
+The sun disk (radius ``sun_radius_deg`` plus half a pixel) saturates its pixels. Pixels outside
+the lens's image circle or looking below the horizon receive no scene light and are masked.
+
+References
+----------
+.. [1] S. B. Powell, V. Gruev, "Calibration methods for division-of-focal-plane
+   polarimeters", Opt. Express 21(18):21039-21055 (2013), doi:10.1364/OE.21.021039.
+.. [2] W. J. Smith, *Modern Optical Engineering*, 4th ed., McGraw-Hill (2008), sect. 9.8
+   (cos^4 law of illumination).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass, field, replace
+
+import numpy as np
+from scipy.spatial.transform import Rotation
+
+from skysim.exceptions import InvalidParameterError
+
+from .lens import FisheyeLens
+
+__all__ = ["DEFAULT_LAYOUT_DEG", "SUN_RADIUS_DEG", "MosaicSensor", "PolarizationCamera",
+           "Scene", "camera_attitude", "camera_basis", "sky_stokes_camera"]
+
+DEFAULT_LAYOUT_DEG = ((90.0, 45.0), (135.0, 0.0))
+"""Polarizer angles [deg] of the 2x2 super-pixel, rows then columns (the layout of the Sony
+IMX250MZR sensor, also polanalyser's default)."""
+
+SUN_RADIUS_DEG = 0.2666
+"""Mean angular radius of the solar disk [deg]."""
+
+
+def camera_attitude(yaw_deg: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> Rotation:
+    """Camera-to-ENU rotation ``R_nc = Rz(-yaw) Rx(pitch) Ry(roll)`` [deg] of an upward-looking
+    camera whose image top is its heading reference (the body attitude of
+    :func:`sensor.compound_eye.body_attitude`)."""
+    for name, v in (("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)):
+        if not np.isfinite(v):
+            raise InvalidParameterError(f"{name} must be finite; got {v!r}")
+    return Rotation.from_euler("ZXY", [-yaw_deg, pitch_deg, roll_deg], degrees=True)
+
+
+def camera_basis(directions):
+    """``(theta, psi, e_theta, e_psi)`` of unit camera-frame directions ``(..., 3)``: angle from
+    the optical axis and image azimuth [rad], and the unit vectors of increasing ``theta``
+    and ``psi`` (the image's radial and tangential directions)."""
+    d = np.asarray(directions, dtype=float)
+    theta = np.arctan2(np.hypot(d[..., 0], d[..., 1]), d[..., 2])
+    psi = np.arctan2(d[..., 1], d[..., 0])
+    ct, st, cp, sp = np.cos(theta), np.sin(theta), np.cos(psi), np.sin(psi)
+    e_theta = np.stack([ct * cp, ct * sp, -st], axis=-1)
+    e_psi = np.stack([-sp, cp, np.zeros_like(sp)], axis=-1)
+    return theta, psi, e_theta, e_psi
+
+
+def _check_positive(name, value, allow_zero=False):
+    v = float(value)
+    if not np.isfinite(v) or v < 0 or (v == 0 and not allow_zero):
+        raise InvalidParameterError(f"{name} must be {'>= 0' if allow_zero else '> 0'}; "
+                                    f"got {value!r}")
+    return v
+
+
+@dataclass(frozen=True, eq=False)
+class MosaicSensor:
+    """A W x H pixel sensor with a 2x2 micro-polarizer mosaic.
+
+    Parameters
+    ----------
+    width, height : int
+        Pixels; both even (whole super-pixels).
+    layout_deg : 2x2 nested sequence
+        Nominal polarizer angles [deg] of a super-pixel (rows, columns), measured from the
+        camera's x axis towards its y axis.
+    full_well_e : float
+        Full-well capacity [e-].
+    read_noise_e : float
+        RMS read noise [e-].
+    dark_current_e_s : float
+        Dark current [e-/s].
+    adc_bits : int
+        ADC resolution, 8 to 16 bits.
+    black_level_dn : int or None
+        Offset added before quantisation [DN]; None: ``2**(adc_bits - 6)``.
+    angle_error_deg : ndarray (H, W) or None
+        Per-pixel polarizer-angle error [deg] (None: none).
+    extinction_ratio : float or ndarray (H, W)
+        Polarizer extinction ratio (> 1; ``inf`` for an ideal polarizer).
+    gain : ndarray (H, W) or None
+        Relative pixel response (photo-response non-uniformity; None: 1).
+    """
+
+    width: int
+    height: int
+    layout_deg: tuple = DEFAULT_LAYOUT_DEG
+    full_well_e: float = 10500.0
+    read_noise_e: float = 2.3
+    dark_current_e_s: float = 3.0
+    adc_bits: int = 12
+    black_level_dn: int | None = None
+    angle_error_deg: np.ndarray | None = None
+    extinction_ratio: float | np.ndarray = np.inf
+    gain: np.ndarray | None = None
+    error_parameters: dict = field(default_factory=dict)
+
+    def __post_init__(self):
+        for name in ("width", "height"):
+            n = getattr(self, name)
+            if int(n) != n or n < 2 or n % 2:
+                raise InvalidParameterError(f"{name} must be an even number of pixels >= 2; "
+                                            f"got {n!r}")
+        layout = np.asarray(self.layout_deg, dtype=float)
+        if layout.shape != (2, 2) or not np.isfinite(layout).all():
+            raise InvalidParameterError(f"layout_deg must be 2x2 finite angles; got "
+                                        f"{self.layout_deg!r}")
+        object.__setattr__(self, "layout_deg", tuple(map(tuple, layout.tolist())))
+        if not (isinstance(self.adc_bits, (int, np.integer)) and 8 <= self.adc_bits <= 16):
+            raise InvalidParameterError(f"adc_bits must be an integer in [8, 16]; got "
+                                        f"{self.adc_bits!r}")
+        _check_positive("full_well_e", self.full_well_e)
+        _check_positive("read_noise_e", self.read_noise_e, allow_zero=True)
+        _check_positive("dark_current_e_s", self.dark_current_e_s, allow_zero=True)
+        if self.black_level_dn is None:
+            object.__setattr__(self, "black_level_dn", 2 ** (self.adc_bits - 6))
+        if not (0 <= self.black_level_dn < self.max_dn // 2):
+            raise InvalidParameterError(f"black_level_dn must be in [0, {self.max_dn // 2}) for "
+                                        f"{self.adc_bits} bits; got {self.black_level_dn!r}")
+        er = np.asarray(self.extinction_ratio, dtype=float)
+        if np.any(~(er > 1.0)):
+            raise InvalidParameterError(f"extinction_ratio must be > 1; got min {er.min()!r}")
+        for name in ("angle_error_deg", "gain"):
+            a = getattr(self, name)
+            if a is not None and np.shape(a) != self.shape:
+                raise InvalidParameterError(f"{name} must have shape {self.shape}; got "
+                                            f"{np.shape(a)}")
+        if np.ndim(er) and er.shape != self.shape:
+            raise InvalidParameterError(f"extinction_ratio must be scalar or shape {self.shape}")
+
+    @property
+    def shape(self) -> tuple[int, int]:
+        """``(height, width)`` [px]."""
+        return (int(self.height), int(self.width))
+
+    @property
+    def max_dn(self) -> int:
+        """Largest ADC output [DN] (``2**adc_bits - 1``): the saturation value."""
+        return 2 ** int(self.adc_bits) - 1
+
+    @property
+    def e_per_dn(self) -> float:
+        """Conversion gain [e-/DN]: the full well spans the ADC range above the black level."""
+        return self.full_well_e / (self.max_dn - self.black_level_dn)
+
+    def nominal_angle_deg(self) -> np.ndarray:
+        """Nominal polarizer angle of every pixel [deg], shape (H, W)."""
+        return np.tile(np.asarray(self.layout_deg), (self.height // 2, self.width // 2))
+
+    def analysis_vectors(self, ideal: bool = False) -> np.ndarray:
+        """Per-pixel analysis vectors ``A`` (H, W, 3) (module doc); ``ideal``: without errors."""
+        a = self.nominal_angle_deg()
+        if not ideal and self.angle_error_deg is not None:
+            a = a + self.angle_error_deg
+        inv_er = 0.0 if ideal else 1.0 / np.broadcast_to(
+            np.asarray(self.extinction_ratio, float), self.shape)
+        g = np.ones(self.shape) if ideal or self.gain is None else np.asarray(self.gain, float)
+        two_a = np.radians(2.0 * a)
+        d = 0.5 * g * (1.0 - inv_er)
+        return np.stack([0.5 * g * (1.0 + inv_er), d * np.cos(two_a), d * np.sin(two_a)], -1)
+
+    def with_random_errors(self, rng: np.random.Generator, *, angle_std_deg: float = 0.0,
+                           mosaic_rotation_deg: float = 0.0, extinction_ratio: float = np.inf,
+                           extinction_ratio_rel_std: float = 0.0,
+                           gain_std: float = 0.0) -> "MosaicSensor":
+        """A copy with per-pixel errors drawn from ``rng``.
+
+        Parameters
+        ----------
+        angle_std_deg : float
+            Standard deviation of the independent per-pixel polarizer-angle errors [deg].
+        mosaic_rotation_deg : float
+            Rotation of the whole polarizer array against the pixel grid [deg] (common to all
+            pixels).
+        extinction_ratio, extinction_ratio_rel_std : float
+            Mean extinction ratio and its relative per-pixel standard deviation (log-normal).
+        gain_std : float
+            Relative standard deviation of the pixel response (PRNU).
+        """
+        er_mean = float(extinction_ratio)
+        er = er_mean
+        if np.isfinite(er_mean) and extinction_ratio_rel_std > 0:
+            s = np.sqrt(np.log1p(extinction_ratio_rel_std ** 2))
+            er = np.maximum(er_mean * rng.lognormal(-0.5 * s * s, s, self.shape), 1.0 + 1e-6)
+        angle = mosaic_rotation_deg + angle_std_deg * rng.standard_normal(self.shape)
+        gain = 1.0 + gain_std * rng.standard_normal(self.shape)
+        params = {"angle_std_deg": angle_std_deg, "mosaic_rotation_deg": mosaic_rotation_deg,
+                  "extinction_ratio": er_mean, "extinction_ratio_rel_std":
+                  extinction_ratio_rel_std, "gain_std": gain_std}
+        return replace(self, angle_error_deg=angle, extinction_ratio=er, gain=gain,
+                       error_parameters=params)
+
+    def describe(self) -> dict:
+        """Sensor parameters for sidecars (per-pixel errors by their generating parameters)."""
+        return {"width": int(self.width), "height": int(self.height),
+                "layout_deg": [list(r) for r in self.layout_deg],
+                "full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e),
+                "dark_current_e_s": float(self.dark_current_e_s), "adc_bits": int(self.adc_bits),
+                "black_level_dn": int(self.black_level_dn), "saturation_dn": self.max_dn,
+                "e_per_dn": self.e_per_dn,
+                # JSON has no infinity: an ideal polarizer's extinction ratio is written null
+                "errors": {k: (v if np.isfinite(v) else None)
+                           for k, v in self.error_parameters.items()}}
+
+
+@dataclass(frozen=True, eq=False)
+class Scene:
+    """What reaches each pixel: camera-frame Stokes (H, W) of the sky, masks, geometry."""
+
+    I: np.ndarray
+    Q: np.ndarray
+    U: np.ndarray
+    valid: np.ndarray
+    """in the image circle and above the horizon"""
+    sun: np.ndarray
+    """pixels covered by the sun disk (saturated)"""
+    view_elevation_deg: np.ndarray
+    view_azimuth_deg: np.ndarray
+
+    @property
+    def stokes(self) -> np.ndarray:
+        return np.stack([self.I, self.Q, self.U], axis=-1)
+
+
+@dataclass(frozen=True, eq=False)
+class PolarizationCamera:
+    """A fisheye lens on a :class:`MosaicSensor` (see the module doc for the signal chain).
+
+    Parameters
+    ----------
+    lens : FisheyeLens
+    sensor : MosaicSensor
+    photoelectrons_per_s : float
+        ``q`` [e-/s] for a scene radiance 1 in the sky model's unit.
+    exit_pupil_px : float
+        Exit-pupil distance [px] of the vignetting law; ``inf``: no vignetting.
+    sun_radius_deg : float
+        Angular radius of the saturating sun disk [deg].
+    """
+
+    lens: FisheyeLens
+    sensor: MosaicSensor
+    photoelectrons_per_s: float = 2.0e5
+    exit_pupil_px: float = np.inf
+    sun_radius_deg: float = SUN_RADIUS_DEG
+
+    def __post_init__(self):
+        _check_positive("photoelectrons_per_s", self.photoelectrons_per_s)
+        if not self.exit_pupil_px > 0:
+            raise InvalidParameterError(f"exit_pupil_px must be > 0 (inf: no vignetting); got "
+                                        f"{self.exit_pupil_px!r}")
+
+    @classmethod
+    def fisheye(cls, width: int, height: int, *, fov_deg: float = 180.0,
+                model: str = "equidistant", **kwargs) -> "PolarizationCamera":
+        """A camera whose image circle fits the sensor (``kwargs``: sensor parameters, then
+        camera parameters by name)."""
+        cam_keys = {"photoelectrons_per_s", "exit_pupil_px", "sun_radius_deg"}
+        cam = {k: kwargs.pop(k) for k in list(kwargs) if k in cam_keys}
+        return cls(FisheyeLens.fitting(width, height, fov_deg, model),
+                   MosaicSensor(width, height, **kwargs), **cam)
+
+    @functools.cached_property
+    def pixel_directions(self) -> tuple[np.ndarray, np.ndarray]:
+        """Camera-frame unit directions (H, W, 3) of the pixel centres and the image-circle
+        mask (H, W)."""
+        rows, cols = np.indices(self.sensor.shape, dtype=float)
+        return self.lens.back_project(rows, cols)
+
+    @functools.cached_property
+    def _rays(self):
+        """Flat indices of the pixels in the image circle and their camera basis."""
+        d_c, in_circle = self.pixel_directions
+        rays = np.flatnonzero(in_circle)
+        return rays, camera_basis(d_c.reshape(-1, 3)[rays])
+
+    @functools.cached_property
+    def _analysis(self) -> dict:
+        v = self.vignetting()[..., None]
+        return {ideal: self.sensor.analysis_vectors(ideal) * v for ideal in (False, True)}
+
+    def vignetting(self, rows=None, cols=None) -> np.ndarray:
+        """Relative illumination ``V`` at pixel coordinates (default: every pixel centre)."""
+        if rows is None:
+            rows, cols = np.indices(self.sensor.shape, dtype=float)
+        if not np.isfinite(self.exit_pupil_px):
+            return np.ones(np.broadcast(rows, cols).shape)
+        r2 = ((cols - self.lens.cx) ** 2 + (rows - self.lens.cy) ** 2) / self.exit_pupil_px ** 2
+        return 1.0 / (1.0 + r2) ** 2
+
+    def analysis_dn(self, exposure_s: float, ideal: bool = False) -> np.ndarray:
+        """Per-pixel analysis vectors in DN per unit scene radiance (H, W, 3), vignetting
+        included: the expected dark-subtracted pixel value is ``analysis_dn . S``.
+        ``ideal``: the nominal polarizers (what a camera without calibration assumes)."""
+        scale = self.photoelectrons_per_s * exposure_s / self.sensor.e_per_dn
+        return self._analysis[bool(ideal)] * scale
+
+    def scene(self, sky, attitude: Rotation, sun_elevation_deg: float,
+              sun_azimuth_deg: float) -> Scene:
+        """Camera-frame Stokes of ``sky`` at every pixel for a camera at ``attitude``
+        (camera-to-ENU rotation, :func:`camera_attitude`) and the given sun [deg]."""
+        d_c, in_circle = self.pixel_directions
+        shape = self.sensor.shape
+        rays, basis = self._rays
+        idx, stokes, el, az = sky_stokes_camera(sky, attitude, sun_elevation_deg,
+                                                sun_azimuth_deg, d_c.reshape(-1, 3)[rays],
+                                                np.ones(rays.size, bool), basis=basis)
+        idx = rays[idx]
+        out = {k: np.zeros(shape) for k in ("I", "Q", "U", "el", "az")}
+        for k, v in (("I", stokes[:, 0]), ("Q", stokes[:, 1]), ("U", stokes[:, 2]),
+                     ("el", el), ("az", az)):
+            out[k].reshape(-1)[idx] = v
+        valid = np.zeros(shape, bool)
+        valid.reshape(-1)[idx] = True
+        s_c = attitude.inv().apply(_enu(sun_elevation_deg, sun_azimuth_deg))
+        sun_theta = np.arctan2(np.hypot(s_c[0], s_c[1]), s_c[2])
+        reach = np.radians(self.sun_radius_deg) + 0.5 * float(self.lens.dtheta_dr(sun_theta))
+        sun = np.zeros(shape, bool)
+        sun.reshape(-1)[rays] = d_c.reshape(-1, 3)[rays] @ s_c >= np.cos(reach)
+        return Scene(out["I"], out["Q"], out["U"], valid, sun, out["el"], out["az"])
+
+    def expected_electrons(self, scene: Scene, exposure_s: float) -> np.ndarray:
+        """Mean photo- and dark electrons of every pixel (H, W) before noise and clipping; the
+        sun disk at the full well."""
+        _check_positive("exposure_s", exposure_s)
+        a = self._analysis[False]
+        e = a[..., 0] * scene.I + a[..., 1] * scene.Q + a[..., 2] * scene.U
+        e *= self.photoelectrons_per_s * exposure_s
+        e += self.sensor.dark_current_e_s * exposure_s
+        e[scene.sun] = np.maximum(e[scene.sun], self.sensor.full_well_e)
+        return e
+
+    def auto_exposure_s(self, scene: Scene, fill: float = 0.6, percentile: float = 99.0):
+        """Exposure [s] putting the ``percentile`` of the sky pixels (sun disk excluded) at
+        ``fill`` of the full well."""
+        sky = scene.valid & ~scene.sun
+        if not sky.any():
+            raise InvalidParameterError("no sky pixel in view: cannot set an exposure")
+        per_s = self.expected_electrons(scene, 1.0)[sky]
+        return float(fill * self.sensor.full_well_e / np.percentile(per_s, percentile))
+
+    def digitise(self, electrons: np.ndarray) -> np.ndarray:
+        """Clip electrons at the full well and convert to DN (uint16, black level added; read
+        noise below zero electrons stays above 0 DN thanks to the black level)."""
+        s = self.sensor
+        e = np.minimum(electrons, s.full_well_e)
+        dn = np.rint(e / s.e_per_dn) + s.black_level_dn
+        return np.clip(dn, 0, s.max_dn).astype(np.uint16)
+
+    def noisy_frames(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
+        """Raw frames (..., H, W) uint16 [DN] for mean electrons (..., H, W): photon and
+        dark-current shot noise (Poisson) and read noise (Gaussian) from ``rng``, full-well
+        clipping, ADC."""
+        e = rng.poisson(mean_electrons).astype(float)
+        e += self.sensor.read_noise_e * rng.standard_normal(e.shape)
+        return self.digitise(e)
+
+    def capture(self, scene: Scene, exposure_s: float, rng: np.random.Generator) -> np.ndarray:
+        """A raw mosaic image (H, W) uint16 [DN] of ``scene`` (:meth:`noisy_frames`); the sun
+        disk saturated."""
+        raw = self.noisy_frames(self.expected_electrons(scene, exposure_s), rng)
+        raw[scene.sun] = self.sensor.max_dn
+        return raw
+
+    def calibration_frames(self, angles_deg, radiance: float, exposure_s: float,
+                           n_frames: int, rng: np.random.Generator):
+        """Flat-field calibration data: the mean of ``n_frames`` raw frames [DN] of a fully
+        polarized uniform source of ``radiance`` at each polarizer angle [deg] (camera
+        frame), shape (K, H, W), and the mean dark frame (H, W) (source off)."""
+        a = np.radians(2.0 * np.asarray(angles_deg, dtype=float))
+        if a.ndim != 1 or n_frames < 1:
+            raise InvalidParameterError(f"angles_deg must be 1-D and n_frames >= 1; got "
+                                        f"shape {a.shape}, n_frames={n_frames!r}")
+        scenes = [(radiance, radiance * np.cos(x), radiance * np.sin(x)) for x in a] + [(0, 0, 0)]
+        mean = np.stack([self.expected_electrons(self.uniform_scene(s), exposure_s)
+                         for s in scenes])  # K + 1 sources, not samples
+        frames = self.noisy_frames(np.broadcast_to(mean[:, None], (len(scenes), n_frames)
+                                                   + mean.shape[1:]), rng)
+        avg = frames.mean(axis=1)
+        return avg[:-1], avg[-1]
+
+    def uniform_scene(self, stokes) -> Scene:
+        """A flat scene of camera-frame Stokes ``(I, Q, U)`` filling the image circle (an
+        integrating sphere behind a polarizer in front of the lens)."""
+        _, in_circle = self.pixel_directions
+        i, q, u = (np.where(in_circle, float(v), 0.0) for v in stokes)
+        z = np.zeros(self.sensor.shape)
+        return Scene(i, q, u, in_circle, np.zeros(self.sensor.shape, bool), z, z)
+
+    def describe(self) -> dict:
+        """Lens, sensor and radiometry for sidecars."""
+        return {"lens": self.lens.describe(),
+                "sensor": {**self.sensor.describe(),
+                           "photoelectrons_per_s": float(self.photoelectrons_per_s),
+                           "exit_pupil_px": None if not np.isfinite(self.exit_pupil_px)
+                           else float(self.exit_pupil_px),
+                           "sun_radius_deg": float(self.sun_radius_deg)}}
+
+
+def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azimuth_deg: float,
+                      directions, in_view, basis=None):
+    """Camera-frame Stokes ``(n, 3)`` of ``sky`` along camera-frame unit ``directions``
+    ``(N, 3)`` where ``in_view`` (N,) holds and the ray looks above the horizon.
+
+    ``basis``: :func:`camera_basis` of ``directions`` if already known. Returns
+    ``(index, stokes, elevation_deg, azimuth_deg)`` of those ``n`` rays.
+    """
+    east, north, up = attitude.inv().apply(np.eye(3))  # ENU axes in the camera frame
+    sin_el = np.clip(directions @ up, -1.0, 1.0)
+    keep = np.asarray(in_view, bool) & (sin_el >= 0.0)
+    if keep.all():  # a level camera: no copies
+        idx, d_c = np.arange(len(keep)), directions
+    else:
+        idx = np.flatnonzero(keep)
+        d_c, sin_el = directions[idx], sin_el[idx]
+    el = np.degrees(np.arcsin(sin_el))
+    az = np.mod(np.degrees(np.arctan2(d_c @ east, d_c @ north)), 360.0)
+    fld = sky.field(el, az, sun_elevation_deg, sun_azimuth_deg)
+    if basis is None:
+        basis = camera_basis(directions)
+    _, psi, e_th, e_ps = basis if keep.all() else (b[idx] for b in basis)
+    # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y by the
+    # camera-plane angle delta = beta + psi of e_el, where beta is the angle of the zenith's
+    # component across the ray, (p, q) = (up . e_theta, up . e_psi), from e_theta (both bases
+    # are right-handed about the ray); double angles without trigonometry
+    p, q = e_th @ up, e_ps @ up
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r2 = 1.0 / (p * p + q * q)
+    c2b, s2b = (p * p - q * q) * r2, 2.0 * p * q * r2
+    c2p, s2p = np.cos(2.0 * psi), np.sin(2.0 * psi)
+    c2, s2 = c2b * c2p - s2b * s2p, s2b * c2p + c2b * s2p
+    stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
+    return idx, stokes, el, az
+
+
+def _enu(elevation_deg, azimuth_deg) -> np.ndarray:
+    el, az = np.radians(elevation_deg), np.radians(azimuth_deg)
+    return np.array([np.cos(el) * np.sin(az), np.cos(el) * np.cos(az), np.sin(el)])

@@ -1,0 +1,205 @@
+"""Polarization camera: lens projection, mosaic signal chain, demosaicing (closed forms)."""
+
+import numpy as np
+import pytest
+from scipy.spatial.transform import Rotation
+
+from sensor.camera import (FisheyeLens, MosaicSensor, PolarizationCamera, camera_attitude,
+                           demosaic, local_meridian_aop)
+from sensor.camera.mosaic import sky_stokes_camera
+from skysim.exceptions import InvalidParameterError
+from skysim.sky import RayleighSky
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_projection_round_trip(model):
+    # directions -> pixels -> directions is exact up to float64 rounding: 1e-9 is ~1e6 ulp
+    lens = FisheyeLens(focal_px=83.7, cx=63.2, cy=61.9, fov_deg=190.0, model=model)
+    rng = np.random.default_rng(3)
+    theta = np.radians(rng.uniform(0, 95.0, 5000))
+    psi = rng.uniform(-np.pi, np.pi, 5000)
+    d = np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)], -1)
+    row, col = lens.project(d)
+    back, valid = lens.back_project(row, col)
+    assert valid.all()
+    np.testing.assert_allclose(back, d, atol=1e-9, rtol=0)
+    # and pixels -> directions -> pixels
+    r2, c2 = lens.project(back)
+    np.testing.assert_allclose(np.c_[r2, c2], np.c_[row, col], atol=1e-9, rtol=0)
+
+
+def test_projection_closed_form_radius():
+    # equidistant r = f theta, equisolid r = 2 f sin(theta/2): a ray at 60 deg from the axis
+    for model, r in (("equidistant", 100 * np.pi / 3), ("equisolid", 200 * np.sin(np.pi / 6))):
+        lens = FisheyeLens(100.0, 50.0, 40.0, 180.0, model)
+        row, col = lens.project([np.sin(np.pi / 3), 0.0, np.cos(np.pi / 3)])  # along +x
+        assert col == pytest.approx(50.0 + r, abs=1e-12) and row == pytest.approx(40.0)
+    lens = FisheyeLens(100.0, 50.0, 40.0, 120.0)
+    assert np.isnan(lens.project([1.0, 0.0, 0.0])[0])  # 90 deg off axis, outside a 120 deg FOV
+
+
+def test_image_top_is_heading_reference():
+    # a level camera with yaw 90 (reference axis east): the image top sees the east horizon
+    cam = PolarizationCamera.fisheye(64, 64)
+    sc = cam.scene(RayleighSky(), camera_attitude(90.0), 30.0, 200.0)
+    top = sc.valid[:8, 31] & sc.valid[:8, 32]
+    # columns 31 and 32 lie half a pixel either side of the principal point (cx = 31.5)
+    mid = 0.5 * (sc.view_azimuth_deg[:8, 31] + sc.view_azimuth_deg[:8, 32])
+    np.testing.assert_allclose(mid[top], 90.0, atol=1e-9)
+    assert np.all(np.abs(sc.view_azimuth_deg[:8, 31][top] - 90.0) < 1.5)
+
+
+def test_uniform_polarized_scene_gives_malus_values():
+    # ideal polarizers: a fully polarized flat field at angle chi gives I cos^2(chi - a) (Malus)
+    cam = PolarizationCamera.fisheye(16, 16, read_noise_e=0.0, dark_current_e_s=0.0)
+    chi = 30.0
+    c, s = np.cos(np.radians(2 * chi)), np.sin(np.radians(2 * chi))
+    e = cam.expected_electrons(cam.uniform_scene((1.0, c, s)), 1e-3)
+    a = cam.sensor.nominal_angle_deg()
+    malus = cam.photoelectrons_per_s * 1e-3 * np.cos(np.radians(chi - a)) ** 2
+    inside = cam.pixel_directions[1]
+    np.testing.assert_allclose(e[inside], malus[inside], rtol=1e-12)
+    # extinction ratio ER: transmittance across the axis is 1/ER of that along it
+    er = MosaicSensor(16, 16, extinction_ratio=50.0).analysis_vectors()
+    t_par = er[..., 0] + er[..., 1] * np.cos(np.radians(2 * a)) + er[..., 2] * np.sin(
+        np.radians(2 * a))
+    t_perp = er[..., 0] - er[..., 1] * np.cos(np.radians(2 * a)) - er[..., 2] * np.sin(
+        np.radians(2 * a))
+    np.testing.assert_allclose(t_par / t_perp, 50.0, rtol=1e-12)
+
+
+def test_noise_statistics_and_saturation():
+    cam = PolarizationCamera.fisheye(64, 64, read_noise_e=5.0, adc_bits=16)
+    scene = cam.uniform_scene((1.0, 0.0, 0.0))
+    t = 0.01
+    mean = cam.expected_electrons(scene, t)
+    raws = np.stack([cam.capture(scene, t, np.random.default_rng(k)) for k in range(40)])
+    inside = cam.pixel_directions[1]
+    e = (raws.astype(float) - cam.sensor.black_level_dn) * cam.sensor.e_per_dn
+    # variance = shot (mean) + read^2 + quantisation (e_per_dn^2 / 12); 40 frames x ~3000
+    # pixels: the pooled variance ratio is known to ~0.5 %, 3 % leaves room for rounding
+    var_pred = mean + 25.0 + cam.sensor.e_per_dn ** 2 / 12
+    ratio = (e.var(axis=0, ddof=1)[inside] / var_pred[inside]).mean()
+    assert ratio == pytest.approx(1.0, abs=0.03)
+    assert (e.mean(0)[inside] / mean[inside]).mean() == pytest.approx(1.0, abs=2e-3)
+    sat = cam.capture(scene, 10.0, np.random.default_rng(0))
+    assert (sat[inside] == cam.sensor.max_dn).all() and sat.dtype == np.uint16
+
+
+def test_sun_disk_saturates_and_horizon_is_masked():
+    cam = PolarizationCamera.fisheye(128, 128)
+    att = camera_attitude(0.0, pitch_deg=20.0)
+    sc = cam.scene(RayleighSky(), att, 50.0, 10.0)
+    assert sc.sun.sum() >= 1
+    raw = cam.capture(sc, cam.auto_exposure_s(sc), np.random.default_rng(0))
+    assert (raw[sc.sun] == cam.sensor.max_dn).all()
+    d, inside = cam.pixel_directions
+    el = np.degrees(np.arcsin(att.apply(d[inside])[:, 2]))
+    assert (sc.valid[inside] == (el >= 0)).all() and (el < 0).any()
+
+
+def _ideal_camera(n=128):
+    return PolarizationCamera.fisheye(n, n, read_noise_e=0.0, dark_current_e_s=0.0)
+
+
+def test_ideal_camera_stokes_equal_sky_within_demosaicing_bound():
+    """Noise-free ideal camera, super-pixel demosaicing against the sky's Stokes at each
+    super-pixel centre. The four pixels sample the field at offsets of half a pixel; with
+    ideal polarizers (S0 = sum/2, S1 = d0 - d90, S2 = d45 - d135) each component's error is at
+    most max_k(|dI_k| + |dP_k|), dI_k and dP_k the change of I and of (Q, U) from the centre
+    to pixel k. Sun-disk blocks excluded (saturated)."""
+    cam = _ideal_camera()
+    att = camera_attitude(25.0, 3.0, -2.0)
+    sky, sun = RayleighSky(), (35.0, 140.0)
+    sc = cam.scene(sky, att, *sun)
+    t = 1e-3
+    raw = cam.expected_electrons(sc, t) / cam.sensor.e_per_dn
+    st = demosaic(raw, cam.analysis_dn(t), valid=sc.valid & ~sc.sun, method="superpixel")
+    ok = st.valid
+    d, _ = cam.lens.back_project(st.row[ok], st.col[ok])
+    _, s_c, *_ = sky_stokes_camera(sky, att, *sun, d, np.ones(len(d), bool))
+    est = np.c_[st.S0[ok], st.S1[ok], st.S2[ok]]
+    ref = s_c
+    # bound from the scene's own pixel values in each block
+    blocks = np.stack([sc.I, sc.Q, sc.U], -1).reshape(64, 2, 64, 2, 3).swapaxes(1, 2)
+    blocks = blocks.reshape(64, 64, 4, 3)[ok]
+    dif = blocks - ref[:, None, :]
+    bound = (np.abs(dif[..., 0]) + np.hypot(dif[..., 1], dif[..., 2])).max(-1)
+    assert (np.abs(est - ref) <= bound[:, None] + 1e-9).all()
+    # the bound scales with a pixel's angular size (1.4 deg here): a few % of I
+    assert np.median(bound) < 0.03 * np.median(ref[:, 0])
+    # and in the local-meridian convention the AoP matches the sky's
+    el, az, aop = local_meridian_aop(st, cam.lens, att)
+    fld = sky.field(el[ok], az[ok], *sun)
+    dolp = np.hypot(ref[:, 1], ref[:, 2]) / ref[:, 0]
+    strong = dolp > 0.2  # away from the neutral points, where the AoP is well defined
+    dif_aop = (aop[ok] - fld.aop_deg + 90) % 180 - 90
+    assert np.abs(dif_aop[strong]).max() < 2.0  # within the bound's angle at DoP 0.2
+
+
+def test_bilinear_exact_for_linear_fields():
+    # the bilinear kernel reproduces a field linear in the pixel coordinates exactly away from
+    # the border (the weights of each channel are symmetric about the pixel)
+    cam = _ideal_camera(32)
+    rows, cols = np.indices((32, 32), dtype=float)
+    S = np.stack([2.0 + 0.01 * rows + 0.02 * cols, 0.3 - 0.004 * rows, 0.1 + 0.003 * cols], -1)
+    a = cam.analysis_dn(1e-3)
+    raw = np.einsum("hwk,hwk->hw", a, S)
+    for method in ("bilinear", "superpixel"):
+        st = demosaic(raw, a, method=method)
+        inner = st.valid & (st.row > 1) & (st.row < 30) & (st.col > 1) & (st.col < 30)
+        r, c = st.row[inner], st.col[inner]
+        ref = np.c_[2.0 + 0.01 * r + 0.02 * c, 0.3 - 0.004 * r, 0.1 + 0.003 * c]
+        if method == "bilinear":
+            np.testing.assert_allclose(np.c_[st.S0[inner], st.S1[inner], st.S2[inner]], ref,
+                                       atol=1e-9)
+        assert inner.sum() > 50
+
+
+def test_demosaic_against_polanalyser():
+    pa = pytest.importorskip("polanalyser")
+    pytest.importorskip("cv2")
+    rng = np.random.default_rng(5)
+    raw = rng.integers(200, 4000, (32, 32)).astype(np.uint16)
+    sensor = MosaicSensor(32, 32)  # layout [[90, 45], [135, 0]], polanalyser's
+    a = 2.0 * sensor.analysis_vectors(ideal=True)  # d = A S with A = (1, cos 2a, sin 2a) / 2
+    st = demosaic(raw, a / 2.0, method="bilinear")
+    imgs = pa.demosaicing(raw, pa.COLOR_PolarMono)
+    angles = np.deg2rad([0, 45, 90, 135])
+    stokes = pa.calcStokes(imgs, angles) if hasattr(pa, "calcStokes") else None
+    if stokes is None:
+        pytest.skip("polanalyser without calcStokes")
+    inner = (slice(2, -2), slice(2, -2))
+    # polanalyser rounds the interpolated channels to the image's integer type: 1 DN
+    np.testing.assert_allclose(st.S0[inner], stokes[..., 0][inner], atol=2.0)
+    np.testing.assert_allclose(st.S1[inner], stokes[..., 1][inner], atol=2.0)
+    np.testing.assert_allclose(st.S2[inner], stokes[..., 2][inner], atol=2.0)
+
+
+def test_bad_inputs_raise():
+    with pytest.raises(InvalidParameterError, match="even"):
+        MosaicSensor(63, 64)
+    with pytest.raises(InvalidParameterError, match="adc_bits"):
+        MosaicSensor(64, 64, adc_bits=20)
+    with pytest.raises(ValueError, match="equidistant"):
+        FisheyeLens(10.0, 5.0, 5.0, model="pinhole")
+    cam = _ideal_camera(16)
+    with pytest.raises(ValueError, match="bilinear, superpixel"):
+        demosaic(np.zeros((16, 16)), cam.analysis_dn(1.0), method="vng")
+    with pytest.raises(InvalidParameterError, match="analysis_dn"):
+        demosaic(np.zeros((16, 16)), np.zeros((16, 16, 4)))
+    with pytest.raises(InvalidParameterError, match="exposure_s"):
+        cam.expected_electrons(cam.uniform_scene((1, 0, 0)), -1.0)
+    assert isinstance(camera_attitude(10.0), Rotation)
+
+
+def test_missing_tifffile_gives_install_hint(tmp_path, monkeypatch, capsys):
+    import sys
+
+    from experiments.cli import main
+    monkeypatch.setitem(sys.modules, "tifffile", None)  # import fails as if not installed
+    assert main(["camera", "--lat", "34", "--lon", "108", "--time", "2013-05-22T12:00+08:00",
+                 "--width", "32", "--height", "32", "--out", str(tmp_path / "x.tiff")]) == 2
+    err = capsys.readouterr().err
+    assert "'camera'" in err and "pip install -e" in err
+    assert not (tmp_path / "x.tiff").exists()
