@@ -15,12 +15,13 @@ $(BIN)/python:
 	$(PIP) install --quiet --upgrade pip
 
 # Stamps re-install when pyproject.toml changes. `make run` installs the extras the README's
-# commands need: rt (multiple-scattering sky) and sweep (sensitivity sweeps).
+# commands need: rt (multiple-scattering sky), sweep (sensitivity sweeps), series (netCDF sky
+# series) and camera (16-bit TIFF images).
 $(VENV)/.installed-run: pyproject.toml Makefile | $(BIN)/python
-	$(PIP) install --quiet -e '.[rt,sweep,series]'
+	$(PIP) install --quiet -e '.[rt,sweep,series,camera]'
 	@touch $@
 
-$(VENV)/.installed-test: pyproject.toml | $(BIN)/python
+$(VENV)/.installed-test: pyproject.toml Makefile | $(BIN)/python
 	$(PIP) install --quiet -e '.[test,rt,sweep,series,camera]'
 	@touch $@ $(VENV)/.installed-run
 
