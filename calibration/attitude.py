@@ -41,7 +41,7 @@ which in a Rayleigh sky is perpendicular to the sun direction. Per update k:
        with the gyro and grows when they do not.
 
 The structure (gyro quaternion update, error vector from E-vector and gravity, F = 1/2 |e|^2,
-fixed vs line-search step) is that of [1]_ as summarised in the project's issue 6; the
+fixed vs line-search step) is that of [1]_; the
 paper's own text was not available here, so its equation numbers are not cited and the
 formulas above are written from [2]_ and [3]_.
 

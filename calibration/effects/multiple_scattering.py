@@ -6,7 +6,7 @@ The base model takes the zenith DoP as ``d_max`` times the single-scattering sha
 by the ground) is less polarized and depolarizes the sky unevenly: the DoP at the zenith falls
 faster towards a low sun, and the neutral points (Arago, Babinet, Brewster) appear
 (Coulson 1988 [1]_ ch. 6; tables of Natraj et al. 2009 [2]_). The effect replaces the shape by
-the zenith DoP of the multiple-scattering sky of :mod:`skysim.multiple` (issue 3), keeping the
+the zenith DoP of the multiple-scattering sky of :mod:`skysim.multiple`, keeping the
 free scale ``s`` for aerosol depolarization. By the symmetry of a plane-parallel atmosphere the
 zenith E-vector stays perpendicular to the solar meridian, so ``phi`` is unchanged.
 

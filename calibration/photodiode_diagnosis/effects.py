@@ -122,8 +122,10 @@ class RingEffect:
     def sky(self, p, base_sky, sun_enu):
         return base_sky
 
-    def observe(self, sensor, sky, att, sun, p) -> SkySample:  # pragma: no cover - abstract
-        raise NotImplementedError
+    def observe(self, sensor, sky, att, sun, p) -> SkySample:
+        """What every unit sees, for effects with ``observes = True`` (default: the sensor's
+        own sampling)."""
+        return sensor.observe(sky, att, sun)
 
     def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
         return obs
