@@ -17,9 +17,24 @@ Channel faults (a whole photodiode column is excluded and reported):
 Unit faults: a unit left with fewer than three working photodiodes at distinct polarizer
 angles (modulo 180 deg) cannot measure a linear polarization and is excluded (``too_few``).
 
-Reading exclusions (counted, not faults): missing, zero and saturated readings, and every
+Reading exclusions (counted, not faults): missing, zero and saturated readings, every
 reading of a unit at a sample where one of its photodiodes is saturated (the sun or its glare
-is in the unit's view and the channels are no longer linear).
+is in the unit's view and the channels are no longer linear), and the unit's readings at the
+samples where it is brighter than its glare threshold (:func:`bright_glare`).
+
+Glare: with the sun at the edge of a unit's field of view, direct sunlight (some 10^5 times
+the sky's radiance per steradian) reaches the photodiodes at oblique incidence through the
+unit's window, diffuser and polarizer film, which no longer act as an ideal analyser: the
+Fresnel transmittances of s and p light differ at oblique incidence (Hecht 2017, sect. 4.6),
+so the stray sunlight is partly polarized in its own plane of incidence, and a polarizer
+film's extinction falls off its axis. The readings then follow neither the sky's polarization
+nor Malus's law against it, well before a channel clips. The unit's brightness (its mean
+reading over its median across the session) tells these samples apart without any geometry
+(so without the heading, the clock or the sun's position the fit is to find): after the base
+fit, the unit-samples are binned by brightness in steps of :data:`GLARE_BIN` in log2 above
+the median (sparse bins merged upwards until one holds :data:`GLARE_MIN_SAMPLES`), and every
+sample from the first bin whose residual RMS exceeds
+:data:`GLARE_FACTOR` times that of the samples around the median is glare.
 
 The rail: an instrument can clip below its declared ``saturation_value`` (a light-to-digital
 converter's own full scale). Readings within :data:`RAIL_BAND` of the highest reading below
@@ -30,14 +45,15 @@ two bands below: a smooth sky thins out towards its brightest reading, a clipped
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
 from .instrument import Instrument
 
 __all__ = ["ZERO_FRACTION", "SATURATED_FRACTION", "STUCK_FRACTION", "DUPLICATE_FRACTION",
-           "RAIL_BAND", "RAIL_MIN_FRACTION", "Screen", "screen", "malus_outliers"]
+           "RAIL_BAND", "RAIL_MIN_FRACTION", "GLARE_BIN", "GLARE_FACTOR", "Screen", "screen",
+           "malus_outliers", "bright_glare", "unit_brightness"]
 
 ZERO_FRACTION = 0.2
 SATURATED_FRACTION = 0.25
@@ -45,6 +61,14 @@ STUCK_FRACTION = 0.5
 DUPLICATE_FRACTION = 0.9
 RAIL_BAND = 0.04
 RAIL_MIN_FRACTION = 0.002
+GLARE_BIN = 0.1
+"""Width of the brightness bins of :func:`bright_glare`, in log2 of brightness (7 %)."""
+GLARE_FACTOR = 3.0
+"""A brightness bin is glare when its residual RMS exceeds this multiple of the RMS of the
+unit-samples within one bin of the median: a threefold RMS is a ninefold variance, far more
+than the sky's own brightening towards the sun changes the fit (the aureole is smooth and
+the profiled radiance absorbs its brightness)."""
+GLARE_MIN_SAMPLES = 20
 MALUS_FACTOR = 2.5
 """A channel fails Malus's law when its residual RMS exceeds this multiple of the median
 channel's and the robust spread of the channels (median + 5 MAD)."""
@@ -74,6 +98,10 @@ class Screen:
     reading_ok: np.ndarray
     counts: dict = field(default_factory=dict)
     rail: float | None = None
+    bright: np.ndarray | None = None
+    """Unit-sample glare by brightness (n, P), from :func:`bright_glare`."""
+    glare: dict | None = None
+    """How the glare threshold was found (brightness ratio, RMS by bin), or None."""
 
     @property
     def faulty_channels(self) -> list:
@@ -122,9 +150,7 @@ def screen(inst: Instrument) -> Screen:
     finite = np.isfinite(R)
     sat_value = float(inst.source.get("saturation_value", np.inf))
     rail = _rail(R, finite, sat_value)
-    with np.errstate(invalid="ignore"):
-        saturated = finite & ((R >= sat_value) | ((R >= rail) if rail is not None else False))
-        zero = finite & (R == 0.0)
+    finite, saturated, zero = _masks(inst, rail)
     faults, ok = [], np.ones(P, bool)
     for p, col in enumerate(inst.columns):
         x = R[:, p]
@@ -173,20 +199,94 @@ def screen(inst: Instrument) -> Screen:
     return _finish(inst, faults, ok, unit_ok, saturated, zero, finite, rail)
 
 
-def _finish(inst, faults, ok, unit_ok, saturated, zero, finite, rail) -> Screen:
+def _masks(inst: Instrument, rail):
+    """Finite, saturated (declared value or rail) and zero readings (n, P)."""
+    R = inst.readings
+    finite = np.isfinite(R)
+    sat_value = float(inst.source.get("saturation_value", np.inf))
+    with np.errstate(invalid="ignore"):
+        saturated = finite & ((R >= sat_value) | ((R >= rail) if rail is not None else False))
+        zero = finite & (R == 0.0)
+    return finite, saturated, zero
+
+
+def _finish(inst, faults, ok, unit_ok, saturated, zero, finite, rail, bright=None,
+            glare_info=None) -> Screen:
     n, P = inst.readings.shape
+    bright = np.zeros((n, P), bool) if bright is None else bright
     usable_channel = ok & unit_ok[inst.pd_unit]
     member = inst.pd_unit[None, :] == np.arange(inst.n_units)[:, None]
     glare_unit = (saturated & usable_channel[None, :]).astype(float) @ member.T.astype(float) > 0
     glare = glare_unit[:, inst.pd_unit] & ~saturated
-    reading_ok = (usable_channel[None, :] & finite & ~saturated & ~zero & ~glare
+    bright = bright & finite & ~saturated & ~zero & ~glare
+    reading_ok = (usable_channel[None, :] & finite & ~saturated & ~zero & ~glare & ~bright
                   & ~inst.flagged)
     counts = {"readings": int(n * P), "missing": int((~finite).sum()),
               "saturated": int(saturated.sum()), "zero": int(zero.sum()),
               "glare_unit_readings": int((glare & usable_channel[None, :]).sum()),
+              "bright_glare_readings": int((bright & usable_channel[None, :]).sum()),
               "faulty_channel_readings": int((~usable_channel).sum() * n),
               "used": int(reading_ok.sum())}
-    return Screen(faults, ok, unit_ok, reading_ok, counts, rail)
+    return Screen(faults, ok, unit_ok, reading_ok, counts, rail, bright, glare_info)
+
+
+def unit_brightness(inst: Instrument, reading_ok) -> np.ndarray:
+    """Each unit's mean reading over its median across the session (n, U); NaN where the
+    unit has no usable reading."""
+    member = (inst.pd_unit[None, :] == np.arange(inst.n_units)[:, None]).astype(float)
+    total = np.where(reading_ok, inst.readings, 0.0) @ member.T
+    cnt = reading_ok.astype(float) @ member.T
+    mean = np.where(cnt > 0, total / np.maximum(cnt, 1.0), np.nan)
+    out = np.full_like(mean, np.nan)
+    for u in range(inst.n_units):
+        live = np.isfinite(mean[:, u])
+        if live.any():
+            out[:, u] = mean[:, u] / np.median(mean[live, u])
+    return out
+
+
+def bright_glare(inst: Instrument, scr: Screen, residual, usable) -> Screen:
+    """Exclude the unit-samples brighter than the glare threshold found from the base-fit
+    residuals (n, P) (see module doc); returns the updated screen.
+
+    The screen's ``glare`` records the threshold (``brightness_ratio``, None when no bin
+    qualifies) and the residual RMS by brightness bin.
+    """
+    w = usable & scr.reading_ok
+    b = unit_brightness(inst, scr.reading_ok)                        # (n, U)
+    r2 = np.where(w, residual, 0.0) ** 2
+    member = (inst.pd_unit[None, :] == np.arange(inst.n_units)[:, None]).astype(float)
+    ss, cnt = r2 @ member.T, w.astype(float) @ member.T              # (n, U)
+    ok = (cnt > 0) & np.isfinite(b) & (b > 0)
+    level = np.floor(np.log2(np.where(ok, b, 1.0)) / GLARE_BIN).astype(int)
+    core = ok & (np.abs(level) <= 1)
+    if core.sum() < GLARE_MIN_SAMPLES:
+        return scr
+    core_rms = float(np.sqrt(ss[core].sum() / cnt[core].sum()))
+    bins, threshold = [], None
+    top = int(level[ok].max(initial=0))
+    k = 1
+    while k <= top and threshold is None:
+        j = k                  # merge sparse bins upwards until one holds enough samples
+        while j < top and (ok & (level >= k) & (level <= j)).sum() < GLARE_MIN_SAMPLES:
+            j += 1
+        m = ok & (level >= k) & (level <= j)
+        if m.sum() >= GLARE_MIN_SAMPLES:
+            rms = float(np.sqrt(ss[m].sum() / cnt[m].sum()))
+            bins.append({"brightness_from": float(2.0 ** (k * GLARE_BIN)), "rms": rms,
+                         "unit_samples": int(m.sum())})
+            if rms > GLARE_FACTOR * core_rms:
+                threshold = float(2.0 ** (k * GLARE_BIN))
+        k = j + 1
+    info = {"brightness_ratio": threshold, "core_rms": core_rms, "factor": GLARE_FACTOR,
+            "bins": bins}
+    if threshold is None:
+        return replace(scr, glare=info)
+    bright_unit = ok & (b >= threshold * (1 - 1e-12))
+    bright = bright_unit[:, inst.pd_unit]
+    finite, saturated, zero = _masks(inst, scr.rail)
+    return _finish(inst, scr.faults, scr.channel_ok, scr.unit_ok, saturated, zero, finite,
+                   scr.rail, bright, info)
 
 
 def malus_outliers(inst: Instrument, scr: Screen, residual, usable) -> Screen:
@@ -211,11 +311,6 @@ def malus_outliers(inst: Instrument, scr: Screen, residual, usable) -> Screen:
         return scr
     faults = [f for f in faults if f["kind"] != "too_few"]
     unit_ok = _unit_check(inst, ok, faults)
-    R = inst.readings
-    finite = np.isfinite(R)
-    sat_value = float(inst.source.get("saturation_value", np.inf))
-    with np.errstate(invalid="ignore"):
-        saturated = finite & ((R >= sat_value) | ((R >= scr.rail) if scr.rail is not None
-                                                  else False))
-        zero = finite & (R == 0.0)
-    return _finish(inst, faults, ok, unit_ok, saturated, zero, finite, scr.rail)
+    finite, saturated, zero = _masks(inst, scr.rail)
+    return _finish(inst, faults, ok, unit_ok, saturated, zero, finite, scr.rail, scr.bright,
+                   scr.glare)

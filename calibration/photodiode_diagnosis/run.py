@@ -16,7 +16,7 @@ from skysim.validation import TWILIGHT_LIMIT_DEG
 from ..diagnosis import DIAGNOSIS_SCHEMA, InsufficientDataError
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
 from .errors import InstrumentDataError, NoUsableChannelsError, SunTooLowError
-from .faults import malus_outliers, screen
+from .faults import bright_glare, malus_outliers, screen
 from .fit import Priors, coarse_headings, fit, fit_headings
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
@@ -339,6 +339,13 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     sign, theta = orient(base, theta)
     first = fit(base, theta, sigma=0.02, max_iter=max_iter)
     full = Forward(work, sun=sun, polarizer_sign=sign)
+    scr2 = bright_glare(inst, scr, full.residual(first.theta), full.usable)
+    if scr2.bright is not None and scr2.bright.any():
+        work = replace(inst, flagged=~scr2.reading_ok)
+        base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
+        first = fit(base, first.theta, sigma=0.02, max_iter=max_iter)
+        full = Forward(work, sun=sun, polarizer_sign=sign)
+    scr = scr2
     scr2 = malus_outliers(inst, scr, full.residual(first.theta), full.usable)
     if scr2 is not scr:
         scr = scr2
@@ -457,7 +464,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                           "base_deg": herr.get("base"),
                           "best_deg": herr.get(best) if best in herr else None},
         "base_fit": _base_fit_report(first.theta, L, base, work, sign),
-        "data": dict(inst.source, readings_excluded=scr.counts,
+        "data": dict(inst.source, readings_excluded=scr.counts, glare=scr.glare,
                      sun_elevation_deg=[float(sun_el.min()), float(sun_el.max())]),
         "split": {"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
                   "held_out_readings": n_ho},
