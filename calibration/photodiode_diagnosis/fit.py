@@ -26,7 +26,13 @@ import scipy.sparse as sp
 
 from .forward import Forward
 
-__all__ = ["FitResult", "Priors", "fit", "fit_headings", "coarse_headings"]
+__all__ = ["FitResult", "Priors", "fit", "fit_headings", "coarse_headings", "ANGLE_SD_DEG"]
+
+ANGLE_SD_DEG = 5.0
+"""Prior SD [deg] of each photodiode's polarizer-angle deviation from nominal (the common part
+of a unit is its polarizer offset ``delta_u``, prior SD 20 deg): polarizer film cut and placed
+by hand sits within a few degrees of its nominal angle; the prior only resolves the common
+mode with ``delta_u``, the data fix the rest."""
 
 
 @dataclass
@@ -47,6 +53,8 @@ class Priors:
         lo, hi, step = np.full(n, -np.inf), np.full(n, np.inf), np.ones(n)
         mu[L.lam], sd[L.lam], step[L.lam] = 0.0, 0.5, 1e-4
         mu[L.off], sd[L.off], step[L.off] = 0.0, 0.5, 1e-4
+        mu[L.angle], sd[L.angle], step[L.angle] = 0.0, ANGLE_SD_DEG, 1e-3
+        lo[L.angle], hi[L.angle] = -20.0, 20.0
         lo[L.off] = -0.5
         mu[L.delta], sd[L.delta], step[L.delta] = 0.0, 20.0, 1e-3
         mu[L.scale], sd[L.scale], step[L.scale] = 0.6, 1.0, 1e-4
@@ -80,7 +88,7 @@ def _groups(fwd: Forward, free: np.ndarray):
     for u in range(inst.n_units):
         rank[cols_of_unit[u]] = np.arange(cols_of_unit[u].sum())
     groups = []
-    for sl in (L.lam, L.off):
+    for sl in (L.lam, L.off, L.angle):
         for j in range(rank.max() + 1):
             idx = [sl.start + p for p in np.flatnonzero(rank == j)]
             groups.append((idx, "output", [("cols", cols_of_unit[inst.pd_unit[i - sl.start]])

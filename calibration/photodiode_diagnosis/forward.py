@@ -5,11 +5,12 @@ Geometry (what each unit sees) comes from the project's compound-eye sensor
 along each unit's view at the body attitude of every sample; the readings from Malus's law of
 the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`):
 
-``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - delta_u)) + o_p``
+``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - beta_p - delta_u)) + o_p``
 
 with ``d_iu``, ``chi_iu`` the degree and angle of linear polarization of the light reaching
-unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle, ``delta_u`` the
-unit's polarizer-angle (installation) offset, ``s`` the DoP scale (the sky's ``d_max``),
+unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle, ``beta_p`` the
+photodiode's own deviation from it (a hand-cut polarizer film is placed within a few degrees),
+``delta_u`` the unit's polarizer-angle (installation) offset, ``s`` the DoP scale (the sky's ``d_max``),
 ``g_p = exp(lambda_p)`` the photodiode's gain and ``o_p`` its dark offset. The radiance
 ``I_iu`` reaching a unit is a nuisance profiled out in closed form (least squares over the
 unit's photodiodes at each sample, variable projection, Golub & Pereyra 1973 [1]_): a
@@ -17,7 +18,7 @@ polarization compass does not use it, and the single-scattering radiance misses 
 sky's aerosol brightening near the sun and horizon by factors of several, which would bury
 every polarization effect. Residuals are relative: ``(r - r_hat) / mean_u(r)``.
 
-Which parameters are shared and which are per sweep: gains, offsets, polarizer offsets, the
+Which parameters are shared and which are per sweep: gains, offsets, polarizer angles, the
 pointing of every unit's axis (elevation and azimuth offsets from nominal) and the DoP scale
 belong to the instrument and the sky of a session, so they are shared by all sweeps
 (fitted on the training sweeps, held fixed on the held-out ones). The heading offset between
@@ -58,7 +59,7 @@ class Layout:
     """Positions of the parameter groups in the parameter vector.
 
     Order: ``lambda_p`` (P log-gains), ``o_p`` (P offsets, in units of the session's median
-    reading), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``epsilon_u``,
+    reading), ``beta_p`` (P polarizer-angle deviations of each photodiode [deg]), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``epsilon_u``,
     ``alpha_u`` (U elevation and U azimuth offsets of the unit axes [deg]), ``h_k`` (one heading
     offset per sweep [deg]; one shared offset for absolute yaw), effect parameters.
     """
@@ -77,12 +78,17 @@ class Layout:
         return slice(self.n_pd, 2 * self.n_pd)
 
     @property
+    def angle(self):
+        """Per-photodiode polarizer-angle deviations from nominal [deg]."""
+        return slice(2 * self.n_pd, 3 * self.n_pd)
+
+    @property
     def delta(self):
-        return slice(2 * self.n_pd, 2 * self.n_pd + self.n_units)
+        return slice(3 * self.n_pd, 3 * self.n_pd + self.n_units)
 
     @property
     def scale(self) -> int:
-        return 2 * self.n_pd + self.n_units
+        return 3 * self.n_pd + self.n_units
 
     @property
     def pointing(self):
@@ -215,12 +221,12 @@ class Forward:
 
     # ---------------------------------------------------------------- output stage
     def channel_model(self, theta, obs: SkySample) -> np.ndarray:
-        """``g_p (1 + s d cos 2(chi - a_p - delta_u))`` (n, P), Malus's law [2]_."""
+        """``g_p (1 + s d cos 2(chi - a_p - beta_p - delta_u))`` (n, P), Malus's law [2]_."""
         L, inst = self.layout, self.inst
         u = inst.pd_unit
         d = np.clip(theta[L.scale] * obs.dop[:, u], 0.0, 0.999)
-        return photodiode_signal(1.0, obs.aop_unit_deg[:, u],
-                                 d, self.polarizer_sign * inst.pd_angle_deg + theta[L.delta][u],
+        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        return photodiode_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
                                  responsivity=np.exp(theta[L.lam]))
 
     def predict(self, theta, obs: SkySample):

@@ -493,6 +493,8 @@ def _base_fit_report(theta, L, fwd, inst, sign):
     return {"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
             "dop_scale": float(theta[L.scale]),
             "polarizer_offset_deg": {f"u{u}": float(d) for u, d in enumerate(theta[L.delta])},
+            "polarizer_angle_deviation_deg": {c: float(b) for c, b in
+                                              zip(inst.columns, theta[L.angle])},
             "elevation_offset_deg": {f"u{u}": float(d) for u, d in
                                      enumerate(theta[L.pointing][:L.n_units])},
             "azimuth_offset_deg": {f"u{u}": float(d) for u, d in
