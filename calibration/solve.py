@@ -106,16 +106,19 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     scale = np.log(10.0) / (2.0 * gain)
     neg_half_deg = -90.0 / np.pi  # -atan2 [rad] -> phi [deg]
     m_max = min(SOLVE_BLOCK, n)
+    x_buf = np.empty(len(used) * m_max)
     p_buf = np.empty(len(used) * m_max)
     sc_buf = np.empty(2 * m_max)
     for start in range(0, n, SOLVE_BLOCK):
         stop = min(start + SOLVE_BLOCK, n)
         m = stop - start
-        # every step in the cache-sized buffers; each output row is written once, by the
-        # slow arctangent and square root, so that the writes to memory overlap their work
-        p = p_buf[:len(used) * m].reshape(len(used), m)          # (channel, block) rows
-        np.multiply(flat[start:stop].T, scale, out=p)
-        np.tanh(p, out=p)
+        # every step in the cache-sized buffers; each output row is written once. U is read
+        # once, by a contiguous pass (memory bandwidth); tanh then reads it transposed from
+        # the cache into (channel, block) rows
+        x = x_buf[:len(used) * m].reshape(m, len(used))
+        np.multiply(flat[start:stop], scale, out=x)
+        p = p_buf[:len(used) * m].reshape(len(used), m)
+        np.tanh(x.T, out=p)
         neg_s_c = sc_buf[:2 * m].reshape(2, m)
         neg_s, c = neg_s_c
         for k, (rows, matrix) in enumerate(systems):
