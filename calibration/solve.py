@@ -210,7 +210,9 @@ def _pair_systems(pairs: tuple) -> tuple[list, list]:
         ri, rj = used.index(i), used.index(j)
         if ri > rj:                                  # rows in increasing order: a slice
             ri, rj, matrix = rj, ri, matrix[:, ::-1]
-        systems.append((slice(ri, rj + 1, rj - ri), np.ascontiguousarray(matrix)))
+        matrix = np.ascontiguousarray(matrix)
+        matrix.flags.writeable = False               # shared by every call (cached)
+        systems.append((slice(ri, rj + 1, rj - ri), matrix))
     return used, systems
 
 
