@@ -71,9 +71,14 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
 
     Each channel's log ratio is inverted once (eq. 5 of [1]_) and shared by the pairs; each
     pair then solves the linear system of eqs. (7)-(8) for ``C = d cos 2phi`` and
-    ``S = d sin 2phi`` and takes ``phi = atan2(S, C) / 2`` (eq. 9 with the 90-degree ambiguity
-    resolved by ``d > 0``). Samples are processed in blocks of :data:`SOLVE_BLOCK` so that the
+    ``S = d sin 2phi`` (one 2x2 matrix product per block gives ``-S`` and ``C``) and takes
+    ``phi = atan2(S, C) / 2`` (eq. 9 with the 90-degree ambiguity resolved by ``d > 0``) and
+    ``d = hypot(C, S)``. Samples are processed in blocks of :data:`SOLVE_BLOCK` so that the
     temporaries stay in cache; the result equals :func:`solve_pair` pair by pair.
+
+    The half-open interval comes from the sign of zero, without a wrapping pass:
+    ``phi = -atan2(-S + 0, C) / 2``, where ``-S + 0`` is never ``-0``, so the arctangent lies
+    in ``(-180, 180]`` deg and ``phi`` in ``[-90, 90)`` (``S = 0, C < 0`` gives -90).
 
     Parameters
     ----------
@@ -92,33 +97,40 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     U = np.asarray(U, dtype=float)
     if U.shape[-1:] != (3,):
         raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
-    used, terms = _pair_coefficients(tuple(pair_index(pair) for pair in pairs))
+    used, systems = _pair_systems(tuple(pair_index(pair) for pair in pairs))
     flat = U.reshape(-1, 3)
     flat = flat if len(used) == 3 else flat[:, used]
     n = flat.shape[0]
-    phi = np.empty((len(terms), n))
-    dop = np.empty((len(terms), n))
+    phi = np.empty((len(systems), n))
+    dop = np.empty((len(systems), n))
     scale = np.log(10.0) / (2.0 * gain)
-    half_deg = 90.0 / np.pi  # atan2 [rad] -> phi [deg]
-    buffers = np.empty((4, min(SOLVE_BLOCK, n)))
+    neg_half_deg = -90.0 / np.pi  # -atan2 [rad] -> phi [deg]
+    m_max = min(SOLVE_BLOCK, n)
+    x_buf = np.empty(len(used) * m_max)
+    p_buf = np.empty(len(used) * m_max)
+    sc_buf = np.empty(2 * m_max)
     for start in range(0, n, SOLVE_BLOCK):
         stop = min(start + SOLVE_BLOCK, n)
-        p = np.multiply(flat[start:stop].T, scale, order="C")   # (channel, block) rows
-        np.tanh(p, out=p)
-        c_buf, s_buf, work, d_buf = buffers[:, :stop - start]
-        for k, (c_terms, s_terms) in enumerate(terms):
-            # every step in the cache-sized buffers; each output row is written once
-            c = _combine(p, c_terms, c_buf, work)
-            s = _combine(p, s_terms, s_buf, work)
-            np.arctan2(s, c, out=work)
-            work *= half_deg
-            # atan2 lies in [-180, 180], phi in [-90, 90]: +90 (S = +0, C < 0) is -90
-            np.copyto(work, -90.0, where=work >= 90.0)
-            phi[k, start:stop] = work
-            np.multiply(c, c, out=d_buf)
-            d_buf += np.multiply(s, s, out=work)
-            np.sqrt(d_buf, out=dop[k, start:stop])  # d = hypot(C, S) (|C|, |S| <= ~2)
-    shape = U.shape[:-1] + (len(terms),)
+        m = stop - start
+        # every step in the cache-sized buffers; each output row is written once. U is read
+        # once, by a contiguous pass (memory bandwidth); tanh then reads it transposed from
+        # the cache into (channel, block) rows
+        x = x_buf[:len(used) * m].reshape(m, len(used))
+        np.multiply(flat[start:stop], scale, out=x)
+        p = p_buf[:len(used) * m].reshape(len(used), m)
+        np.tanh(x.T, out=p)
+        neg_s_c = sc_buf[:2 * m].reshape(2, m)
+        neg_s, c = neg_s_c
+        for k, (rows, matrix) in enumerate(systems):
+            np.matmul(matrix, p[rows], out=neg_s_c)
+            np.add(neg_s, 0.0, out=neg_s)                      # -0 -> +0 (see above)
+            out = phi[k, start:stop]
+            np.arctan2(neg_s, c, out=out)
+            out *= neg_half_deg
+            np.square(neg_s_c, out=neg_s_c)
+            np.add(neg_s, c, out=neg_s)
+            np.sqrt(neg_s, out=dop[k, start:stop])  # d = hypot(C, S) (|C|, |S| <= ~2)
+    shape = U.shape[:-1] + (len(systems),)
     return phi.T.reshape(shape), dop.T.reshape(shape)
 
 
@@ -183,36 +195,25 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
 
 
 @functools.lru_cache(maxsize=64)
-def _pair_coefficients(pairs: tuple) -> tuple[list, list]:
-    """Channels to invert and, per pair, the terms ``((row, coefficient), ...)`` of
-    ``C = c_i p_i + c_j p_j`` and of ``S = s_i p_i + s_j p_j`` (Cramer's rule on eqs. 7-8),
-    without the exact zeros (the paper's angles make several: pair (1, 2) has ``C = p_2``)."""
+def _pair_systems(pairs: tuple) -> tuple[list, list]:
+    """Channels to invert and, per pair, ``(rows, matrix)``: the rows of the inverted
+    channels (a slice) and the 2x2 matrix that maps them to ``(-S, C)`` by Cramer's rule on
+    eqs. (7)-(8): ``C = (p_j sin 2a_i - p_i sin 2a_j) / det``,
+    ``S = (p_j cos 2a_i - p_i cos 2a_j) / det``, ``det = sin 2(a_i - a_j)``."""
     used = sorted({ch for pair in pairs for ch in pair})   # invert only these channels
-    terms = []
+    systems = []
     for i, j in pairs:
         ai, aj = np.radians(2.0 * CHANNEL_ANGLES_DEG[[i, j]])
         det = np.sin(ai - aj)
-        rows = (used.index(i), used.index(j))
-        c = tuple((r, float(k)) for r, k in zip(rows, (-np.sin(aj) / det, np.sin(ai) / det))
-                  if k != 0.0)
-        s = tuple((r, float(k)) for r, k in zip(rows, (-np.cos(aj) / det, np.cos(ai) / det))
-                  if k != 0.0)
-        terms.append((c, s))
-    return used, terms
-
-
-def _combine(p, terms, out, work):
-    """``sum(k p[row])`` over ``terms`` into ``out`` (a row of ``p`` itself for ``1 p[row]``)."""
-    if not terms:
-        out[...] = 0.0
-        return out
-    if len(terms) == 1 and terms[0][1] == 1.0:
-        return p[terms[0][0]]
-    (r0, k0), *rest = terms
-    np.multiply(p[r0], k0, out=out)
-    for r, k in rest:
-        out += np.multiply(p[r], k, out=work)
-    return out
+        matrix = np.array([[np.cos(aj) / det, -np.cos(ai) / det],     # -S
+                           [-np.sin(aj) / det, np.sin(ai) / det]])    # C
+        ri, rj = used.index(i), used.index(j)
+        if ri > rj:                                  # rows in increasing order: a slice
+            ri, rj, matrix = rj, ri, matrix[:, ::-1]
+        matrix = np.ascontiguousarray(matrix)
+        matrix.flags.writeable = False               # shared by every call (cached)
+        systems.append((slice(ri, rj + 1, rj - ri), matrix))
+    return used, systems
 
 
 def heading_error_deg(phi_estimated_deg, phi_reference_deg) -> np.ndarray:

@@ -198,6 +198,34 @@ def test_solve_pairs_equals_each_pair_written_out():
     np.testing.assert_array_equal(solve_pair(u, (2, 3))[0], got_phi[:, 2])
 
 
+def test_solve_pairs_boundary_and_signed_zeros_stay_in_range():
+    """phi is in [-90, 90) from the sign of zero alone: headings at exactly +-90 deg and
+    outputs that are +0 or -0 (every sign pattern, alone and beside a nonzero channel) never
+    give +90; where the pair's d > 0 they equal the per-pair formulas (axially, 1e-12 deg), and
+    a pair whose two outputs are zero gives d = 0 exactly."""
+    from calibration.solve import solve_pairs
+    signs = np.array([[a, b, c] for a in (1, -1) for b in (1, -1) for c in (1, -1)], float)
+    zeros = 0.0 * signs                                          # +0 / -0 in every pattern
+    one_lit = zeros.copy()
+    one_lit[:, 0] = 0.3                                          # U1 nonzero, U2 = U3 = +-0
+    u = np.concatenate([channel_outputs(np.array([-90.0, 90.0, 0.0, -45.0]), 0.6),
+                        zeros, one_lit, one_lit[:, [1, 0, 2]], one_lit[:, [1, 2, 0]]])
+    phi, d = solve_pairs(u)
+    assert np.all((phi >= -90.0) & (phi < 90.0)) and np.all(np.isfinite(phi))
+    for k, pair in enumerate(PAIRS):
+        ref_phi, ref_d = pair_by_cramer(u, pair)
+        dark = np.all(u[:, [pair[0] - 1, pair[1] - 1]] == 0.0, axis=1)
+        assert dark.sum() == 16                  # the eight all-zero rows and eight more
+        np.testing.assert_array_equal(d[dark, k], 0.0)
+        lit = ~dark
+        assert np.max(np.abs(heading_error_deg(phi[lit, k], ref_phi[lit]))) < 1e-12
+        np.testing.assert_allclose(d[:, k], ref_d, rtol=0, atol=1e-15)
+    # a pair given in either order is the same linear system
+    rev_phi, rev_d = solve_pairs(u, tuple(pair[::-1] for pair in PAIRS))
+    np.testing.assert_allclose(rev_phi, phi, rtol=0, atol=1e-12)
+    np.testing.assert_allclose(rev_d, d, rtol=0, atol=1e-15)
+
+
 def test_solve_pairs_shapes_and_bad_input():
     from calibration.solve import solve_pairs
     u = channel_outputs(np.linspace(-80, 80, 12).reshape(3, 4), 0.5)
