@@ -53,6 +53,10 @@ _CLUSTER_PX = 8
 """Side [px] of the blocks whose scores are summed for the standard error of interpolated
 (correlated) samples: the bilinear kernel reaches one pixel, a channel's samples two."""
 _GRID = np.radians(np.arange(0.0, 360.0, 0.25))
+_SCALE_SAMPLES = 1 << 16
+"""At most this many samples (an even stride through all) give the robust residual scale: the
+MAD of 65536 samples has a relative standard error of 0.5 %, and the scale only sets the
+width of the Cauchy loss."""
 
 
 @dataclass(frozen=True)
@@ -142,22 +146,26 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
                               stokes.S2[use])
     w = camera_attitude(0.0, pitch_deg, roll_deg).apply(e_c)
     el = np.radians(sun_elevation_deg)
-    a = np.c_[np.cos(el) * w[:, 0], np.cos(el) * w[:, 1], np.sin(el) * w[:, 2]]
+    # component-major (3, n): the 3 x 3 scatter matrix is one matrix product per iteration
+    a = np.ascontiguousarray(w.T * np.array([[np.cos(el)], [np.cos(el)], [np.sin(el)]]))
     prior = stokes.S0[use] * stokes.dolp[use] ** 2
     prior = prior / prior.mean()
     u = prior.copy()
     alpha, scale = None, np.nan
+    every = max(1, n // _SCALE_SAMPLES)
+    sqrt_prior = np.sqrt(prior)
     for it in range(1, max_iter + 1):
-        m = (a * u[:, None]).T @ a
+        m = (a * u) @ a.T
         if alpha is None:
             grid_cost = _cost(m, _GRID)
             alpha0 = _GRID[np.argmin(grid_cost)]
         else:
             alpha0 = alpha
         new = _newton(m, alpha0)
-        r = a @ np.array([np.sin(new), np.cos(new), 1.0])
-        z = r * np.sqrt(prior)
-        scale = 1.4826 * np.median(np.abs(z - np.median(z)))
+        r = np.array([np.sin(new), np.cos(new), 1.0]) @ a
+        z = r * sqrt_prior
+        zs = z[::every]
+        scale = 1.4826 * np.median(np.abs(zs - np.median(zs)))
         u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
         done = alpha is not None and abs(new - alpha) < 1e-8  # rad: 6e-7 deg
         alpha = new
@@ -166,15 +174,15 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     else:
         raise ConvergenceError(f"heading did not settle in {max_iter} reweighting iterations",
                                iterations=max_iter)
-    m = (a * u[:, None]).T @ a
+    m = (a * u) @ a.T
     best = _cost(m, np.array([alpha]))[0]
     other = _cost(m, np.array([_newton(m, alpha + np.pi)]))[0]
-    jac = a @ np.array([np.cos(alpha), -np.sin(alpha), 0.0])
+    jac = np.array([np.cos(alpha), -np.sin(alpha), 0.0]) @ a
     score = u * jac * r
     if stokes.method != "superpixel":  # neighbours share raw pixels: sum scores per cluster
         rows, cols = stokes.row[use].astype(int), stokes.col[use].astype(int)
-        key = (rows // _CLUSTER_PX) * (int(cols.max()) + 1) + cols // _CLUSTER_PX
-        score = np.bincount(np.unique(key, return_inverse=True)[1], weights=score)
+        key = (rows // _CLUSTER_PX) * (int(cols.max()) // _CLUSTER_PX + 1) + cols // _CLUSTER_PX
+        score = np.bincount(key, weights=score)  # empty clusters add nothing below
     # M-estimator sandwich: the bread is the derivative of the weighted score, psi'(z)
     q = (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2
     bread = np.sum(prior * (1.0 - q) / (1.0 + q) ** 2 * jac ** 2)
