@@ -46,7 +46,15 @@ from skysim.validation import check_in_range
 
 from .exceptions import ConvergenceError, TooFewSamplesError
 
-__all__ = ["CameraHeading", "heading_from_image"]
+__all__ = ["DEFAULT_DEMOSAIC", "CameraHeading", "heading_from_image"]
+
+DEFAULT_DEMOSAIC = "centred"
+"""Demosaicing of the heading's command and studies: half resolution with the four channels
+met at each super-pixel centre (:mod:`sensor.camera.demosaic`). Its noise-free heading error
+on a Rayleigh sky is that of full-resolution bilinear (both below 0.011 deg on 128 px images,
+0.0006 deg on 512 px, falling with the square of the resolution), where the plain super-pixel
+is biased by its instantaneous field of view (2 deg on 128 px, 0.1 deg on 2048 px, tilted camera,
+sun at 80 deg), at a quarter of bilinear's samples."""
 
 _CAUCHY_C = 2.385
 _CLUSTER_PX = 8

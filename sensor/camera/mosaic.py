@@ -404,8 +404,9 @@ class PolarizationCamera:
 
     def _analysis_components(self, ideal: bool, dtype) -> np.ndarray:
         """:attr:`_analysis` as three contiguous (H, W) planes of ``dtype``."""
-        return self._cached(("analysis", bool(ideal), np.dtype(dtype)), lambda: np.ascontiguousarray(
-            np.moveaxis(self._analysis[bool(ideal)], -1, 0), dtype=dtype))
+        return self._cached(("analysis", bool(ideal), np.dtype(dtype)),
+                            lambda: np.ascontiguousarray(np.moveaxis(
+                                self._analysis[bool(ideal)], -1, 0), dtype=dtype))
 
     def _pixel_frame(self, dtype) -> np.ndarray:
         """Camera-fixed vectors of every pixel, (3 vectors, 3 components, H, W) in ``dtype``:
