@@ -20,8 +20,12 @@ sun disk and samples of low DoLP (ill-defined AoP) are excluded first. Prior wei
 The uncertainty is the heteroscedasticity-consistent (sandwich) standard error of alpha
 (White 1980 [1]_) from the final weights and residuals. Super-pixel samples have independent
 noise; bilinear samples share raw pixels with their neighbours, so their scores are summed over
-blocks of 8 x 8 pixels first (cluster-robust form, Liang & Zeger 1986 [3]_). It covers noise only, not a sky that departs from E perpendicular to the sun
-(multiple scattering), which shows as a bias.
+blocks of 8 x 8 pixels first (cluster-robust form, Liang & Zeger 1986 [3]_). Super-pixel
+residuals also carry the smooth error of their instantaneous field of view, which is the same
+in every image and no noise: their score variance is taken from the differences of
+horizontally adjacent samples, which cancel a smooth part (difference-based variance, Rice 1984
+[4]_). It covers noise only, not a sky that departs from E perpendicular to the sun (multiple
+scattering), which shows as a bias.
 
 References
 ----------
@@ -32,6 +36,8 @@ References
    doi:10.1080/03610927708827533 (Cauchy weights, tuning constant 2.385).
 .. [3] K.-Y. Liang, S. L. Zeger, "Longitudinal data analysis using generalized linear
    models", Biometrika 73(1):13-22 (1986), doi:10.1093/biomet/73.1.13.
+.. [4] J. Rice, "Bandwidth choice for nonparametric regression", Ann. Stat. 12(4):1215-1230
+   (1984), doi:10.1214/aos/1176346788 (variance from first differences).
 """
 
 from __future__ import annotations
@@ -191,10 +197,17 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         rows, cols = stokes.row[use].astype(int), stokes.col[use].astype(int)
         key = (rows // _CLUSTER_PX) * (int(cols.max()) // _CLUSTER_PX + 1) + cols // _CLUSTER_PX
         score = np.bincount(key, weights=score)  # empty clusters add nothing below
+        meat = np.sum(score ** 2)
+    else:
+        grid = np.zeros(use.shape)
+        grid[use] = score
+        pair = use[:, 1:] & use[:, :-1]
+        diff = (grid[:, 1:] - grid[:, :-1])[pair]
+        meat = n * 0.5 * np.mean(diff ** 2)
     # M-estimator sandwich: the bread is the derivative of the weighted score, psi'(z)
     q = (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2
     bread = np.sum(prior * (1.0 - q) / (1.0 + q) ** 2 * jac ** 2)
-    sigma = np.sqrt(np.sum(score ** 2)) / bread
+    sigma = np.sqrt(meat) / bread
     heading = float(np.mod(sun_azimuth_deg - np.degrees(alpha), 360.0))
     return CameraHeading(heading, float(np.degrees(sigma)), n,
                          int(np.sum(u < 0.1 * prior)), float(scale),

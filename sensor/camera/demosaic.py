@@ -17,7 +17,10 @@ squares, ``S = (A^T A)^-1 A^T d``. The methods differ in where the four channels
   weights ``(3/4, 1/4)`` along each axis (the normalised convolution again), so the four
   channels meet at the same point: no first-order instantaneous-field-of-view error (exact for
   fields linear in the pixel coordinates, like bilinear) at a quarter of the samples, which
-  makes it the fast path for the heading. Neighbouring outputs share raw pixels.
+  makes it the fast path for the heading. A sample is valid where all 16 raw pixels of its
+  stencil are measured (none saturated or masked: no extrapolation at the edges of masks).
+  Neighbouring outputs share raw pixels. Its linear map depends on the analysis vectors only
+  (:func:`demosaic_operator`), so a camera's nominal one is computed once.
 - ``"superpixel"``: each 2x2 block gives one Stokes vector at the block centre
   (half resolution). Each block uses only its own four pixels, so a calibrated pixel's
   analysis vector applies exactly, a saturated or masked pixel spoils only its block, and the
@@ -51,8 +54,8 @@ from skysim.geometry import aop_from_e_vector, elevation_azimuth, wrap_axial_deg
 
 from .mosaic import camera_basis
 
-__all__ = ["DEMOSAIC_METHODS", "StokesImage", "camera_stokes", "demosaic", "local_meridian_aop",
-           "solve_stokes", "e_vectors_camera"]
+__all__ = ["DEMOSAIC_METHODS", "DemosaicOperator", "StokesImage", "camera_stokes", "demosaic",
+           "demosaic_operator", "local_meridian_aop", "solve_stokes", "e_vectors_camera"]
 
 DEMOSAIC_METHODS = ("bilinear", "centred", "superpixel")
 
@@ -110,26 +113,25 @@ def _solve_normal(a: np.ndarray, d: np.ndarray) -> np.ndarray:
     return _solve_terms(m, b)
 
 
+def _inverse_terms(m):
+    """Inverse of the symmetric 3x3 matrices ``m = (m00, m11, m22, m01, m02, m12)`` (arrays)
+    by the adjugate, as the full 3x3 nested list: elementwise arithmetic only (NaN or inf
+    where singular)."""
+    m00, m11, m22, m01, m02, m12 = m
+    c00, c11, c22 = m11 * m22 - m12 * m12, m00 * m22 - m02 * m02, m00 * m11 - m01 * m01
+    c01, c02, c12 = m02 * m12 - m01 * m22, m01 * m12 - m02 * m11, m01 * m02 - m00 * m12
+    with np.errstate(all="ignore"):
+        inv = 1.0 / (m00 * c00 + m01 * c01 + m02 * c02)
+        c00, c11, c22, c01, c02, c12 = (c * inv for c in (c00, c11, c22, c01, c02, c12))
+    return [[c00, c01, c02], [c01, c11, c12], [c02, c12, c22]]
+
+
 def _solve_terms(m, b) -> np.ndarray:
     """Solve the symmetric 3x3 normal equations given as ``m = (m00, m11, m22, m01, m02,
     m12)`` and ``b = (b0, b1, b2)`` (arrays) by the adjugate: elementwise arithmetic only."""
-    m00, m11, m22, m01, m02, m12 = m
-    b0, b1, b2 = b
-    c00, c11, c22 = m11 * m22 - m12 * m12, m00 * m22 - m02 * m02, m00 * m11 - m01 * m01
-    c01, c02, c12 = m02 * m12 - m01 * m22, m01 * m12 - m02 * m11, m01 * m02 - m00 * m12
-    det = m00 * c00 + m01 * c01 + m02 * c02
-    with np.errstate(invalid="ignore", divide="ignore"):
-        inv = 1.0 / det
-        return np.stack([(c00 * b0 + c01 * b1 + c02 * b2) * inv,
-                         (c01 * b0 + c11 * b1 + c12 * b2) * inv,
-                         (c02 * b0 + c12 * b1 + c22 * b2) * inv], axis=-1)
-
-
-def _blocks(a: np.ndarray) -> np.ndarray:
-    """(H, W, ...) -> (H/2, W/2, 4, ...) in the order (0,0), (0,1), (1,0), (1,1)."""
-    h, w = a.shape[:2]
-    b = a.reshape(h // 2, 2, w // 2, 2, *a.shape[2:]).swapaxes(1, 2)
-    return b.reshape(h // 2, w // 2, 4, *a.shape[2:])
+    inv = _inverse_terms(m)
+    with np.errstate(invalid="ignore"):
+        return np.stack([row[0] * b[0] + row[1] * b[1] + row[2] * b[2] for row in inv], axis=-1)
 
 
 def _upsample(v: np.ndarray, offset: int, axis: int) -> np.ndarray:
@@ -181,6 +183,83 @@ _DTYPE = {"bilinear": np.float64, "centred": np.float32, "superpixel": np.float6
 relative of float64, tested), the others in float64."""
 
 
+_CHANNELS = ((0, 0), (0, 1), (1, 0), (1, 1))
+"""Row and column offsets of the four mosaic channels in a super-pixel."""
+
+
+@dataclass(frozen=True, eq=False)
+class DemosaicOperator:
+    """The linear map of a half-resolution method (``"centred"``, ``"superpixel"``) for one
+    set of analysis vectors: ``S = sum_k P_k R_k(d)`` at every sample whose stencil is all
+    measured, with ``R_k`` the channel's resampling (:data:`_RESAMPLE`).
+
+    Attributes
+    ----------
+    method : str
+    P : ndarray (4, 3, h, w)
+        Per channel, the row of the least-squares pseudo-inverse divided by the channel's
+        resampled weight ``R_k(1)``.
+    weight : ndarray (4, h, w)
+        ``R_k(1)``: a sample's stencil is complete where ``R_k(good) == R_k(1)`` for all ``k``.
+    """
+
+    method: str
+    P: np.ndarray
+    weight: np.ndarray
+
+
+def demosaic_operator(analysis_dn, method: str = "centred") -> DemosaicOperator:
+    """:class:`DemosaicOperator` of analysis vectors ``(H, W, 3)`` [DN per unit radiance]:
+    per sample, the analysis vector of each channel resampled to the sample (normalised by its
+    weight) and the inverse of the 4-channel normal matrix. Depends on the analysis only, so a
+    camera computes it once for its nominal analysis (:func:`camera_stokes`)."""
+    if method not in ("centred", "superpixel"):
+        raise ValueError(f"a demosaicing operator is for 'centred' or 'superpixel'; got "
+                         f"{method!r}")
+    analysis = np.asarray(analysis_dn)
+    dtype = _DTYPE[method]
+    shape = (analysis.shape[0] // 2, analysis.shape[1] // 2)
+    m = [np.zeros(shape, dtype) for _ in _PAIRS]
+    ahat, weight = [], np.empty((4,) + shape, dtype)
+    for k, (i, j) in enumerate(_CHANNELS):
+        stack = np.empty((4,) + shape, dtype)
+        stack[0] = 1.0
+        for c in range(3):
+            stack[1 + c] = analysis[i::2, j::2, c]
+        q = _RESAMPLE[method](stack, i, j)
+        weight[k] = q[0]
+        q[1:] /= q[0]  # > 0: every sample has weight from its own block
+        for t, (u, v) in zip(m, _PAIRS):
+            t += q[1 + u] * q[1 + v]
+        ahat.append(q[1:])
+    inv = _inverse_terms(m)
+    P = np.empty((4, 3) + shape, dtype)
+    with np.errstate(all="ignore"):  # singular where the analysis is missing: NaN, invalid
+        for k in range(4):
+            for c in range(3):
+                P[k, c] = (inv[c][0] * ahat[k][0] + inv[c][1] * ahat[k][1]
+                           + inv[c][2] * ahat[k][2]) / weight[k]
+    return DemosaicOperator(method, P, weight)
+
+
+def _apply_operator(op: DemosaicOperator, d, good):
+    """Stokes ``(h, w, 3)`` of ``op`` on dark-subtracted values ``d`` (zero where not
+    ``good``), and where each sample's stencil is complete."""
+    shape = op.weight.shape[1:]
+    s = np.zeros((3,) + shape, op.P.dtype)
+    complete = np.ones(shape, bool)
+    work = np.empty(shape, op.P.dtype)
+    for k, (i, j) in enumerate(_CHANNELS):
+        stack = np.empty((2,) + shape, op.P.dtype)
+        stack[0] = good[i::2, j::2]
+        stack[1] = d[i::2, j::2]
+        q = _RESAMPLE[op.method](stack, i, j)
+        complete &= q[0] == op.weight[k]
+        for c in range(3):
+            s[c] += np.multiply(op.P[k, c], q[1], out=work)
+    return np.moveaxis(s, 0, -1), complete
+
+
 def _interpolated(d, analysis, good, method):
     """Least-squares Stokes of the four channels on ``method``'s output grid.
 
@@ -195,7 +274,7 @@ def _interpolated(d, analysis, good, method):
     m = [np.zeros(shape, dtype) for _ in _PAIRS]
     b = [np.zeros(shape, dtype) for _ in range(3)]
     support = np.ones(shape, bool)
-    for i, j in ((0, 0), (0, 1), (1, 0), (1, 1)):  # four channels, accumulated one at a time
+    for i, j in _CHANNELS:  # four channels, accumulated one at a time
         g = good[i::2, j::2]
         stack = np.empty((5,) + g.shape, dtype)
         stack[0] = g
@@ -214,7 +293,8 @@ def _interpolated(d, analysis, good, method):
 
 
 def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
-             saturation_dn: float | None = None, method: str = "bilinear") -> StokesImage:
+             saturation_dn: float | None = None, method: str = "bilinear",
+             operator: DemosaicOperator | None = None) -> StokesImage:
     """Stokes images from a raw mosaic.
 
     Parameters
@@ -234,6 +314,9 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
     method : {"bilinear", "centred", "superpixel"}
         See the module doc (bilinear is the default: full resolution and no
         instantaneous-field-of-view error).
+    operator : DemosaicOperator or None
+        :func:`demosaic_operator` of ``analysis_dn`` for ``method`` if already known (the
+        half-resolution methods; computed here otherwise).
 
     Raises
     ------
@@ -264,15 +347,22 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
         good &= raw < saturation_dn
     d = np.subtract(raw, black_level_dn, dtype=_DTYPE[method])
     np.copyto(d, 0.0, where=~good)
-    s, ok = _interpolated(d, analysis, good, method)
     if method == "bilinear":
+        s, ok = _interpolated(d, analysis, good, method)
         row, col = np.indices(d.shape, dtype=float)
         ok &= good
     else:
+        if operator is None:
+            operator = demosaic_operator(analysis, method)
+        elif operator.method != method or operator.P.shape[2:] != (d.shape[0] // 2,
+                                                                   d.shape[1] // 2):
+            raise InvalidParameterError(f"operator is for {operator.method!r} on "
+                                        f"{operator.P.shape[2:]} samples; need {method!r} on "
+                                        f"{(d.shape[0] // 2, d.shape[1] // 2)}")
+        s, ok = _apply_operator(operator, d, good)  # ok: every stencil pixel measured
         h, w = ok.shape
         row, col = np.meshgrid(2.0 * np.arange(h) + 0.5, 2.0 * np.arange(w) + 0.5,
                                indexing="ij")
-        ok &= _blocks(good).all(axis=2)  # all four own pixels measured
     ok &= np.isfinite(s).all(-1)
     s = np.where(ok[..., None], s, np.nan)
     return StokesImage(s[..., 0], s[..., 1], s[..., 2], ok, row, col, method)
@@ -335,8 +425,13 @@ def camera_stokes(camera, raw_dn, exposure_s: float, *, valid=None, method: str 
         scale = camera.photoelectrons_per_s * exposure_s / s.e_per_dn
     if dark_dn is None:
         dark_dn = s.black_level_dn + s.dark_current_e_s * exposure_s / s.e_per_dn
+    operator = None
+    if scale != 1.0 and method != "bilinear":  # the nominal analysis: its operator is fixed
+        planes = analysis_dn
+        operator = camera._cached(("demosaic", method),
+                                  lambda: demosaic_operator(planes, method))
     st = demosaic(raw_dn, analysis_dn, black_level_dn=dark_dn, valid=valid,
-                  saturation_dn=s.max_dn, method=method)
+                  saturation_dn=s.max_dn, method=method, operator=operator)
     if scale == 1.0:
         return st
     return replace(st, S0=st.S0 / scale, S1=st.S1 / scale, S2=st.S2 / scale)
