@@ -4,9 +4,10 @@ fisheye lens, imaging any :class:`skysim.sky.Sky`.
 Signal chain of one pixel (Powell & Gruev 2013 [1]_, eq. 1; the analysis vector of a pixel
 behind a partial polarizer):
 
-``e = X[t * q * V(r) * (A . S)] + t * i_dark``, then photon shot noise (Poisson; its Gaussian
-limit above :data:`POISSON_EXACT_BELOW_E`), read noise (Gaussian), clipping at the full well and
-an ADC of ``adc_bits`` bits with a black level.
+``e = X[t * q * V(r) * (A . S)] + t * i_dark``, then photon shot noise (Poisson; its
+skewness-corrected normal limit from :data:`POISSON_EXACT_BELOW_E` on), read noise (Gaussian),
+clipping at the full well and an ADC of ``adc_bits`` bits with a black level. The sun disk's
+photoelectrons are raised to the full well before crosstalk.
 
 - ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector rotated into the camera frame
   (angles from the camera's x axis towards its y axis, see :mod:`sensor.camera.lens`). An ideal
