@@ -325,3 +325,20 @@ def test_gaussian_shot_noise_limit_and_exact_poisson_below():
     keep = ref > 20
     chi2 = np.sum((obs[keep] - ref[keep]) ** 2 / ref[keep])
     assert chi2 < stats.chi2.ppf(0.999, keep.sum() - 1)
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_sun_disk_found_in_its_window(model):
+    # the sun disk is searched in a box around the sun's image: the same pixels as the full-
+    # frame test of the generic path, for random suns and attitudes (the sun near the edge of
+    # a 190 deg field of view included), and a disk of several pixels
+    rng = np.random.default_rng(0)
+    cam = PolarizationCamera.fisheye(150, 120, model=model, fov_deg=190.0, sun_radius_deg=3.0)
+    found = 0
+    for _ in range(40):  # random configurations, each a whole image
+        sun = (rng.uniform(-9.0, 90.0), rng.uniform(0.0, 360.0))
+        att = camera_attitude(rng.uniform(0, 360), rng.uniform(-40, 40), rng.uniform(-40, 40))
+        fast = cam.scene(RayleighSky(), att, *sun).sun
+        assert (fast == cam.scene(_GenericRayleigh(), att, *sun).sun).all()
+        found += int(fast.sum())
+    assert found > 40 * 10

@@ -481,6 +481,27 @@ class PolarizationCamera:
         return float(np.cos(np.radians(self.sun_radius_deg)
                             + 0.5 * float(self.lens.dtheta_dr(sun_theta))))
 
+    def _sun_disk(self, rays: np.ndarray, s_c, work: np.ndarray) -> np.ndarray:
+        """Pixels whose centre is on the sun disk (:meth:`_sun_reach_cos`), from the dot
+        products of their rays ``(3, H, W)`` with the sun ``s_c`` in a box around the sun's
+        image (the whole frame when the sun is outside the field of view)."""
+        reach_cos = self._sun_reach_cos(s_c)
+        sun = np.zeros(self.sensor.shape, bool)
+        row, col = self.lens.project(s_c)
+        if not (np.isfinite(row) and np.isfinite(col)):
+            return np.greater_equal(_dot(rays, s_c, out=work), reach_cos)
+        # the smallest angle a pixel spans at the sun's place: radially dtheta/dr, tangentially
+        # sin(theta) / r (1 / f on the axis)
+        theta = float(np.arccos(np.clip(s_c[2], -1.0, 1.0)))
+        r = float(self.lens.radius_px(theta))
+        per_px = min(float(self.lens.dtheta_dr(theta)),
+                     np.sin(theta) / r if r > 0 else 1.0 / self.lens.focal_px)
+        k = int(np.ceil(np.arccos(reach_cos) / per_px)) + 2
+        rows = slice(max(int(row) - k, 0), max(int(row) + k + 2, 0))
+        cols = slice(max(int(col) - k, 0), max(int(col) + k + 2, 0))
+        sun[rows, cols] = _dot(rays[:, rows, cols], s_c) >= reach_cos
+        return sun
+
     def _rayleigh_scene(self, sky, attitude, sun_elevation_deg, sun_azimuth_deg) -> Scene:
         """:meth:`scene` of a single-scattering sky: camera-frame Stokes from the sun's
         projections on each pixel's image axes ``(e_x, e_y)`` (:meth:`_pixel_frame`), the
@@ -499,12 +520,11 @@ class PolarizationCamera:
                                                        sky.dmax)
         valid = np.greater_equal(_dot(frame[0], up_c, out=work, work=None), 0.0)
         valid &= inside
-        sun = np.greater_equal(_dot(frame[0], s_c, out=work, work=None),
-                               self._sun_reach_cos(s_c))
+        sun = self._sun_disk(frame[0], s_c, work)
         sun &= inside
         dark = ~valid
         for a in (i, q, u):
-            a[dark] = 0.0
+            np.copyto(a, 0.0, where=dark)  # one streaming pass, no gather
 
         def view():
             d_n = attitude.apply(self.pixel_directions[0].reshape(-1, 3))
