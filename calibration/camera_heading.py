@@ -168,6 +168,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     alpha, scale = None, np.nan
     every = max(1, n // _SCALE_SAMPLES)
     sqrt_prior = np.sqrt(prior)
+    prev_step = None
     for it in range(1, max_iter + 1):
         m = (a * u) @ a.T
         if alpha is None:
@@ -176,12 +177,22 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         else:
             alpha0 = alpha
         new = _newton(m, alpha0)
+        step = None if alpha is None else new - alpha
+        if step is not None and prev_step is not None and abs(step) >= 1e-8 \
+                and 0.0 < step / prev_step < 0.9:
+            # the reweighting converges linearly (steps shrink by a constant ratio q):
+            # Aitken's extrapolation jumps to the limit, the next step confirms it
+            q = step / prev_step
+            new += step * q / (1.0 - q)
+            step, prev_step = None, None
+        else:
+            prev_step = step
         r = np.array([np.sin(new), np.cos(new), 1.0]) @ a
         z = r * sqrt_prior
         zs = z[::every]
         scale = 1.4826 * np.median(np.abs(zs - np.median(zs)))
         u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
-        done = alpha is not None and abs(new - alpha) < 1e-8  # rad: 6e-7 deg
+        done = step is not None and abs(step) < 1e-8  # rad: 6e-7 deg
         alpha = new
         if done:
             break
