@@ -10,22 +10,25 @@ axis, is ``b(alpha) = (cos e sin alpha, cos e cos alpha, sin e)``. The heading m
 ``a_i = (cos e w_x, cos e w_y, sin e w_z)``
 
 (linear in ``(sin alpha, cos alpha)``: the weighted cost is the quadratic form
-``x^T M x`` with ``M = sum_i u_i a_i a_i^T``, scanned over alpha on a fine grid and refined
-by Newton steps). ``rho`` is Cauchy's loss by iteratively reweighted least squares with the
-residual scale ``s`` from the median absolute deviation, so clouds, trees and other pixels
-whose E-vector does not follow the sky's pattern get a small weight; saturated pixels, the
-sun disk and samples of low DoLP (ill-defined AoP) are excluded first. Prior weights
-``S0 * DoLP^2`` follow the AoP variance ``~ 1 / (S0 DoLP^2)`` of shot-noise-limited pixels.
+``x^T M x`` with ``M = sum_i u_i a_i a_i^T``, scanned over alpha on a fine grid and refined by
+Newton steps; each iteration is one pass over the samples to form the 3 x 3 matrix, the
+minimisation itself is on that matrix alone). ``rho`` is Cauchy's loss by iteratively
+reweighted least squares with the residual scale ``s`` from the median absolute deviation
+(the steps shrink by a constant ratio, so Aitken's extrapolation jumps to their limit and the
+next step confirms it), so clouds, trees and other pixels whose E-vector does not follow the
+sky's pattern get a small weight; saturated pixels, the sun disk and samples of low DoLP
+(ill-defined AoP) are excluded first. Prior weights ``S0 * DoLP^2`` follow the AoP variance
+``~ 1 / (S0 DoLP^2)`` of shot-noise-limited pixels.
 
 The uncertainty is the heteroscedasticity-consistent (sandwich) standard error of alpha
 (White 1980 [1]_) from the final weights and residuals. Super-pixel samples have independent
-noise; bilinear samples share raw pixels with their neighbours, so their scores are summed over
-blocks of 8 x 8 pixels first (cluster-robust form, Liang & Zeger 1986 [3]_). Super-pixel
-residuals also carry the smooth error of their instantaneous field of view, which is the same
-in every image and no noise: their score variance is taken from the differences of
-horizontally adjacent samples, which cancel a smooth part (difference-based variance, Rice 1984
-[4]_). It covers noise only, not a sky that departs from E perpendicular to the sun (multiple
-scattering), which shows as a bias.
+noise; bilinear and centred samples share raw pixels with their neighbours, so their scores
+are summed over blocks of 8 x 8 pixels first (cluster-robust form, Liang & Zeger 1986 [3]_).
+Super-pixel residuals also carry the smooth error of their instantaneous field of view, which
+is the same in every image and no noise: their score variance is taken from the differences
+of horizontally adjacent samples, which cancel a smooth part (difference-based variance, Rice
+1984 [4]_). It covers noise only, not a sky that departs from E perpendicular to the sun
+(multiple scattering), which shows as a bias.
 
 References
 ----------
