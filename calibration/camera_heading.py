@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from sensor.camera.demosaic import StokesImage, e_vectors_camera
+from sensor.camera.demosaic import StokesImage, image_e_vectors
 from sensor.camera.mosaic import camera_attitude
 from skysim.validation import check_in_range
 
@@ -159,9 +159,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         raise TooFewSamplesError(f"only {n} samples with DoLP >= {min_dolp} (need 10): the "
                                  "sky is overcast, blocked or saturated; lower the exposure "
                                  "or min_dolp")
-    e_c, _ = e_vectors_camera(lens, stokes.row[use], stokes.col[use], stokes.S1[use],
-                              stokes.S2[use])
-    w = camera_attitude(0.0, pitch_deg, roll_deg).apply(e_c)
+    w = camera_attitude(0.0, pitch_deg, roll_deg).apply(image_e_vectors(stokes, lens, use))
     el = np.radians(sun_elevation_deg)
     # component-major (3, n): the 3 x 3 scatter matrix is one matrix product per iteration
     a = np.ascontiguousarray(w.T * np.array([[np.cos(el)], [np.cos(el)], [np.sin(el)]]))
@@ -172,8 +170,9 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     every = max(1, n // _SCALE_SAMPLES)
     sqrt_prior = np.sqrt(prior)
     prev_step = None
+    au = np.empty_like(a)  # reused: a fresh 3 x n array per iteration costs page faults
     for it in range(1, max_iter + 1):
-        m = (a * u) @ a.T
+        m = np.multiply(a, u, out=au) @ a.T
         if alpha is None:
             grid_cost = _cost(m, _GRID)
             alpha0 = _GRID[np.argmin(grid_cost)]
@@ -202,7 +201,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     else:
         raise ConvergenceError(f"heading did not settle in {max_iter} reweighting iterations",
                                iterations=max_iter)
-    m = (a * u) @ a.T
+    m = np.multiply(a, u, out=au) @ a.T
     best = _cost(m, np.array([alpha]))[0]
     other = _cost(m, np.array([_newton(m, alpha + np.pi)]))[0]
     jac = np.array([np.cos(alpha), -np.sin(alpha), 0.0]) @ a

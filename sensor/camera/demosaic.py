@@ -55,7 +55,8 @@ from skysim.geometry import aop_from_e_vector, elevation_azimuth, wrap_axial_deg
 from .mosaic import camera_basis
 
 __all__ = ["DEMOSAIC_METHODS", "DemosaicOperator", "StokesImage", "camera_stokes", "demosaic",
-           "demosaic_operator", "local_meridian_aop", "solve_stokes", "e_vectors_camera"]
+           "demosaic_operator", "local_meridian_aop", "solve_stokes", "e_vectors_camera",
+           "image_e_vectors"]
 
 DEMOSAIC_METHODS = ("bilinear", "centred", "superpixel")
 
@@ -370,28 +371,51 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
 
 def e_vectors_camera(lens, row, col, s1, s2):
     """Camera-frame unit E-vectors (..., 3) and ray directions (..., 3) at pixel coordinates
-    for the linear Stokes ``s1``, ``s2`` there (an ideal rotationally symmetric lens keeps the
-    angle from the image radius as the angle from ``e_theta``, see
-    :mod:`sensor.camera.mosaic`). Half-angle identities instead of an arctangent: with
-    ``chi`` the camera-frame AoP in [-90, 90], ``cos chi = sqrt((1 + cos 2chi) / 2) >= 0``."""
-    x = np.asarray(col, dtype=float) - lens.cx
-    y = lens.cy - np.asarray(row, dtype=float)
-    rho = np.hypot(x, y)
+    for the linear Stokes ``s1``, ``s2`` there: ``cos chi e_x + sin chi e_y`` with ``chi`` the
+    camera-frame AoP and ``e_x``, ``e_y`` the image axes carried onto the sky
+    (:meth:`FisheyeLens.image_axes`)."""
+    e_x, e_y, d = lens.image_axes(row, col)
+    c_chi, s_chi = _half_angle(s1, s2)
+    return c_chi[..., None] * e_x + s_chi[..., None] * e_y, d
+
+
+def _half_angle(s1, s2):
+    """``(cos chi, sin chi)`` of the AoP ``chi`` in [-90, 90] [deg] of linear Stokes
+    ``(s1, s2)`` by half-angle identities instead of an arctangent:
+    ``cos chi = sqrt((1 + cos 2chi) / 2) >= 0``, ``sin chi`` with the sign of ``s2``."""
     with np.errstate(invalid="ignore", divide="ignore"):
-        c_psi = np.where(rho > 0, x / rho, 1.0)
-        s_psi = np.where(rho > 0, y / rho, 0.0)
-        p = np.hypot(s1, s2)
-        c2 = s1 / p
+        c2 = s1 / np.hypot(s1, s2)
     c_chi = np.sqrt(np.clip(0.5 * (1.0 + c2), 0.0, 1.0))
     s_chi = np.copysign(np.sqrt(np.clip(0.5 * (1.0 - c2), 0.0, 1.0)), s2)
-    c_beta = c_chi * c_psi + s_chi * s_psi  # beta = chi - psi
-    s_beta = s_chi * c_psi - c_chi * s_psi
-    theta = lens.theta_rad(rho)
-    c_th, s_th = np.cos(theta), np.sin(theta)
-    e = np.stack([c_beta * c_th * c_psi - s_beta * s_psi, c_beta * c_th * s_psi + s_beta * c_psi,
-                  -c_beta * s_th], axis=-1)
-    d = np.stack([s_th * c_psi, s_th * s_psi, c_th], axis=-1)
-    return e, d
+    return c_chi, s_chi
+
+
+def image_e_vectors(stokes: StokesImage, lens, where) -> np.ndarray:
+    """:func:`e_vectors_camera` of the samples ``where`` (mask over ``stokes``) of a Stokes
+    image on a demosaicing grid, shape (n, 3): the grid's image axes come from a small cache
+    (they depend on the lens and the grid only)."""
+    rows, cols = stokes.row, stokes.col
+    h, w = rows.shape
+    grid = (float(rows[0, 0]), float(cols[0, 0]),
+            float(rows[1, 0] - rows[0, 0]) if h > 1 else 1.0,
+            float(cols[0, 1] - cols[0, 0]) if w > 1 else 1.0)
+    axes = _grid_axes(lens, (h, w), grid)
+    if not (np.array_equal(rows, axes[2]) and np.array_equal(cols, axes[3])):
+        return e_vectors_camera(lens, rows[where], cols[where], stokes.S1[where],
+                                stokes.S2[where])[0]
+    c_chi, s_chi = _half_angle(stokes.S1[where], stokes.S2[where])
+    return c_chi[:, None] * axes[0][where] + s_chi[:, None] * axes[1][where]
+
+
+@functools.lru_cache(maxsize=2)
+def _grid_axes(lens, shape, grid):
+    """Image axes ``e_x``, ``e_y`` (h, w, 3) and the pixel coordinates of a regular grid
+    ``(row0, col0, row_step, col_step)`` of ``shape``."""
+    r0, c0, dr, dc = grid
+    rows, cols = np.meshgrid(r0 + dr * np.arange(shape[0]), c0 + dc * np.arange(shape[1]),
+                             indexing="ij")
+    e_x, e_y, _ = lens.image_axes(rows, cols)
+    return e_x, e_y, rows, cols
 
 
 def local_meridian_aop(stokes: StokesImage, lens, attitude: Rotation):

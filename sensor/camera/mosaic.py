@@ -415,15 +415,12 @@ class PolarizationCamera:
 
     def _pixel_frame(self, dtype) -> np.ndarray:
         """Camera-fixed vectors of every pixel, (3 vectors, 3 components, H, W) in ``dtype``:
-        the ray ``d`` and the image's x and y axes carried onto the sky,
-        ``e_x = cos psi e_theta - sin psi e_psi``, ``e_y = sin psi e_theta + cos psi e_psi``
-        (``(e_x, e_y, d)`` right-handed); zero outside the image circle."""
+        the ray ``d`` and the image's x and y axes carried onto the sky
+        (:meth:`FisheyeLens.image_axes`); zero outside the image circle."""
         def make():
-            d, inside = self.pixel_directions
-            d = np.where(inside[..., None], d, 0.0)
-            _, psi, e_th, e_ps = camera_basis(d)
-            c, s = np.cos(psi)[..., None], np.sin(psi)[..., None]
-            vec = np.stack([d, c * e_th - s * e_ps, s * e_th + c * e_ps])
+            inside = self.pixel_directions[1]
+            e_x, e_y, d = self.lens.image_axes(*np.indices(self.sensor.shape, dtype=float))
+            vec = np.stack([d, e_x, e_y])
             vec[:, ~inside] = 0.0
             return np.ascontiguousarray(np.moveaxis(vec, -1, 1), dtype=dtype)
         return self._cached(("frame", np.dtype(dtype)), make)
