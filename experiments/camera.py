@@ -102,7 +102,7 @@ def _camera_command(args) -> int:
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
     cam = PolarizationCamera.fisheye(args.width, args.height, fov_deg=args.fov, model=args.lens,
-                                     adc_bits=args.adc_bits)
+                                     adc_bits=args.adc_bits, crosstalk=args.crosstalk)
     faults = {"angle_std_deg": args.angle_error_std, "mosaic_rotation_deg":
               args.mosaic_rotation, "extinction_ratio": args.extinction_ratio}
     if args.angle_error_std or args.mosaic_rotation or np.isfinite(args.extinction_ratio):
@@ -197,6 +197,9 @@ def register(sub) -> None:
     p.add_argument("--adc-bits", type=int_at_least(8), default=12, help="ADC bits, 8-16")
     p.add_argument("--extinction-ratio", type=float_in(1, low_open=True), default=np.inf,
                    help="polarizer extinction ratio")
+    p.add_argument("--crosstalk", type=float_in(0, 0.25, high_open=True), default=0.0,
+                   help="share of each of its four edge neighbours' photoelectrons a pixel "
+                        "receives (it keeps 1 - 4x its own)")
     p.add_argument("--angle-error-std", type=float_in(0), default=0.0,
                    help="per-pixel polarizer angle error, standard deviation [deg]")
     p.add_argument("--mosaic-rotation", type=float, default=0.0,
