@@ -102,7 +102,7 @@ def _camera_command(args) -> int:
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
     cam = PolarizationCamera.fisheye(args.width, args.height, fov_deg=args.fov, model=args.lens,
-                                     adc_bits=args.adc_bits)
+                                     adc_bits=args.adc_bits, crosstalk=args.crosstalk)
     faults = {"angle_std_deg": args.angle_error_std, "mosaic_rotation_deg":
               args.mosaic_rotation, "extinction_ratio": args.extinction_ratio}
     if args.angle_error_std or args.mosaic_rotation or np.isfinite(args.extinction_ratio):
@@ -197,6 +197,9 @@ def register(sub) -> None:
     p.add_argument("--adc-bits", type=int_at_least(8), default=12, help="ADC bits, 8-16")
     p.add_argument("--extinction-ratio", type=float_in(1, low_open=True), default=np.inf,
                    help="polarizer extinction ratio")
+    p.add_argument("--crosstalk", type=float_in(0, 0.25, high_open=True), default=0.0,
+                   help="share of each of its four edge neighbours' photoelectrons a pixel "
+                        "receives (it keeps 1 - 4x its own)")
     p.add_argument("--angle-error-std", type=float_in(0), default=0.0,
                    help="per-pixel polarizer angle error, standard deviation [deg]")
     p.add_argument("--mosaic-rotation", type=float, default=0.0,
@@ -218,8 +221,11 @@ def register(sub) -> None:
                                    "raw image (E-vector perpendicular to the sun), using the "
                                    "site, time and tilt of its skysim.dofp/1 sidecar.")
     h.add_argument("image", type=existing_file, help="raw image (.tiff) with its sidecar")
-    h.add_argument("--method", choices=("bilinear", "superpixel"), default="bilinear",
-                   help="demosaicing")
+    # literals: the command line does not import the camera (tested equal to
+    # sensor.camera.DEMOSAIC_METHODS and calibration.camera_heading.DEFAULT_DEMOSAIC)
+    h.add_argument("--method", choices=("bilinear", "centred", "superpixel"), default="centred",
+                   help="demosaicing (centred: half resolution, channels met at each "
+                        "super-pixel centre)")
     h.add_argument("--min-dolp", type=float_in(0, 1, high_open=True), default=0.05,
                    help="samples of lower DoLP are left out")
     h.add_argument("--figure", type=output_file(".png"), default=None,
@@ -233,10 +239,11 @@ SUN_AZIMUTH_DEG = 135.0
 
 
 def heading_trials(cam, sky, sun_elevation_deg: float, yaws_deg, rng, *, fill: float = 0.6,
-                   calibration=None, method: str = "bilinear"):
+                   calibration=None, method: str = "centred"):
     """Heading errors and reported standard errors [deg] of one image per yaw [deg] (each
     trial is a whole image, vectorised over its pixels). ``calibration``: ``(cal, t_cal)``
-    from the flat-field calibration, else the nominal camera model."""
+    from the flat-field calibration, else the nominal camera model. ``method``: demosaicing
+    (default :data:`calibration.camera_heading.DEFAULT_DEMOSAIC`)."""
     from calibration.camera_heading import heading_from_image
     from sensor.camera import camera_attitude, camera_stokes
     errors, sigmas = [], []
@@ -255,9 +262,9 @@ def heading_trials(cam, sky, sun_elevation_deg: float, yaws_deg, rng, *, fill: f
     return np.array(errors), np.array(sigmas)
 
 
-def _row(study, sky_name, camera, sun_el, fill, er, errors, sigmas):
+def _row(study, sky_name, camera, sun_el, fill, er, errors, sigmas, crosstalk=0.0):
     return {"study": study, "sky": sky_name, "camera": camera, "sun_elevation_deg": sun_el,
-            "fill": fill, "extinction_ratio": er, "trials": len(errors),
+            "fill": fill, "extinction_ratio": er, "crosstalk": crosstalk, "trials": len(errors),
             "rms_error_deg": float(np.sqrt(np.mean(errors ** 2))),
             "mean_error_deg": float(np.mean(errors)),
             "max_abs_error_deg": float(np.max(np.abs(errors))),
@@ -272,6 +279,8 @@ def run(*, quick: bool = False, trials: int | None = None, seed: int = DEFAULT_S
 
     from skysim.multiple import MultipleScatteringSky
     from skysim.sky import RayleighSky
+
+    from calibration.camera_heading import DEFAULT_DEMOSAIC
 
     start = time.perf_counter()
     size = 128 if quick else 256
@@ -305,9 +314,20 @@ def run(*, quick: bool = False, trials: int | None = None, seed: int = DEFAULT_S
             e, s = heading_trials(cam, skies["rayleigh"], 40.0, rng.uniform(0, 360, trials),
                                   rng, calibration=c)
             rows.append(_row("extinction ratio", "rayleigh", cam_name, 40.0, 0.6, er, e, s))
+    # crosstalk: ideal polarizers (it lowers the DoLP by 1 - 4c, not the AoP), and the faulty
+    # camera calibrated (a flat field measures each pixel's analysis vector with the
+    # neighbours' share in it)
+    for c in ((0.01, 0.03) if quick else (0.005, 0.01, 0.02, 0.04)):
+        for cam_name, cam in (("ideal", _camera(size, crosstalk=c)),
+                              ("calibrated", _camera(size, faults=FAULTS, rng=rng,
+                                                     crosstalk=c))):
+            cal = _calibrate(cam, rng) if cam_name == "calibrated" else None
+            e, s = heading_trials(cam, skies["rayleigh"], 40.0, rng.uniform(0, 360, trials),
+                                  rng, calibration=cal)
+            rows.append(_row("crosstalk", "rayleigh", cam_name, 40.0, 0.6, np.inf, e, s, c))
     table = pd.DataFrame(rows)
     summary = {"image_px": size, "trials_per_condition": trials, "seed": seed,
-               "demosaicing": "bilinear", "sun_azimuth_deg": SUN_AZIMUTH_DEG,
+               "demosaicing": DEFAULT_DEMOSAIC, "sun_azimuth_deg": SUN_AZIMUTH_DEG,
                "rayleigh_dmax": SKY_DMAX, "multiple": skies["multiple"].describe(),
                "faulty_camera": FAULTS, "calibration_angles_deg": list(CAL_ANGLES_DEG),
                "elapsed_s": time.perf_counter() - start}
@@ -318,14 +338,14 @@ def run(*, quick: bool = False, trials: int | None = None, seed: int = DEFAULT_S
 
 def format_table(table) -> str:
     """Markdown table of the study."""
-    cols = ["study", "sky", "camera", "sun_elevation_deg", "fill", "extinction_ratio", "trials",
-            "rms_error_deg", "mean_error_deg", "mean_sigma_deg"]
-    head = ("| study | sky | camera | sun el [deg] | fill | ER | trials | RMS error [deg] | "
-            "mean error [deg] | mean 1σ [deg] |")
+    cols = ["study", "sky", "camera", "sun_elevation_deg", "fill", "extinction_ratio",
+            "crosstalk", "trials", "rms_error_deg", "mean_error_deg", "mean_sigma_deg"]
+    head = ("| study | sky | camera | sun el [deg] | fill | ER | crosstalk | trials | "
+            "RMS error [deg] | mean error [deg] | mean 1σ [deg] |")
     lines = [head, "|" + "---|" * len(cols)]
     for r in table[cols].itertuples(index=False):
         lines.append(f"| {r.study} | {r.sky} | {r.camera} | {r.sun_elevation_deg:.0f} | "
-                     f"{r.fill:.2f} | {r.extinction_ratio:g} | {r.trials} | "
+                     f"{r.fill:.2f} | {r.extinction_ratio:g} | {r.crosstalk:g} | {r.trials} | "
                      f"{r.rms_error_deg:.4f} | {r.mean_error_deg:+.4f} | "
                      f"{r.mean_sigma_deg:.4f} |")
     return "\n".join(lines)
@@ -340,8 +360,8 @@ def _write_outputs(out: Path, table, summary, skies, cam, size) -> None:
     (out / "figures").mkdir(exist_ok=True)
     atomic_write(out / "table.csv", lambda tmp: table.to_csv(tmp, index=False))
     md = ("Heading error of a fisheye polarization camera, one image per trial "
-          f"({size}x{size} px, bilinear demosaicing, sun azimuth {SUN_AZIMUTH_DEG:g} deg, "
-          "random yaw).\n\n" + format_table(table) + "\n")
+          f"({size}x{size} px, {summary['demosaicing']} demosaicing, sun azimuth "
+          f"{SUN_AZIMUTH_DEG:g} deg, random yaw).\n\n" + format_table(table) + "\n")
     atomic_write(out / "table.md", lambda tmp: tmp.write_text(md))
     write_json_atomic(out / "summary.json", summary)
     plt = pyplot()

@@ -34,6 +34,7 @@ __all__ = [
     "meridian_components",
     "polarization_field",
     "stokes",
+    "stokes_from_sun_projections",
     "FLOAT32_AOP_ERROR_DEG",
     "FLOAT32_DOP_ERROR",
     "FLOAT32_MIN_SCATTERING_ANGLE_DEG",
@@ -210,6 +211,50 @@ def polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     if off.any():
         aop[off] = np.where(np.isnan(aop[off]), 0.0, -90.0)
     return {"I": intensity, "Q": q, "U": u, "dop": dop, "aop_deg": aop}
+
+
+def stokes_from_sun_projections(p1, p2, dmax: float = 1.0):
+    """Single-scattering Stokes ``(I, Q, U)`` in any polarization basis of a ray, from the
+    sun's projections on that basis: dot products only, no angles.
+
+    For a right-handed basis ``(e1, e2, v)`` across the view direction ``v`` (``e1 x e2 = v``;
+    e.g. the local meridian basis ``(e_el, e_az)``, or a camera pixel's image axes carried onto
+    the sky) and the unit sun vector ``s``, the E-vector ``v x s`` [1]_ has the components
+    ``(s . (e1 x v), s . (e2 x v)) = (-p2, p1)`` with ``p_k = s . e_k``, and
+    ``p1^2 + p2^2 = sin^2 gamma``. Hence (as in :func:`polarization_field` with
+    ``a = -p2``, ``b = p1``)
+
+    ``I = (3/4)(2 - p1^2 - p2^2)``, ``Q = (3/4) d_max (p2^2 - p1^2)``,
+    ``U = -(3/2) d_max p1 p2``,
+
+    ``Q`` along ``e1``, ``U`` from ``e1`` towards ``e2``.
+
+    Parameters
+    ----------
+    p1, p2 : ndarray
+        Sun projections ``s . e1``, ``s . e2`` [1], same shape; the result keeps their dtype
+        (float32 halves the memory traffic; every output is a few float32 ulps of its float64
+        value, since ``|p_k| <= 1``).
+    dmax : float
+        Maximum degree of polarization, in (0, 1].
+
+    Returns
+    -------
+    (I, Q, U) : tuple of ndarray, shape and dtype of ``p1``.
+    """
+    dmax = float(check_in_range("dmax", dmax, 0.0, 1.0, low_open=True))
+    p1, p2 = np.asarray(p1), np.asarray(p2)
+    intensity = np.multiply(p1, p1)
+    q = np.multiply(p2, p2)
+    u = np.multiply(p1, p2)
+    q -= intensity                 # p2^2 - p1^2
+    intensity *= 2.0
+    intensity += q                 # p1^2 + p2^2 = sin^2 gamma
+    intensity *= -0.75
+    intensity += 1.5
+    q *= 0.75 * dmax
+    u *= -1.5 * dmax
+    return intensity, q, u
 
 
 def stokes(view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,

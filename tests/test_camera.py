@@ -1,5 +1,7 @@
 """Polarization camera: lens projection, mosaic signal chain, demosaicing (closed forms)."""
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 from scipy.spatial.transform import Rotation
@@ -145,7 +147,7 @@ def test_bilinear_exact_for_linear_fields():
     S = np.stack([2.0 + 0.01 * rows + 0.02 * cols, 0.3 - 0.004 * rows, 0.1 + 0.003 * cols], -1)
     a = cam.analysis_dn(1e-3)
     raw = np.einsum("hwk,hwk->hw", a, S)
-    for method in ("bilinear", "superpixel"):
+    for method in ("bilinear", "centred", "superpixel"):
         st = demosaic(raw, a, method=method)
         inner = st.valid & (st.row > 1) & (st.row < 30) & (st.col > 1) & (st.col < 30)
         r, c = st.row[inner], st.col[inner]
@@ -153,6 +155,11 @@ def test_bilinear_exact_for_linear_fields():
         if method == "bilinear":
             np.testing.assert_allclose(np.c_[st.S0[inner], st.S1[inner], st.S2[inner]], ref,
                                        atol=1e-9)
+        if method == "centred":
+            # weights (3/4, 1/4) per axis are symmetric about the centre: exact, up to the
+            # float32 arithmetic of this method (measured 4e-7 on S0 ~ 2.5: ~3 ulp)
+            np.testing.assert_allclose(np.c_[st.S0[inner], st.S1[inner], st.S2[inner]], ref,
+                                       atol=2e-6)
         assert inner.sum() > 50
 
 
@@ -184,7 +191,7 @@ def test_bad_inputs_raise():
     with pytest.raises(ValueError, match="equidistant"):
         FisheyeLens(10.0, 5.0, 5.0, model="pinhole")
     cam = _ideal_camera(16)
-    with pytest.raises(ValueError, match="bilinear, superpixel"):
+    with pytest.raises(ValueError, match="bilinear, centred, superpixel"):
         demosaic(np.zeros((16, 16)), cam.analysis_dn(1.0), method="vng")
     with pytest.raises(InvalidParameterError, match="analysis_dn"):
         demosaic(np.zeros((16, 16)), np.zeros((16, 16, 4)))
@@ -203,3 +210,162 @@ def test_missing_tifffile_gives_install_hint(tmp_path, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert "'camera'" in err and "pip install -e" in err
     assert not (tmp_path / "x.tiff").exists()
+
+
+class _GenericRayleigh(RayleighSky):
+    """The same sky through the generic :meth:`Sky.field` path of the camera."""
+
+
+@pytest.mark.parametrize("dtype, atol", [("float64", 1e-12), ("float32", 1e-6)])
+def test_rayleigh_dot_product_render_matches_generic_path(dtype, atol):
+    # the Rayleigh sky from each pixel's camera-fixed frame (dot products, no angles) against
+    # the generic path (view angles -> sky.field -> rotation into the camera frame) on a
+    # tilted camera: float64 agree to rounding (measured 1e-13); float32 Stokes (|S| <= 1.5)
+    # carry a few ulps, measured 2.5e-7
+    cam = PolarizationCamera.fisheye(120, 100, fov_deg=190.0)
+    att = camera_attitude(25.0, 13.0, -7.0)
+    fast = cam.scene(RayleighSky(0.7, dtype=dtype), att, 35.0, 140.0)
+    ref = cam.scene(_GenericRayleigh(0.7), att, 35.0, 140.0)
+    assert fast.I.dtype == np.dtype(dtype)
+    assert (fast.valid == ref.valid).all() and (fast.sun == ref.sun).all() and fast.sun.any()
+    assert (~fast.valid).sum() > 1000  # the horizon of the tilted fisheye is in the image
+    for a, b in ((fast.I, ref.I), (fast.Q, ref.Q), (fast.U, ref.U)):
+        np.testing.assert_allclose(a, b, atol=atol, rtol=0)
+    np.testing.assert_allclose(fast.view_elevation_deg, ref.view_elevation_deg, atol=1e-9)
+    np.testing.assert_allclose(fast.view_azimuth_deg, ref.view_azimuth_deg, atol=1e-9)
+
+
+def test_float32_render_error_bound():
+    # every camera effect; float32 against float64 mean electrons: relative error <= 2e-6
+    # (measured 9e-7, a few float32 ulps), i.e. <= 0.02 e- at the full well, a thousandth
+    # of the shot noise there
+    base = PolarizationCamera.fisheye(128, 96)
+    sensor = replace(base.sensor.with_random_errors(
+        np.random.default_rng(0), angle_std_deg=1.0, extinction_ratio=30.0,
+        extinction_ratio_rel_std=0.2, gain_std=0.02), crosstalk=0.02)
+    cam = PolarizationCamera(base.lens, sensor, base.photoelectrons_per_s,
+                             1.5 * base.lens.focal_px)
+    att = camera_attitude(25.0, 13.0, -7.0)
+    e64, e32 = (cam.expected_electrons(cam.scene(RayleighSky(0.7, dtype=dt), att, 35.0, 140.0),
+                                       0.02) for dt in ("float64", "float32"))
+    assert e32.dtype == np.float32 and e64.dtype == np.float64
+    np.testing.assert_allclose(e32, e64, rtol=2e-6, atol=0)
+
+
+def test_crosstalk_conserves_energy_and_keeps_a_uniform_scene():
+    c = 0.03
+    ideal = PolarizationCamera.fisheye(64, 64, read_noise_e=0.0, dark_current_e_s=0.0)
+    cam = PolarizationCamera(ideal.lens, replace(ideal.sensor, crosstalk=c))
+    e = np.random.default_rng(4).uniform(0, 1e4, (64, 64))
+    # energy conserving, borders included
+    assert cam.sensor.apply_crosstalk(e).sum() == pytest.approx(e.sum(), rel=1e-12)
+    np.testing.assert_allclose(cam.sensor.apply_crosstalk(np.full((64, 64), 7.0)), 7.0,
+                               rtol=1e-12)
+    # a uniform scene (filling the image circle) is unchanged wherever all four neighbours
+    # see it; a uniform fully polarized one loses exactly 1 - 4c of its DoLP: every edge
+    # neighbour's polarizer is at +-45 deg, whose cos 2(chi - a) terms cancel in pairs
+    inside = cam.pixel_directions[1]
+    core = inside.copy()
+    for ax in (0, 1):
+        for k in (1, -1):
+            core &= np.roll(inside, k, axis=ax)
+    core[[0, -1], :] = core[:, [0, -1]] = False  # a border pixel keeps its missing share
+    unpol = cam.uniform_scene((1.0, 0.0, 0.0))
+    np.testing.assert_allclose(cam.expected_electrons(unpol, 1e-3)[core],
+                               ideal.expected_electrons(unpol, 1e-3)[core], rtol=1e-12)
+    for chi in (0.0, 30.0, 100.0):
+        x = np.radians(2 * chi)
+        sc = cam.uniform_scene((1.0, np.cos(x), np.sin(x)))
+        raw = cam.expected_electrons(sc, 1e-3) / cam.sensor.e_per_dn
+        st = demosaic(raw, cam.analysis_dn(1e-3), valid=core, method="superpixel")
+        assert st.valid.sum() > 400
+        np.testing.assert_allclose(st.dolp[st.valid], 1.0 - 4.0 * c, rtol=1e-12)
+        np.testing.assert_allclose(st.aop_camera_deg[st.valid], (chi + 90) % 180 - 90,
+                                   atol=1e-9)
+    with pytest.raises(InvalidParameterError, match="crosstalk"):
+        MosaicSensor(8, 8, crosstalk=0.25)
+
+
+def test_gaussian_shot_noise_limit_and_exact_poisson_below():
+    from scipy import stats
+
+    from sensor.camera.mosaic import POISSON_EXACT_BELOW_E
+    # the documented bounds: sup |F_Poisson - F_approx| (continuity-corrected) from scipy's
+    # exact Poisson law, the approximation lam + sqrt(lam) z + (z^2 - 1) / 6 inverted in
+    # closed form, without read noise (the worst case)
+    for lam, bound in ((POISSON_EXACT_BELOW_E, 4.4e-4), (1000.0, 1.2e-5)):
+        k = np.arange(max(0, int(lam - 12 * lam ** 0.5)), int(lam + 12 * lam ** 0.5))
+        x, g = (k + 0.5 - lam) / lam ** 0.5, 1.0 / (6.0 * lam ** 0.5)
+        z = (-1.0 + np.sqrt(1.0 + 4.0 * g * (x + g))) / (2.0 * g)
+        assert np.abs(stats.poisson.cdf(k, lam) - stats.norm.cdf(z)).max() <= bound
+        # the plain normal limit misses by the Edgeworth skewness term 1/(6 sqrt(2 pi lam))
+        plain = np.abs(stats.poisson.cdf(k, lam) - stats.norm.cdf(x)).max()
+        assert plain == pytest.approx(1 / (6 * np.sqrt(2 * np.pi * lam)), rel=0.02)
+    # both branches have the exact mean and variance (shot + read + quantisation); 200000
+    # draws know the variance to 0.32 % (1 sigma): 1.5 % is 4.7 sigma
+    cam = PolarizationCamera.fisheye(16, 16, read_noise_e=4.0, adc_bits=16)
+    s = cam.sensor
+    for mean in (10.0, 30.0, 300.0, 3000.0, 8000.0):
+        raw = cam.noisy_frames(np.full(200_000, mean), np.random.default_rng(int(mean)))
+        e = (raw.astype(float) - s.black_level_dn) * s.e_per_dn
+        assert e.mean() == pytest.approx(mean, abs=5 * np.sqrt((mean + 16) / 2e5))
+        assert e.var() == pytest.approx(mean + 16.0 + s.e_per_dn ** 2 / 12, rel=0.015)
+        # and the third central moment is the Poisson law's, lam (read noise adds none);
+        # its sampling error is ~sqrt(15 v^3 / n): 4 of those
+        v = mean + 16.0
+        assert np.mean((e - e.mean()) ** 3) == pytest.approx(mean, abs=4 * np.sqrt(15 * v ** 3
+                                                                               / 2e5))
+    # below the threshold the draw is Poisson itself: integer electrons without read noise
+    exact = PolarizationCamera.fisheye(16, 16, read_noise_e=0.0, adc_bits=16,
+                                       full_well_e=2.0 ** 16 - 1 - 1024)  # 1 e-/DN
+    raw = exact.noisy_frames(np.full(50_000, 20.0), np.random.default_rng(1)).astype(float)
+    counts = raw - exact.sensor.black_level_dn
+    ref = stats.poisson.pmf(np.arange(60), 20.0) * counts.size
+    obs = np.bincount(counts.astype(int), minlength=60)[:60]
+    keep = ref > 20
+    chi2 = np.sum((obs[keep] - ref[keep]) ** 2 / ref[keep])
+    assert chi2 < stats.chi2.ppf(0.999, keep.sum() - 1)
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_sun_disk_found_in_its_window(model):
+    # the sun disk is searched in a box around the sun's image: the same pixels as the full-
+    # frame test of the generic path, for random suns and attitudes (the sun near the edge of
+    # a 190 deg field of view included), and a disk of several pixels
+    rng = np.random.default_rng(0)
+    cam = PolarizationCamera.fisheye(150, 120, model=model, fov_deg=190.0, sun_radius_deg=3.0)
+    found = 0
+    for _ in range(40):  # random configurations, each a whole image
+        sun = (rng.uniform(-9.0, 90.0), rng.uniform(0.0, 360.0))
+        att = camera_attitude(rng.uniform(0, 360), rng.uniform(-40, 40), rng.uniform(-40, 40))
+        fast = cam.scene(RayleighSky(), att, *sun).sun
+        assert (fast == cam.scene(_GenericRayleigh(), att, *sun).sun).all()
+        found += int(fast.sum())
+    assert found > 40 * 10
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_image_axes_are_the_meridional_basis_turned_by_the_image_azimuth(model):
+    # (e_x, e_y, d) orthonormal and right-handed; e_x = cos psi e_theta - sin psi e_psi,
+    # e_y = sin psi e_theta + cos psi e_psi with the basis of camera_basis; on the image's x
+    # axis right of the centre (psi = 0) e_x is e_theta: a small step along it moves the image
+    # point along +x only (1e-6 rad: the cross term is second order, < 1e-9 px)
+    from sensor.camera import camera_basis
+    lens = FisheyeLens(83.7, 63.2, 61.9, 190.0, model)
+    rng = np.random.default_rng(9)
+    row, col = rng.uniform(5, 120, 400), rng.uniform(5, 120, 400)
+    e_x, e_y, d = lens.image_axes(row, col)
+    ok = np.isfinite(d).all(-1)
+    assert ok.sum() > 300
+    e_x, e_y, d = e_x[ok], e_y[ok], d[ok]
+    np.testing.assert_allclose(np.cross(e_x, e_y), d, atol=1e-12)
+    for u, v in ((e_x, e_y), (e_x, d), (e_y, d)):
+        np.testing.assert_allclose(np.sum(u * v, -1), 0.0, atol=1e-12)
+    _, psi, e_th, e_ps = camera_basis(d)
+    c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
+    np.testing.assert_allclose(e_x, c * e_th - s * e_ps, atol=1e-12)
+    np.testing.assert_allclose(e_y, s * e_th + c * e_ps, atol=1e-12)
+    cols = lens.cx + np.array([3.0, 20.0, 55.0])
+    ex0, _, d0 = lens.image_axes(np.full(3, lens.cy), cols)
+    r1, c1 = lens.project(d0 + 1e-6 * ex0)
+    assert (np.abs(r1 - lens.cy) < 1e-9).all() and (c1 > cols).all()

@@ -37,11 +37,12 @@ def test_sidecar_is_strict_json(tmp_path):
     out = tmp_path / "e.tiff"
     assert main(["camera", "--lat", "34.2", "--lon", "108.9", "--time",
                  "2013-05-22T15:00+08:00", "--width", "32", "--height", "32",
-                 "--angle-error-std", "0.5", "--out", str(out)]) == 0
+                 "--angle-error-std", "0.5", "--crosstalk", "0.02", "--out", str(out)]) == 0
     text = (tmp_path / "e.tiff.json").read_text()
     doc = json.loads(text, parse_constant=lambda c: pytest.fail(f"non-standard JSON {c}"))
     assert doc["sensor"]["errors"]["extinction_ratio"] is None
     assert doc["sensor"]["errors"]["angle_std_deg"] == 0.5
+    assert doc["sensor"]["crosstalk"] == 0.02
 
 
 def test_writer_is_atomic_and_reader_checks(tmp_path):

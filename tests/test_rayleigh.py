@@ -214,3 +214,19 @@ def test_cos_sin_from_half_angle_tangent():
     assert np.max(np.abs(s - np.sin(np.radians(x)))) <= 4.5e-16
     c0, s0 = cos_sin_deg(60.0)
     assert c0.shape == () and c0 == pytest.approx(0.5, abs=1e-16)
+
+
+def test_stokes_from_sun_projections_matches_meridian_field():
+    # in the local meridian basis (e_el, e_az) (right-handed about the ray) the dot-product
+    # form equals polarization_field (itself tested against the vector formulation)
+    from skysim.geometry import direction_vector, local_basis
+    rng = np.random.default_rng(8)
+    el, az = rng.uniform(0, 90, 2000), rng.uniform(0, 360, 2000)
+    sun_el, sun_az = 27.0, 211.0
+    v, e_el, e_az = local_basis(el, az)
+    np.testing.assert_allclose(np.cross(e_el, e_az), v, atol=1e-15)
+    s = direction_vector(sun_el, sun_az)
+    i, q, u = rayleigh.stokes_from_sun_projections(e_el @ s, e_az @ s, 0.7)
+    ref = rayleigh.polarization_field(el, az, sun_el, sun_az, 0.7)
+    for a, b in ((i, ref["I"]), (q, ref["Q"]), (u, ref["U"])):
+        np.testing.assert_allclose(a, b, atol=1e-14)

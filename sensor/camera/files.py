@@ -14,6 +14,7 @@ not rescaled), written with ``tifffile`` (optional extra ``skysim[camera]``). Th
 - ``sensor``: ``width``, ``height``, ``layout_deg`` (2x2, rows then columns), ``adc_bits``,
   ``black_level_dn``, ``saturation_dn``, ``full_well_e``, ``e_per_dn``, ``read_noise_e``,
   ``dark_current_e_s``, ``photoelectrons_per_s``, ``exit_pupil_px`` (null: no vignetting),
+  ``crosstalk`` (share of each edge neighbour, :class:`~sensor.camera.MosaicSensor`),
   ``errors`` (parameters of injected per-pixel errors);
 - ``exposure``: ``exposure_s``;
 - for generated images ``generator``: package version, sky model, sun position, seed.

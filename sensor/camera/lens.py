@@ -140,6 +140,39 @@ class FisheyeLens:
         d[~valid] = np.nan
         return d, valid
 
+    def image_axes(self, row, col):
+        """The image's x and y axes carried onto the sky at pixel coordinates, and the ray:
+        camera-frame unit vectors ``(e_x, e_y, d)``, each of shape
+        ``broadcast(row, col).shape + (3,)``.
+
+        With ``theta``, ``psi`` the ray's angle from the axis and its image azimuth and
+        ``(e_theta, e_psi)`` the unit vectors of increasing ``theta`` and ``psi`` across the
+        ray, ``e_x = cos psi e_theta - sin psi e_psi`` and ``e_y = sin psi e_theta + cos psi
+        e_psi``. An ideal rotationally symmetric lens keeps a ray's polarization components
+        in its meridional plane (along ``e_theta``) and across it (``e_psi``) as the
+        components along the image radius and tangent, so a polarization at angle ``chi``
+        from the image's x axis is ``cos chi e_x + sin chi e_y`` on the sky (this is the
+        polarization's transport, not the lens's geometric map of tangent vectors, which
+        stretches the tangential direction by ``r / (f sin theta)``). ``(e_x, e_y, d)`` is
+        right-handed. NaN outside the image circle.
+        """
+        x = np.asarray(col, dtype=float) - self.cx
+        y = self.cy - np.asarray(row, dtype=float)
+        rho = np.hypot(x, y)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            c_psi = np.where(rho > 0, x / rho, 1.0)
+            s_psi = np.where(rho > 0, y / rho, 0.0)
+        theta = self.theta_rad(rho)
+        theta = np.where(theta <= self.max_theta_rad, theta, np.nan)
+        c_th, s_th = np.cos(theta), np.sin(theta)
+        one_minus = 1.0 - c_th
+        e_x = np.stack([c_th * c_psi * c_psi + s_psi * s_psi, -one_minus * c_psi * s_psi,
+                        -s_th * c_psi], axis=-1)
+        e_y = np.stack([-one_minus * c_psi * s_psi, c_th * s_psi * s_psi + c_psi * c_psi,
+                        -s_th * s_psi], axis=-1)
+        d = np.stack([s_th * c_psi, s_th * s_psi, c_th], axis=-1)
+        return e_x, e_y, d
+
     def describe(self) -> dict:
         """Lens parameters for sidecars."""
         return {"model": self.model, "focal_px": float(self.focal_px), "cx": float(self.cx),

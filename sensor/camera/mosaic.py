@@ -4,8 +4,10 @@ fisheye lens, imaging any :class:`skysim.sky.Sky`.
 Signal chain of one pixel (Powell & Gruev 2013 [1]_, eq. 1; the analysis vector of a pixel
 behind a partial polarizer):
 
-``e = t * q * V(r) * (A . S) + t * i_dark``, then photon shot noise (Poisson), read noise
-(Gaussian), clipping at the full well and an ADC of ``adc_bits`` bits with a black level.
+``e = X[t * q * V(r) * (A . S)] + t * i_dark``, then photon shot noise (Poisson; its
+skewness-corrected normal limit from :data:`POISSON_EXACT_BELOW_E` on), read noise (Gaussian),
+clipping at the full well and an ADC of ``adc_bits`` bits with a black level. The sun disk's
+photoelectrons are raised to the full well before crosstalk.
 
 - ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector rotated into the camera frame
   (angles from the camera's x axis towards its y axis, see :mod:`sensor.camera.lens`). An ideal
@@ -19,6 +21,14 @@ behind a partial polarizer):
 - ``V(r) = (1 + (r / p)^2)^-2``: the cos^4 law of natural vignetting with the chief ray's angle
   in image space, ``atan(r / p)`` for an exit pupil ``p`` [px] from the sensor (``p = inf``:
   no vignetting) [2]_.
+- ``X``: crosstalk between neighbouring pixels, the linear superposition of the neighbours'
+  analysed signals with constant weights (Xue et al. 2025 [3]_; review: Jin et al. 2025
+  [4]_): each pixel keeps ``1 - 4c`` of its photoelectrons and receives ``c`` of each of
+  its four edge neighbours' (light through a neighbour's micro-polarizer reaching its
+  photodiode, and diffusing carriers). Energy conserving: a pixel on the sensor's border
+  keeps the share it would pass to its missing neighbour. With the usual mosaic every edge
+  neighbour's polarizer is at +-45 deg, so a uniform scene's apparent DoLP shrinks by exactly
+  ``1 - 4c`` and its intensity is unchanged (tested). Default ``c = 0`` (off).
 - ``q`` [e-/s]: photoelectron rate of a pixel with ``A = (1, 0, 0)`` for a scene radiance 1
   (in the sky model's unit); ``t`` [s] the exposure; ``i_dark`` [e-/s] the dark current.
 
@@ -31,6 +41,15 @@ References
    polarimeters", Opt. Express 21(18):21039-21055 (2013), doi:10.1364/OE.21.021039.
 .. [2] W. J. Smith, *Modern Optical Engineering*, 4th ed., McGraw-Hill (2008), sect. 9.8
    (cos^4 law of illumination).
+.. [3] J. Xue, S. Qiu, W. Jin, X. Wang, L. Luo, Q. Liu, "Fixed linear superposition crosstalk
+   model of division of focal plane polarization camera", Acta Optica Sinica 45(8):0811002
+   (2025).
+.. [4] W. Jin, J. Xue, S. Qiu, L. Luo, Q. Liu, "Review of crosstalk between pixels in
+   division of focal plane polarization camera", Chinese Optics 18(4):725 (2025),
+   doi:10.37188/CO.2024-0217.
+.. [5] E. A. Cornish, R. A. Fisher, "Moments and cumulants in the specification of
+   distributions", Rev. Inst. Int. Stat. 5(4):307-320 (1938), doi:10.2307/1400905 (the
+   quantile expansion whose first term beyond the normal is ``gamma_1 (z^2 - 1) / 6``).
 """
 
 from __future__ import annotations
@@ -41,12 +60,27 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 from scipy.spatial.transform import Rotation
 
+from skysim import rayleigh
 from skysim.exceptions import InvalidParameterError
+from skysim.geometry import elevation_azimuth
+from skysim.sky import RayleighSky
+from skysim.validation import check_finite, check_sun_above_horizon
 
 from .lens import FisheyeLens
 
-__all__ = ["DEFAULT_LAYOUT_DEG", "SUN_RADIUS_DEG", "MosaicSensor", "PolarizationCamera",
-           "Scene", "camera_attitude", "camera_basis", "sky_stokes_camera"]
+__all__ = ["DEFAULT_LAYOUT_DEG", "POISSON_EXACT_BELOW_E", "SUN_RADIUS_DEG", "MosaicSensor",
+           "PolarizationCamera", "Scene", "camera_attitude", "camera_basis", "sky_stokes_camera"]
+
+POISSON_EXACT_BELOW_E = 30.0
+"""Mean photo- and dark electrons [e-] below which shot noise is drawn from the Poisson law
+itself. At and above it, shot plus read noise (variance ``v = lam + read^2``, third cumulant
+``lam``) come from one normal draw ``z`` with the skewness (Cornish-Fisher) correction
+[5]_: ``lam + sqrt(v) z + lam / (6 v) (z^2 - 1)``. Mean exact, variance exact within
+``lam^2 / (18 v^2) <= 0.056 e-^2``, skewness exact to leading order; the largest difference of
+the distribution function from Poisson's (no read noise, the worst case) is 4.4e-4 at the
+threshold and falls like ``1 / lam`` above it (1.2e-5 at 1000 e-, tested against scipy's
+Poisson law); the plain Gaussian limit would leave ``1 / (6 sqrt(2 pi lam))``, 0.012 at 30
+e-."""
 
 DEFAULT_LAYOUT_DEG = ((90.0, 45.0), (135.0, 0.0))
 """Polarizer angles [deg] of the 2x2 super-pixel, rows then columns (the layout of the Sony
@@ -114,6 +148,9 @@ class MosaicSensor:
         Polarizer extinction ratio (> 1; ``inf`` for an ideal polarizer).
     gain : ndarray (H, W) or None
         Relative pixel response (photo-response non-uniformity; None: 1).
+    crosstalk : float
+        Fraction of a pixel's photoelectrons reaching each of its four edge neighbours, in
+        [0, 0.25) (module doc; 0: none).
     """
 
     width: int
@@ -127,6 +164,7 @@ class MosaicSensor:
     angle_error_deg: np.ndarray | None = None
     extinction_ratio: float | np.ndarray = np.inf
     gain: np.ndarray | None = None
+    crosstalk: float = 0.0
     error_parameters: dict = field(default_factory=dict)
 
     def __post_init__(self):
@@ -146,6 +184,9 @@ class MosaicSensor:
         _check_positive("full_well_e", self.full_well_e)
         _check_positive("read_noise_e", self.read_noise_e, allow_zero=True)
         _check_positive("dark_current_e_s", self.dark_current_e_s, allow_zero=True)
+        if not (0.0 <= self.crosstalk < 0.25):
+            raise InvalidParameterError(f"crosstalk must be in [0, 0.25) (the share of each of "
+                                        f"four neighbours); got {self.crosstalk!r}")
         if self.black_level_dn is None:
             object.__setattr__(self, "black_level_dn", 2 ** (self.adc_bits - 6))
         if not (0 <= self.black_level_dn < self.max_dn // 2):
@@ -193,6 +234,29 @@ class MosaicSensor:
         d = 0.5 * g * (1.0 - inv_er)
         return np.stack([0.5 * g * (1.0 + inv_er), d * np.cos(two_a), d * np.sin(two_a)], -1)
 
+    def apply_crosstalk(self, electrons: np.ndarray) -> np.ndarray:
+        """Crosstalk (module doc) on photoelectrons ``(..., H, W)``: ``(1 - 4c) e`` plus ``c``
+        times the sum of the four edge neighbours, a missing neighbour on the border replaced
+        by the pixel itself (energy conserving). Returns ``electrons`` itself when ``c = 0``,
+        else a new array of its dtype."""
+        c = float(self.crosstalk)
+        e = np.asarray(electrons)
+        if c == 0.0:
+            return e
+        nb = np.empty_like(e)
+        nb[..., 1:, :] = e[..., :-1, :]
+        nb[..., :1, :] = e[..., :1, :]
+        nb[..., :-1, :] += e[..., 1:, :]
+        nb[..., -1:, :] += e[..., -1:, :]
+        nb[..., :, 1:] += e[..., :, :-1]
+        nb[..., :, :1] += e[..., :, :1]
+        nb[..., :, :-1] += e[..., :, 1:]
+        nb[..., :, -1:] += e[..., :, -1:]
+        nb *= c
+        out = np.multiply(e, 1.0 - 4.0 * c)
+        out += nb
+        return out
+
     def with_random_errors(self, rng: np.random.Generator, *, angle_std_deg: float = 0.0,
                            mosaic_rotation_deg: float = 0.0, extinction_ratio: float = np.inf,
                            extinction_ratio_rel_std: float = 0.0,
@@ -231,7 +295,7 @@ class MosaicSensor:
                 "full_well_e": float(self.full_well_e), "read_noise_e": float(self.read_noise_e),
                 "dark_current_e_s": float(self.dark_current_e_s), "adc_bits": int(self.adc_bits),
                 "black_level_dn": int(self.black_level_dn), "saturation_dn": self.max_dn,
-                "e_per_dn": self.e_per_dn,
+                "e_per_dn": self.e_per_dn, "crosstalk": float(self.crosstalk),
                 # JSON has no infinity: an ideal polarizer's extinction ratio is written null
                 "errors": {k: (v if np.isfinite(v) else None)
                            for k, v in self.error_parameters.items()}}
@@ -239,7 +303,9 @@ class MosaicSensor:
 
 @dataclass(frozen=True, eq=False)
 class Scene:
-    """What reaches each pixel: camera-frame Stokes (H, W) of the sky, masks, geometry."""
+    """What reaches each pixel: camera-frame Stokes (H, W) of the sky (float64, or the
+    float32 of a float32 sky), masks, and the view directions (computed when first asked
+    for: a render does not need them)."""
 
     I: np.ndarray
     Q: np.ndarray
@@ -248,8 +314,26 @@ class Scene:
     """in the image circle and above the horizon"""
     sun: np.ndarray
     """pixels covered by the sun disk (saturated)"""
-    view_elevation_deg: np.ndarray
-    view_azimuth_deg: np.ndarray
+    view: object = field(default=None, repr=False)
+    """callable returning the view ``(elevation, azimuth)`` [deg] of every pixel, or None"""
+
+    @functools.cached_property
+    def _view(self):
+        if self.view is None:
+            z = np.zeros(self.valid.shape)
+            return z, z
+        el, az = self.view()
+        return np.where(self.valid, el, 0.0), np.where(self.valid, az, 0.0)
+
+    @property
+    def view_elevation_deg(self) -> np.ndarray:
+        """View elevation [deg] of every pixel (0 where not valid)."""
+        return self._view[0]
+
+    @property
+    def view_azimuth_deg(self) -> np.ndarray:
+        """View azimuth [deg, clockwise from north] of every pixel (0 where not valid)."""
+        return self._view[1]
 
     @property
     def stokes(self) -> np.ndarray:
@@ -313,6 +397,34 @@ class PolarizationCamera:
         v = self.vignetting()[..., None]
         return {ideal: self.sensor.analysis_vectors(ideal) * v for ideal in (False, True)}
 
+    @functools.cached_property
+    def _per_dtype(self) -> dict:
+        return {}
+
+    def _cached(self, key, make):
+        out = self._per_dtype.get(key)
+        if out is None:
+            out = self._per_dtype[key] = make()
+        return out
+
+    def _analysis_components(self, ideal: bool, dtype) -> np.ndarray:
+        """:attr:`_analysis` as three contiguous (H, W) planes of ``dtype``."""
+        return self._cached(("analysis", bool(ideal), np.dtype(dtype)),
+                            lambda: np.ascontiguousarray(np.moveaxis(
+                                self._analysis[bool(ideal)], -1, 0), dtype=dtype))
+
+    def _pixel_frame(self, dtype) -> np.ndarray:
+        """Camera-fixed vectors of every pixel, (3 vectors, 3 components, H, W) in ``dtype``:
+        the ray ``d`` and the image's x and y axes carried onto the sky
+        (:meth:`FisheyeLens.image_axes`); zero outside the image circle."""
+        def make():
+            inside = self.pixel_directions[1]
+            e_x, e_y, d = self.lens.image_axes(*np.indices(self.sensor.shape, dtype=float))
+            vec = np.stack([d, e_x, e_y])
+            vec[:, ~inside] = 0.0
+            return np.ascontiguousarray(np.moveaxis(vec, -1, 1), dtype=dtype)
+        return self._cached(("frame", np.dtype(dtype)), make)
+
     def vignetting(self, rows=None, cols=None) -> np.ndarray:
         """Relative illumination ``V`` at pixel coordinates (default: every pixel centre)."""
         if rows is None:
@@ -332,7 +444,15 @@ class PolarizationCamera:
     def scene(self, sky, attitude: Rotation, sun_elevation_deg: float,
               sun_azimuth_deg: float) -> Scene:
         """Camera-frame Stokes of ``sky`` at every pixel for a camera at ``attitude``
-        (camera-to-ENU rotation, :func:`camera_attitude`) and the given sun [deg]."""
+        (camera-to-ENU rotation, :func:`camera_attitude`) and the given sun [deg].
+
+        A :class:`skysim.sky.RayleighSky` is rendered in its own dtype from dot products of
+        the sun with each pixel's camera-fixed frame (:func:`skysim.rayleigh.
+        stokes_from_sun_projections`): no angles per pixel; any other sky through its
+        :meth:`~skysim.sky.Sky.field` at each pixel's view direction.
+        """
+        if type(sky) is RayleighSky:
+            return self._rayleigh_scene(sky, attitude, sun_elevation_deg, sun_azimuth_deg)
         d_c, in_circle = self.pixel_directions
         shape = self.sensor.shape
         rays, basis = self._rays
@@ -347,21 +467,82 @@ class PolarizationCamera:
         valid = np.zeros(shape, bool)
         valid.reshape(-1)[idx] = True
         s_c = attitude.inv().apply(_enu(sun_elevation_deg, sun_azimuth_deg))
-        sun_theta = np.arctan2(np.hypot(s_c[0], s_c[1]), s_c[2])
-        reach = np.radians(self.sun_radius_deg) + 0.5 * float(self.lens.dtheta_dr(sun_theta))
         sun = np.zeros(shape, bool)
-        sun.reshape(-1)[rays] = d_c.reshape(-1, 3)[rays] @ s_c >= np.cos(reach)
-        return Scene(out["I"], out["Q"], out["U"], valid, sun, out["el"], out["az"])
+        sun.reshape(-1)[rays] = d_c.reshape(-1, 3)[rays] @ s_c >= self._sun_reach_cos(s_c)
+        return Scene(out["I"], out["Q"], out["U"], valid, sun, lambda: (out["el"], out["az"]))
+
+    def _sun_reach_cos(self, s_c) -> float:
+        """Cosine of the angle from the sun within which a pixel centre is on the sun disk
+        (its radius plus half a pixel at the sun's place in the image)."""
+        sun_theta = np.arctan2(np.hypot(s_c[0], s_c[1]), s_c[2])
+        return float(np.cos(np.radians(self.sun_radius_deg)
+                            + 0.5 * float(self.lens.dtheta_dr(sun_theta))))
+
+    def _sun_disk(self, rays: np.ndarray, s_c, work: np.ndarray) -> np.ndarray:
+        """Pixels whose centre is on the sun disk (:meth:`_sun_reach_cos`), from the dot
+        products of their rays ``(3, H, W)`` with the sun ``s_c`` in a box around the sun's
+        image (the whole frame when the sun is outside the field of view)."""
+        reach_cos = self._sun_reach_cos(s_c)
+        sun = np.zeros(self.sensor.shape, bool)
+        row, col = self.lens.project(s_c)
+        if not (np.isfinite(row) and np.isfinite(col)):
+            return np.greater_equal(_dot(rays, s_c, out=work), reach_cos)
+        # the smallest angle a pixel spans at the sun's place: radially dtheta/dr, tangentially
+        # sin(theta) / r (1 / f on the axis)
+        theta = float(np.arccos(np.clip(s_c[2], -1.0, 1.0)))
+        r = float(self.lens.radius_px(theta))
+        per_px = min(float(self.lens.dtheta_dr(theta)),
+                     np.sin(theta) / r if r > 0 else 1.0 / self.lens.focal_px)
+        k = int(np.ceil(np.arccos(reach_cos) / per_px)) + 2
+        rows = slice(max(int(row) - k, 0), max(int(row) + k + 2, 0))
+        cols = slice(max(int(col) - k, 0), max(int(col) + k + 2, 0))
+        sun[rows, cols] = _dot(rays[:, rows, cols], s_c) >= reach_cos
+        return sun
+
+    def _rayleigh_scene(self, sky, attitude, sun_elevation_deg, sun_azimuth_deg) -> Scene:
+        """:meth:`scene` of a single-scattering sky: camera-frame Stokes from the sun's
+        projections on each pixel's image axes ``(e_x, e_y)`` (:meth:`_pixel_frame`), the
+        horizon and the sun disk from dot products with the ray; all in the sky's dtype
+        (float32: Stokes within a few 1e-7 of float64, tested)."""
+        check_sun_above_horizon(sun_elevation_deg, sky.min_sun_elevation_deg)
+        check_finite("sun_azimuth_deg", sun_azimuth_deg)
+        frame = self._pixel_frame(sky.dtype)
+        inside = self.pixel_directions[1]
+        inv = attitude.inv()
+        s_c = inv.apply(_enu(sun_elevation_deg, sun_azimuth_deg))
+        up_c = inv.apply([0.0, 0.0, 1.0])
+        work = np.empty(self.sensor.shape, sky.dtype)
+        i, q, u = rayleigh.stokes_from_sun_projections(_dot(frame[1], s_c, work=work),
+                                                       _dot(frame[2], s_c, work=work),
+                                                       sky.dmax)
+        valid = np.greater_equal(_dot(frame[0], up_c, out=work, work=None), 0.0)
+        valid &= inside
+        sun = self._sun_disk(frame[0], s_c, work)
+        sun &= inside
+        dark = ~valid
+        for a in (i, q, u):
+            np.copyto(a, 0.0, where=dark)  # one streaming pass, no gather
+
+        def view():
+            d_n = attitude.apply(self.pixel_directions[0].reshape(-1, 3))
+            return tuple(x.reshape(self.sensor.shape) for x in elevation_azimuth(d_n))
+        return Scene(i, q, u, valid, sun, view)
 
     def expected_electrons(self, scene: Scene, exposure_s: float) -> np.ndarray:
-        """Mean photo- and dark electrons of every pixel (H, W) before noise and clipping; the
-        sun disk at the full well."""
+        """Mean photo- and dark electrons of every pixel (H, W) before noise and clipping, in
+        the scene's dtype: photoelectrons (the sun disk's raised to the full well), then
+        crosstalk, then dark current."""
         _check_positive("exposure_s", exposure_s)
-        a = self._analysis[False]
-        e = a[..., 0] * scene.I + a[..., 1] * scene.Q + a[..., 2] * scene.U
+        dtype = np.result_type(scene.I, np.float32)
+        a0, a1, a2 = self._analysis_components(False, dtype)
+        e = np.multiply(a0, scene.I, dtype=dtype)
+        work = np.multiply(a1, scene.Q, dtype=dtype)
+        e += work
+        e += np.multiply(a2, scene.U, out=work, dtype=dtype)
         e *= self.photoelectrons_per_s * exposure_s
+        np.maximum(e, self.sensor.full_well_e, out=e, where=scene.sun)
+        e = self.sensor.apply_crosstalk(e)
         e += self.sensor.dark_current_e_s * exposure_s
-        e[scene.sun] = np.maximum(e[scene.sun], self.sensor.full_well_e)
         return e
 
     def auto_exposure_s(self, scene: Scene, fill: float = 0.6, percentile: float = 99.0):
@@ -375,18 +556,41 @@ class PolarizationCamera:
 
     def digitise(self, electrons: np.ndarray) -> np.ndarray:
         """Clip electrons at the full well and convert to DN (uint16, black level added; read
-        noise below zero electrons stays above 0 DN thanks to the black level)."""
+        noise below zero electrons stays above 0 DN thanks to the black level). Works in the
+        input's float dtype (float32 holds every DN of 16 bits exactly)."""
         s = self.sensor
-        e = np.minimum(electrons, s.full_well_e)
-        dn = np.rint(e / s.e_per_dn) + s.black_level_dn
-        return np.clip(dn, 0, s.max_dn).astype(np.uint16)
+        dn = np.minimum(electrons, s.full_well_e, dtype=np.result_type(electrons, np.float32))
+        dn /= s.e_per_dn
+        np.rint(dn, out=dn)
+        dn += s.black_level_dn
+        np.clip(dn, 0, s.max_dn, out=dn)
+        return dn.astype(np.uint16)
 
     def noisy_frames(self, mean_electrons: np.ndarray, rng: np.random.Generator) -> np.ndarray:
         """Raw frames (..., H, W) uint16 [DN] for mean electrons (..., H, W): photon and
-        dark-current shot noise (Poisson) and read noise (Gaussian) from ``rng``, full-well
-        clipping, ADC."""
-        e = rng.poisson(mean_electrons).astype(float)
-        e += self.sensor.read_noise_e * rng.standard_normal(e.shape)
+        dark-current shot noise and read noise from ``rng``, full-well clipping, ADC.
+
+        Shot noise is Poisson below :data:`POISSON_EXACT_BELOW_E` mean electrons; at and above
+        it shot and read noise come from one skewness-corrected normal draw per pixel (see
+        there). Works in the input's dtype.
+        """
+        lam = np.asarray(mean_electrons)
+        dtype = np.result_type(lam, np.float32)
+        read = float(self.sensor.read_noise_e)
+        z = rng.standard_normal(lam.shape, dtype=dtype)
+        low = lam < POISSON_EXACT_BELOW_E
+        z_low = z[low] if low.any() else None
+        var = np.add(lam, read * read, dtype=dtype)
+        skew = np.divide(lam, var, dtype=dtype)
+        skew *= 1.0 / 6.0
+        e = np.multiply(z, z)
+        e -= 1.0
+        e *= skew
+        z *= np.sqrt(var, out=var)
+        e += z
+        e += lam
+        if z_low is not None:
+            e[low] = rng.poisson(lam[low]) + read * z_low
         return self.digitise(e)
 
     def capture(self, scene: Scene, exposure_s: float, rng: np.random.Generator) -> np.ndarray:
@@ -418,8 +622,7 @@ class PolarizationCamera:
         integrating sphere behind a polarizer in front of the lens)."""
         _, in_circle = self.pixel_directions
         i, q, u = (np.where(in_circle, float(v), 0.0) for v in stokes)
-        z = np.zeros(self.sensor.shape)
-        return Scene(i, q, u, in_circle, np.zeros(self.sensor.shape, bool), z, z)
+        return Scene(i, q, u, in_circle, np.zeros(self.sensor.shape, bool))
 
     def describe(self) -> dict:
         """Lens, sensor and radiometry for sidecars."""
@@ -465,6 +668,17 @@ def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azi
     c2, s2 = c2b * c2p - s2b * s2p, s2b * c2p + c2b * s2p
     stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
     return idx, stokes, el, az
+
+
+def _dot(vectors: np.ndarray, v, out=None, work=None) -> np.ndarray:
+    """``sum_k vectors[k] * v[k]`` for component planes ``vectors`` (3, H, W) and a 3-vector
+    ``v``, in the planes' dtype; ``out`` and ``work``: (H, W) buffers to reuse (``out`` may
+    not be ``work``)."""
+    out = np.multiply(vectors[0], vectors.dtype.type(v[0]), out=out)
+    work = np.empty_like(out) if work is None or work is out else work
+    for k in (1, 2):
+        out += np.multiply(vectors[k], vectors.dtype.type(v[k]), out=work)
+    return out
 
 
 def _enu(elevation_deg, azimuth_deg) -> np.ndarray:
