@@ -9,9 +9,13 @@ modified data and its truth record.
 - ``yaw_scale``: the recorded yaw change within each sweep becomes ``factor`` times the
   recorded one (``factor`` ~ U(0.93, 0.97) or U(1.03, 1.07)), re-wrapped to (-180, 180].
 - ``occlusion``: units looking into a sector of azimuth (in each sweep's recorded-yaw frame,
-  i.e. about north for a platform set facing north) see foliage light: each reading of the
-  unit is pulled towards the unit mean, ``r -> m + (1 - k)(r - m)`` (the DoP scales by
-  ``1 - k``, ``k`` ~ U(0.6, 0.9)), and darkened by ``1 - k / 2``.
+  i.e. about north for a platform set facing north) see foliage light, depolarized and
+  darker. Each unit's readings at its nominal polarizer angles give its Stokes vector by
+  least squares (Malus's law, ``r_p = (I + Q cos 2a_p + U sin 2a_p) / 2``); in the sector
+  the polarized part ``(Q cos 2a_p + U sin 2a_p) / 2`` of every reading is scaled by
+  ``1 - k`` (the DoP scales by ``1 - k``, ``k`` ~ U(0.6, 0.9)) and the reading darkened by
+  ``1 - k / 2``. What does not follow Malus's law at the nominal angles (the instrument's
+  own gain and angle errors) is left as it was.
 - ``stuck``: one working photodiode reads a constant (its median) from the first turn on.
 """
 
@@ -64,9 +68,13 @@ def inject(data: PhotodiodeData, effect: str, rng: np.random.Generator):
             inside = np.abs(wrap_deg(az - c)) <= 0.5 * w
             R = table[cols].to_numpy(float)
             sat = R >= side["saturation_value"]
-            mean = np.nanmean(np.where(sat, np.nan, R), axis=1, keepdims=True)
-            new = (mean + (1 - k) * (R - mean)) * (1 - 0.5 * k)
-            R = np.where(inside[:, None] & ~sat, np.round(new), R)
+            a = np.radians(2.0 * np.asarray(unit["photodiodes"], float))
+            A = 0.5 * np.stack([np.ones_like(a), np.cos(a), np.sin(a)], axis=-1)   # (P, 3)
+            whole = np.isfinite(R).all(axis=1) & ~sat.any(axis=1)    # rows Malus can invert
+            stokes = np.linalg.lstsq(A, np.where(whole[:, None], R, 0.0).T, rcond=None)[0].T
+            polarized = stokes[:, 1:] @ A[:, 1:].T                                  # (n, P)
+            new = (R - k * polarized) * (1 - 0.5 * k)
+            R = np.where((inside & whole)[:, None], np.round(new), R)
             table[cols] = R
         truth.update(center_deg=float(c), width_deg=float(w), depolarization=float(k))
     elif effect == "stuck":

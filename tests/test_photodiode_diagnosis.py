@@ -244,6 +244,14 @@ def test_injector_does_what_it_says(session):
     u0 = [c for c in session.columns if c.startswith("u0_")]
     changed = (d.table[u0] != session.table[u0]).any(axis=1)
     assert 0.1 < changed.mean() < 0.45     # unit 0 looks into a 60-120 deg sector once a turn
+
+    def dop(t):   # four-angle Stokes estimate (0/45/90/135 deg): exact for equal gains
+        r = t[u0].to_numpy(float)
+        return np.hypot(r[:, 0] - r[:, 2], r[:, 1] - r[:, 3]) / (0.5 * r.sum(axis=1))
+    ratio = dop(d.table)[changed] / dop(session.table)[changed]
+    # the DoP inside the sector scales by 1 - k (rounding to counts: < 1 % at DoP > 0.1)
+    big = dop(session.table)[changed] > 0.1
+    np.testing.assert_allclose(ratio[big], 1 - truth["depolarization"], rtol=0.02)
     with pytest.raises(ValueError, match="injectable"):
         inject(session, "fov", rng)
 
