@@ -11,12 +11,13 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   radius ``alpha / sqrt(2)`` of a uniform cap, which reproduces the cone average to second
   order in ``alpha`` (the first non-vanishing order: the mean of the ring is exact for any
   field linear or quadratic in the offset). Base at ``alpha = 0``.
-- ``occlusion`` (``center_deg``, ``width_deg``, ``depolarization``): a sector of sky azimuth
-  (world frame) blocked by canopy or buildings. What reaches a unit looking into it is
-  foliage-scattered, nearly unpolarized light: its DoP is multiplied by
-  ``1 - depolarization * w(az)``, ``w`` a box over the sector with 3-deg soft edges (a unit's
-  own field of view blurs the edge). The darkening is absorbed by the profiled radiance. Base
-  at ``depolarization = 0``.
+- ``occlusion`` (``center_deg``, ``width_deg``, ``depolarization``, ``edge_deg``): a sector of
+  sky azimuth (world frame) blocked by canopy or buildings. What reaches a unit looking into
+  it is foliage-scattered, nearly unpolarized light: its DoP is multiplied by
+  ``1 - depolarization * w(az)``, ``w`` a box over the sector with logistic edges of width
+  ``edge_deg`` (a unit's own field of view blurs the edge over a fraction of its acceptance
+  angle, and a ragged tree line more). The darkening is absorbed by the profiled radiance.
+  Base at ``depolarization = 0``.
 - ``yaw_scale`` (``factor``): the recorded yaw change within a sweep is ``factor`` times the
   true change (a gyro scale-factor error): ``true = y_0 + (y_rec - y_0) / factor``. Base at 1.
 - ``clock_offset`` (``clock_offset_s``): true minus recorded time, from seconds to whole-hour
@@ -238,20 +239,23 @@ def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):
 
 class Occlusion(RingEffect):
     name = "occlusion"
-    names = ("center_deg", "width_deg", "depolarization")
-    units = ("deg", "deg", "1")
-    null = (180.0, 90.0, 0.0)
-    lower = (-720.0, 10.0, 0.0)
-    upper = (1080.0, 300.0, 1.0)
-    prior_sd = (np.inf, np.inf, 1.0)
-    fd_step = (0.2, 0.2, 1e-3)
+    names = ("center_deg", "width_deg", "depolarization", "edge_deg")
+    units = ("deg", "deg", "1", "deg")
+    null = (180.0, 90.0, 0.0, 3.0)
+    lower = (-720.0, 10.0, 0.0, 1.0)
+    upper = (1080.0, 300.0, 1.0, 30.0)
+    prior_sd = (np.inf, np.inf, 1.0, np.inf)
+    fd_step = (0.2, 0.2, 1e-3, 0.05)
+    n_fits: ClassVar[int] = 3
+    """Short fits from this many of the best-scoring distinct starts (a sector near the sun
+    can at first look like the sky's own misfit there)."""
 
     def starts(self, ctx) -> list:
-        return [np.array([c, w, 0.6]) for c in np.arange(0.0, 360.0, 30.0)
+        return [np.array([c, w, 0.6, 3.0]) for c in np.arange(0.0, 360.0, 30.0)
                 for w in (60.0, 120.0, 180.0)]
 
     def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
-        w = occlusion_weight(obs.view_azimuth_deg, p[0], p[1])
+        w = occlusion_weight(obs.view_azimuth_deg, p[0], p[1], p[3])
         return replace(obs, dop=obs.dop * (1.0 - p[2] * w))
 
 

@@ -158,12 +158,14 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
 
 
 def _fit_effect(fe: Forward, starts, sigma):
-    """Fit from each start; the lowest cost wins, ties (:data:`CLOCK_TIE`) go to the start
-    nearest the effect's null (the smaller clock offset)."""
+    """Fit from each start; the lowest cost wins; for the clock offset, ties
+    (:data:`CLOCK_TIE`) go to the start nearest the effect's null (the smaller offset)."""
     if not isinstance(starts, list):
         return fit(fe, starts, sigma=sigma, max_iter=EFFECT_MAX_ITER)
     fits = [fit(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER) for s in starts]
     best = min(f.cost for f in fits)
+    if fe.effect.name != "clock_offset":
+        return min(fits, key=lambda f: f.cost)
     L = fe.layout
     close = [f for f in fits if f.cost <= best * (1 + CLOCK_TIE)]
     return min(close, key=lambda f: float(np.sum(np.abs(f.theta[L.effect]
@@ -172,7 +174,8 @@ def _fit_effect(fe: Forward, starts, sigma):
 
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
-    list of starts for the clock offset, see :func:`_clock_starts`)."""
+    list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
+    ``n_fits > 1``)."""
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
@@ -181,14 +184,22 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         return _extend(theta_base, fwd_base, fwd, starts[0])
     obs0 = fwd_base.observe(theta_base) if not effect.observes else None
     sun = fwd.sun(fwd.inst.t_s)
-    best = (np.inf, None)
+    scored = []
     for p in starts:
         t = _extend(theta_base, fwd_base, fwd, p)
         o = effect.modify(obs0, p, sun) if obs0 is not None else None
-        c = float(np.sum(fwd.residual(t, o) ** 2))
-        if c < best[0]:
-            best = (c, t)
-    return best[1]
+        scored.append((float(np.sum(fwd.residual(t, o) ** 2)), t))
+    scored.sort(key=lambda x: x[0])
+    n_fits = getattr(effect, "n_fits", 1)
+    if n_fits == 1:
+        return scored[0][1]
+    picked = []      # the best starts that differ in their first parameter (a sector centre)
+    for _, t in scored:
+        if all(abs(wrap_deg(t[L.effect][0] - q[L.effect][0])) > 45.0 for q in picked):
+            picked.append(t)
+        if len(picked) == n_fits:
+            break
+    return picked
 
 
 def _sun_el_az(sun: SunTrack, t_s: float):
