@@ -319,6 +319,15 @@ def _no_signal_report(inst, scr, why) -> dict:
             "data": dict(inst.source, readings_excluded=scr.counts)}
 
 
+def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
+    """The base fit again after the screen excluded more readings: ``(work, base, fit,
+    full)`` (the instrument with its exclusions, the thinned and the full forward models)."""
+    work = replace(inst, flagged=~scr.reading_ok)
+    base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
+    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
+    return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
+
+
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
                         seed: int = 0, max_iter: int = 25) -> dict:
     """Diagnose a photodiode instrument (see module doc); returns the report dict."""
@@ -352,20 +361,14 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     full = Forward(work, sun=sun, polarizer_sign=sign)
     scr2 = bright_glare(inst, scr, full.residual(first.theta), full.usable)
     if scr2.bright is not None and scr2.bright.any():
-        work = replace(inst, flagged=~scr2.reading_ok)
-        base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
-        first = fit(base, first.theta, sigma=0.02, max_iter=max_iter)
-        full = Forward(work, sun=sun, polarizer_sign=sign)
+        work, base, first, full = _refit(inst, scr2, first.theta, sun, sign, max_iter)
     scr = scr2
     scr2 = malus_outliers(inst, scr, full.residual(first.theta), full.usable)
     if scr2 is not scr:
         scr = scr2
         if scr.unit_ok.sum() < 2:
             return _no_signal_report(inst, scr, "fewer than two units follow Malus's law")
-        work = replace(inst, flagged=~scr.reading_ok)
-        base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
-        first = fit(base, first.theta, sigma=0.02, max_iter=max_iter)
-        full = Forward(work, sun=sun, polarizer_sign=sign)
+        work, base, first, full = _refit(inst, scr, first.theta, sun, sign, max_iter)
     sigma = max(noise_floor(full.residual(first.theta), full.usable, work.sweep), 1e-4)
 
     shape = work.readings.shape
