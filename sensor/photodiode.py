@@ -65,7 +65,7 @@ from .errors import OpponentErrors
 from .opponent import CHANNEL_ANGLES_DEG, GAIN
 
 __all__ = ["InvalidIntensityError", "SaturatedReadingError", "BelowDarkLevelError",
-           "ELEMENTARY_CHARGE_C", "extinction_factors", "photodiode_signal",
+           "ELEMENTARY_CHARGE_C", "extinction_factors", "photodiode_signal", "malus_signal",
            "opponent_log_ratio", "three_pair_signals", "three_pair_outputs", "shot_noise",
            "check_not_saturated", "check_above_dark", "PhotodiodeChannels"]
 
@@ -175,9 +175,18 @@ def photodiode_signal(intensity, aop_deg, dop, polarizer_deg, *, responsivity=1.
     dark = check_in_range("dark", dark, 0.0, np.inf,
                           hint="A dark current adds to the signal; a negative one is an offset "
                                "error of the readout.")
-    x = np.radians(2.0 * (check_finite("aop_deg", aop_deg)
-                          - check_finite("polarizer_deg", polarizer_deg)))
-    return r * i * k * (1.0 + eta * d * np.cos(x)) + dark
+    return malus_signal(i, check_finite("aop_deg", aop_deg), d,
+                        check_finite("polarizer_deg", polarizer_deg), responsivity=r, dark=dark,
+                        extinction_intensity=k, extinction_efficiency=eta)
+
+
+def malus_signal(intensity, aop_deg, dop, polarizer_deg, *, responsivity=1.0, dark=0.0,
+                 extinction_intensity=1.0, extinction_efficiency=1.0) -> np.ndarray:
+    """The formula of :func:`photodiode_signal` without its input checks, for inner loops
+    (model fits) whose inputs are valid by construction; same arguments, no exceptions."""
+    x = np.radians(2.0 * (np.asarray(aop_deg, float) - polarizer_deg))
+    return (responsivity * intensity * extinction_intensity
+            * (1.0 + extinction_efficiency * dop * np.cos(x)) + dark)
 
 
 def opponent_log_ratio(signal_a, signal_b, *, gain=GAIN, offset_V=0.0) -> np.ndarray:

@@ -2,7 +2,7 @@
 
 Engine-dependent tests skip (with the reason) when sasktran2 is not installed; table tests
 skip when ``../shared/reference`` is absent. Engine results are cached per
-(tau, albedo, mu0) inside the process (``skysim.multiple._fourier_modes_cached``), so the
+(tau, albedo, mu0) inside the process (``skysim.multiple.fourier_modes_cases``), so the
 cases below are shared between tests; each costs one sasktran2 call (~1 s unloaded).
 """
 
@@ -204,9 +204,36 @@ def test_modes_are_cached_per_sun(monkeypatch):
     sky = MultipleScatteringSky(tau=0.25)
     sky.field(30.0, 10.0, MU0_04_ELEVATION, 0.0)  # warm
     calls = []
-    monkeypatch.setattr(m, "transmitted_stokes", lambda *a, **k: calls.append(a))
+    import skysim.rt_sasktran as rt
+    monkeypatch.setattr(rt, "transmitted_stokes_cases", lambda *a, **k: calls.append(a))
     f = sky.field(np.linspace(0, 90, 50), 33.0, MU0_04_ELEVATION, 0.0)
     assert calls == [] and np.all(f.I > 0)
+    assert m.fourier_modes(0.25, 0.0, 0.4) is m.fourier_modes(0.25, 0.0, 0.4)
+
+
+def test_cases_in_one_engine_call_equal_single_cases(monkeypatch):
+    """Each (tau, albedo) is one engine "wavelength", solved on its own: modes computed
+    together equal the single-case modes to rounding (1e-12 of the largest coefficient), and
+    a prefetch for skies of several albedos makes their evaluation cache hits."""
+    needs_engine()
+    import skysim.multiple as m
+    import skysim.rt_sasktran as rt
+    cases = [(0.15, 0.0), (0.15, 0.3), (0.15, 0.6)]
+    m.clear_modes_cache()
+    single = [m.fourier_modes(t, a, 0.55).coefficients for t, a in cases]
+    m.clear_modes_cache()
+    calls = []
+    real = rt.transmitted_stokes_cases
+    monkeypatch.setattr(rt, "transmitted_stokes_cases",
+                        lambda *a, **k: calls.append(len(a[0])) or real(*a, **k))
+    skies = [MultipleScatteringSky(tau=t, albedo=a) for t, a in cases]
+    m.prefetch_modes(skies, np.degrees(np.arcsin(0.55)))
+    together = [s.modes(np.degrees(np.arcsin(0.55))).coefficients for s in skies]
+    assert calls == [3]
+    for a, b in zip(single, together):
+        np.testing.assert_allclose(b, a, rtol=0, atol=1e-12 * np.abs(a).max())
+    with pytest.raises(ValueError, match="differ only in tau and albedo"):
+        m.prefetch_modes([skies[0], MultipleScatteringSky(tau=0.15, n_zenith=13)], 30.0)
 
 
 # ------------------------------------------------------------------ tables (Natraj et al. 2009)

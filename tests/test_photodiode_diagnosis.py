@@ -310,3 +310,27 @@ def test_glare_found_by_brightness_and_excluded(session):
     # the held-out gap after exclusion: within 50 % of the clean session's (the noise floor of
     # integer counts); with the glare readings kept it is ~100x larger (core RMS above)
     assert doc["verdict"]["gap_before"] < 1.5 * clean["verdict"]["gap_before"]
+
+
+@pytest.mark.parametrize("mu0", [0.05, 0.6])
+def test_candidate_engine_streams_within_stated_bound(mu0):
+    """The multiple_scattering candidate runs the engine with FIT_STREAMS (16) streams; its
+    stated bound against the validated 32: DoLP within 1e-3, AoP within 0.06 deg (where
+    DoLP > 0.05), I/I within 3e-3, at the thickest tau (1, the worst case) and both albedo
+    ends, low and high sun. Tolerances: the bound in the docstring, which is itself ten times
+    below a real ring's relative noise."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    from calibration.photodiode_diagnosis.effects import fit_engine_settings
+    from skysim.multiple import FIT_AZIMUTHS_DEG, zenith_nodes_deg
+    from skysim.rt_sasktran import transmitted_stokes_cases
+    mu = np.clip(np.cos(np.radians(zenith_nodes_deg(25))), 0.01, 0.999)
+    M, P = np.meshgrid(mu, FIT_AZIMUTHS_DEG, indexing="ij")
+    args = ([1.0, 1.0], [0.0, 0.6], mu0, M.ravel(), P.ravel())
+    ref = transmitted_stokes_cases(*args)
+    fast = transmitted_stokes_cases(*args, settings=fit_engine_settings())
+    dolp = lambda s: np.hypot(s[..., 1], s[..., 2]) / s[..., 0]          # noqa: E731
+    aop = lambda s: 0.5 * np.degrees(np.arctan2(s[..., 2], s[..., 1]))   # noqa: E731
+    assert np.max(np.abs(fast[..., 0] / ref[..., 0] - 1.0)) <= 3e-3
+    assert np.max(np.abs(dolp(fast) - dolp(ref))) <= 1e-3
+    d_aop = np.abs((aop(fast) - aop(ref) + 90.0) % 180.0 - 90.0)
+    assert np.max(d_aop[dolp(ref) > 0.05]) <= 0.06

@@ -3,7 +3,8 @@
 Geometry (what each unit sees) comes from the project's compound-eye sensor
 (:meth:`sensor.compound_eye.CompoundEyeSensor.observe`) sampling a :class:`skysim.sky.Sky`
 along each unit's view at the body attitude of every sample; the readings from Malus's law of
-the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`):
+the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`, its formula
+without input checks in the fit's inner loop):
 
 ``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - beta_p - delta_u)) + o_p``
 
@@ -41,7 +42,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from sensor.compound_eye import SkySample, body_attitude
-from sensor.photodiode import photodiode_signal
+from sensor.photodiode import malus_signal
 from skysim.sky import RayleighSky, Sky
 from skysim.sun import Site, sun_vector
 
@@ -155,6 +156,7 @@ class Forward:
         self.inst = inst
         self.polarizer_sign = float(polarizer_sign)
         self.heading_override = None
+        self._last_attitude = None
         self.effect = effect
         if effect is not None:
             effect.bind(inst)
@@ -198,7 +200,7 @@ class Forward:
         pitch, roll = inst.pitch_deg, inst.roll_deg
         if e is not None:
             pitch, roll = e.attitude(pitch, roll, pe)
-        att = body_attitude(self.headings(theta), pitch, roll)
+        att = self._attitude(self.headings(theta), pitch, roll)
         sun = self.sun(t)
         sky = self._sky if e is None else e.sky(pe, self._sky, sun)
         sensor = self.pointed_sensor(theta)
@@ -206,6 +208,18 @@ class Forward:
             return e.observe(sensor, sky, att, sun, pe)
         obs = sensor.observe(sky, att, sun)
         return obs if e is None else e.modify(obs, pe, sun)
+
+    def _attitude(self, heading, pitch, roll):
+        """:func:`body_attitude`, remembered for the last headings and tilt (a fit's steps in
+        the pointing, polarization or effect parameters leave them unchanged)."""
+        key = (np.asarray(heading, float), np.asarray(pitch, float), np.asarray(roll, float))
+        last = self._last_attitude
+        if last is not None and all(a.shape == b.shape and np.array_equal(a, b)
+                                    for a, b in zip(key, last[0])):
+            return last[1]
+        att = body_attitude(*key)
+        self._last_attitude = (tuple(a.copy() for a in key), att)
+        return att
 
     def pointed_sensor(self, theta):
         """The sensor with every unit's axis at its nominal elevation and azimuth plus the
@@ -226,8 +240,8 @@ class Forward:
         u = inst.pd_unit
         d = np.clip(theta[L.scale] * obs.dop[:, u], 0.0, 0.999)
         angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
-        return photodiode_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
-                                 responsivity=np.exp(theta[L.lam]))
+        return malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
+                            responsivity=np.exp(theta[L.lam]))
 
     def predict(self, theta, obs: SkySample):
         """Predicted readings (n, P) in session-median units and the profiled radiance (n, U)."""

@@ -108,7 +108,7 @@ def test_calibration_1000_samples(benchmark):
 
 
 def test_reproduction_200_trials(benchmark):
-    benchmark.extra_info["goal_s"] = 30
+    benchmark.extra_info["goal"] = {"max_s": 30}
     res = benchmark.pedantic(run, kwargs={"trials": 200, "progress": False}, rounds=1,
                              iterations=1)
     assert len(res["table1"]) == 9

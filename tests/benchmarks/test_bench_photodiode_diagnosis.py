@@ -34,7 +34,8 @@ def test_photodiode_base_only_baseline(benchmark, session):
 
 @pytest.mark.benchmark(group="photodiode diagnosis 5k x 32")
 def test_photodiode_all_candidates(benchmark, session):
-    benchmark.extra_info.update(items=len(session.table), candidates=len(RING_EFFECT_NAMES))
+    benchmark.extra_info.update(items=len(session.table), candidates=len(RING_EFFECT_NAMES),
+                                goal={"max_s": 60})
     doc = benchmark.pedantic(diagnose_photodiodes, args=(session, RING_EFFECT_NAMES), rounds=1,
                              iterations=1)
     assert len(doc["candidates"]) == len(RING_EFFECT_NAMES)

@@ -47,7 +47,7 @@ def test_engine_per_direction_baseline(benchmark):
 def test_map_10k_cold(benchmark):
     """One engine call (125 rays) + fit + spline evaluation; cache cleared before each round."""
     benchmark.extra_info.update(items=EL.size, baseline="test_engine_per_direction_baseline")
-    f = benchmark.pedantic(_map, setup=multiple._fourier_modes_cached.cache_clear, rounds=3,
+    f = benchmark.pedantic(_map, setup=multiple.clear_modes_cache, rounds=3,
                            iterations=1)
     assert f.I.shape == (10_000,) and np.all(f.I > 0)
 
