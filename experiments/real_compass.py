@@ -63,6 +63,8 @@ def session_row(name: str, doc: dict) -> dict:
             "shrink": best.get("shrink"),
             "params": _params_text(best.get("params", {})),
             "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
+            "unit_elevation_offset_deg": (doc.get("base_fit") or {}).get(
+                "elevation_offset_mean_deg"),
             "top_where": "; ".join(f"{w['dimension']}={w['label']} ({100 * w['share']:.0f}%)"
                                    for w in doc["where"][:3])}
 
@@ -110,7 +112,8 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
 
 def _table_md(table: pd.DataFrame) -> str:
     cols = ["session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best", "gap_best",
-            "shrink", "params", "heading_rms_base_deg", "heading_rms_best_deg"]
+            "shrink", "params", "heading_rms_base_deg", "heading_rms_best_deg",
+            "unit_elevation_offset_deg"]
     cols = [c for c in cols if c in table.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
@@ -129,21 +132,28 @@ def plot_day(table: pd.DataFrame, path: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
     t = table.dropna(subset=["gap_base"]) if "gap_base" in table else table.iloc[:0]
-    fig, ax = plt.subplots(1, 2, figsize=(10, 4), constrained_layout=True)
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4), constrained_layout=True)
     if len(t):
         x = t["sun_elevation_deg"]
         ax[0].plot(x, 100 * t["gap_base"], "o", label="base model")
         ax[0].plot(x, 100 * t["gap_best"].astype(float), "s", label="best candidate")
         ax[1].plot(x, t["heading_rms_base_deg"], "o", label="base model")
         ax[1].plot(x, t["heading_rms_best_deg"].astype(float), "s", label="best candidate")
+        if "unit_elevation_offset_deg" in t:
+            ax[2].plot(x, t["unit_elevation_offset_deg"].astype(float), "o",
+                       label="base model, mean over units")
     ax[0].set_xlabel("sun elevation [deg]")
     ax[0].set_ylabel("held-out gap [% of unit mean reading]")
     ax[1].set_xlabel("sun elevation [deg]")
     ax[1].set_ylabel("heading error, RMS [deg]")
+    ax[2].axhline(0.0, color="0.5", lw=0.8)
+    ax[2].set_xlabel("sun elevation [deg]")
+    ax[2].set_ylabel("fitted unit elevation offset [deg]")
+    ax[2].set_title("a mounting error would not follow the sun", fontsize=9)
     for a in ax:
         a.legend()
         a.grid(alpha=0.3)
-    fig.suptitle("Ring compass over the day: held-out gap and heading error")
+    fig.suptitle("Ring compass over the day: held-out gap, heading error and fitted pointing")
     atomic_write(path, lambda p: fig.savefig(p, dpi=110, format="png"))
     plt.close(fig)
 

@@ -504,17 +504,29 @@ def _assemble_headings(heads, inst):
 
 
 def _base_fit_report(theta, L, fwd, inst, sign):
+    """The base fit's parameters by unit and photodiode; ``None`` for those the screen
+    excluded (they were never fitted)."""
+    pd_fitted = fwd.usable.any(axis=0)
+    unit_fitted = np.zeros(L.n_units, bool)
+    unit_fitted[inst.pd_unit[pd_fitted]] = True
+
+    def per_unit(values):
+        return {f"u{u}": float(d) if unit_fitted[u] else None for u, d in enumerate(values)}
+
+    def per_pd(values, f=float):
+        return {c: f(v) if ok else None for c, v, ok in zip(inst.columns, values, pd_fitted)}
+
+    el = theta[L.pointing][:L.n_units]
     return {"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
             "dop_scale": float(theta[L.scale]),
-            "polarizer_offset_deg": {f"u{u}": float(d) for u, d in enumerate(theta[L.delta])},
-            "polarizer_angle_deviation_deg": {c: float(b) for c, b in
-                                              zip(inst.columns, theta[L.angle])},
-            "elevation_offset_deg": {f"u{u}": float(d) for u, d in
-                                     enumerate(theta[L.pointing][:L.n_units])},
-            "azimuth_offset_deg": {f"u{u}": float(d) for u, d in
-                                   enumerate(theta[L.pointing][L.n_units:])},
-            "gain": {c: float(np.exp(g)) for c, g in zip(inst.columns, theta[L.lam])},
-            "offset": {c: float(o * fwd.level) for c, o in zip(inst.columns, theta[L.off])},
+            "polarizer_offset_deg": per_unit(theta[L.delta]),
+            "polarizer_angle_deviation_deg": per_pd(theta[L.angle]),
+            "elevation_offset_deg": per_unit(el),
+            "elevation_offset_mean_deg": (float(np.mean(el[unit_fitted])) if unit_fitted.any()
+                                          else None),
+            "azimuth_offset_deg": per_unit(theta[L.pointing][L.n_units:]),
+            "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g))),
+            "offset": per_pd(theta[L.off], lambda o: float(o * fwd.level)),
             "heading_offset_deg": [float(h) for h in theta[L.heading]]}
 
 
