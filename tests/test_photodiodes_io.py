@@ -135,6 +135,36 @@ def test_malformed_sidecar(key, value, match):
         PhotodiodeData(_table(), side)
 
 
+@pytest.mark.parametrize("site,match", [
+    ("Sardinia", "'site' must give the numbers latitude_deg.*got 'Sardinia'"),
+    ({"latitude_deg": 39.2}, "'site' must give the numbers.*got {'latitude_deg': 39.2}"),
+    ({"latitude_deg": 39.2, "longitude_deg": None}, "'longitude_deg': None"),
+    ({"latitude_deg": 39.2, "longitude_deg": 8.4, "altitude_m": "sea"}, "'altitude_m': 'sea'"),
+])
+def test_malformed_site(site, match):
+    side = _sidecar()
+    side["site"] = site
+    with pytest.raises(PhotodiodeFormatError, match=match):
+        PhotodiodeData(_table(), side)
+
+
+@pytest.mark.parametrize("key,value,match", [
+    ("elevation_deg", "high", "unit 1 elevation_deg must be a finite number.*got 'high'"),
+    ("elevation_deg", None, "unit 1 elevation_deg must be a finite number.*got None"),
+    ("azimuth_deg", "east", "unit 1 azimuth_deg must be a finite number.*got 'east'"),
+    ("azimuth_deg", float("nan"), "unit 1 azimuth_deg must be a finite number.*got nan"),
+    ("photodiodes", 4, "unit 1 photodiodes must be a list of polarizer angles.*got 4"),
+    ("photodiodes", "0,45,90,135", "unit 1 photodiodes must be a list.*got '0,45,90,135'"),
+    ("photodiodes", [0, 45, None, 135], r"got \[0, 45, None, 135\]"),
+])
+def test_malformed_unit_values(key, value, match):
+    """A hand-edited sidecar's unit value of the wrong type is named, with its unit."""
+    side = _sidecar()
+    side["units"][1][key] = value
+    with pytest.raises(PhotodiodeFormatError, match=match):
+        PhotodiodeData(_table(), side)
+
+
 def test_missing_site_and_missing_sidecar(tmp_path):
     side = _sidecar()
     del side["site"]
