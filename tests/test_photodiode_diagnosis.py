@@ -225,6 +225,24 @@ def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
     assert main(["diagnose", str(path), "--effects", "nope"]) == 2
 
 
+@pytest.mark.parametrize("units", [{"a": 1}, [{"azimuth_deg": 0, "elevation_deg": 45,
+                                                "photodiodes": 4}],
+                                   [{"azimuth_deg": 0, "elevation_deg": 45,
+                                     "photodiodes": [0, None, 90]}]])
+def test_diagnose_command_names_malformed_units(tmp_path, session, capsys, units):
+    """A malformed sidecar ``units`` is the reader's one-line error, not a crash of the
+    three-pair-sensor check that picks the diagnosis."""
+    from experiments.cli import main
+    side = dict(session.sidecar, units=units)
+    assert not is_three_pair_sensor(side)
+    path = tmp_path / "ring.csv"
+    session.write(path)
+    path.with_name("ring.csv.json").write_text(json.dumps(side))
+    assert main(["diagnose", str(path), "--effects", "yaw_scale"]) == 2
+    err = capsys.readouterr().err
+    assert "internal error" not in err and "unit" in err and "photodiodes" in err
+
+
 def test_injector_does_what_it_says(session):
     """The blind-check injector (shares only the physics library with the fitter)."""
     rng = np.random.default_rng(0)
