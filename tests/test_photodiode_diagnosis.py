@@ -190,6 +190,23 @@ def test_bad_input(session):
     assert not is_three_pair_sensor(session.sidecar)
 
 
+def test_sweep_shorter_than_the_thinning_step():
+    """A sweep of one sample (an aborted recording) between two long ones: the fits use
+    every k-th sample, which skips it, yet its heading offset is a parameter of the full
+    model; the thinning keeps one sample of every sweep."""
+    from calibration.photodiode_diagnosis.run import _thin
+    data = ring_session(n_sweeps=4, per_sweep=600)
+    t = data.table
+    keep = ((t["sweep"] != 1) | (t.index == 600)) & (t.index != 0)   # sweep 1: one sample
+    data = PhotodiodeData(t[keep].reset_index(drop=True), data.sidecar)
+    inst = instrument_from_photodiodes(data)
+    assert inst.n == 1800 and inst.n_sweeps == 4 and np.flatnonzero(inst.sweep == 1) == [599]
+    thin = _thin(inst)                                   # every 2nd sample skips row 599
+    assert thin.n_sweeps == 4 and thin.n == 901
+    doc = diagnose_photodiodes(data, ("yaw_scale",), n_folds=2)
+    assert doc["data"]["sweeps"] == 4 and len(doc["base_fit"]["heading_offset_deg"]) == 4
+
+
 @pytest.mark.skipif(not REAL.is_dir(), reason="reference recordings ../shared/reference/"
                     "gkanias2023 not present")
 def test_real_session_faults():

@@ -46,8 +46,16 @@ start, so its descent is short); a fit stopped here is reported ``converged: fal
 
 
 def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
+    """Every k-th sample (about ``target`` remain), and the first sample of any sweep shorter
+    than k that this skips: each sweep keeps its heading offset, so the thinned fit has the
+    same parameters as the full model."""
     k = max(1, int(np.ceil(inst.n / target)))
-    return inst if k == 1 else inst.subset(np.arange(0, inst.n, k))
+    if k == 1:
+        return inst
+    rows = np.arange(0, inst.n, k)
+    ids, first = np.unique(inst.sweep, return_index=True)
+    missed = first[~np.isin(ids, inst.sweep[rows])]
+    return inst.subset(np.union1d(rows, missed) if missed.size else rows)
 
 
 def held_out_folds(sweep, n_folds: int) -> np.ndarray:
