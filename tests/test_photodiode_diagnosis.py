@@ -260,6 +260,25 @@ def test_diagnose_command_names_malformed_units(tmp_path, session, capsys, units
     assert "internal error" not in err and "unit" in err and "photodiodes" in err
 
 
+@pytest.mark.parametrize("text,match", [
+    ("{bad", "not valid JSON"), ("[1, 2]", "must be a JSON object; got list"),
+    (None, "schema 'skysim.photodiodes/2' is neither"),
+])
+def test_diagnose_command_reports_a_broken_sidecar_before_the_effects(tmp_path, session,
+                                                                     capsys, text, match):
+    """A sidecar that is not JSON, not an object or of another schema is the error shown,
+    not an 'unknown effect' for a ring candidate checked against the wrong instrument."""
+    from experiments.cli import main
+    path = tmp_path / "ring.csv"
+    session.write(path)
+    if text is None:
+        text = json.dumps(dict(session.sidecar, schema="skysim.photodiodes/2"))
+    path.with_name("ring.csv.json").write_text(text)
+    assert main(["diagnose", str(path), "--effects", "yaw_scale"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "unknown effect" not in err
+
+
 def test_injector_does_what_it_says(session):
     """The blind-check injector (shares only the physics library with the fitter)."""
     rng = np.random.default_rng(0)
