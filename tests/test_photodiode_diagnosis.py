@@ -190,6 +190,18 @@ def test_bad_input(session):
     assert not is_three_pair_sensor(session.sidecar)
 
 
+def test_rows_out_of_time_order_are_put_in_time_order(session):
+    """A logger that writes its buffers out of order: the turn, the sweeps and the noise
+    floor are read along the samples, so the adapter sorts them by time (stably) and the
+    diagnosis sees the same instrument as from the sorted file."""
+    t = session.table.sample(frac=1.0, random_state=3).reset_index(drop=True)
+    shuffled = instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+    inst = instrument_from_photodiodes(session)
+    assert np.all(np.diff(shuffled.t_s) >= 0)
+    for name in ("t_s", "yaw_deg", "sweep", "rotating", "readings", "flagged"):
+        np.testing.assert_array_equal(getattr(shuffled, name), getattr(inst, name), err_msg=name)
+
+
 def test_sweep_shorter_than_the_thinning_step():
     """A sweep of one sample (an aborted recording) between two long ones: the fits use
     every k-th sample, which skips it, yet its heading offset is a parameter of the full

@@ -4,7 +4,9 @@ Any multi-unit instrument: N units x M photodiodes, any unit azimuth/elevation, 
 angles, counts or volts, absolute or relative yaw in either sense. The adapter converts the
 yaw to the project's heading convention (clockwise from north, unwrapped along each sweep so
 that a turn stays one continuous angle), finds the sweeps and whether the platform is turning,
-and keeps the reader's per-reading flags. It never drops a sample.
+and keeps the reader's per-reading flags. It never drops a sample; rows written out of time
+order are put in time order (a stable sort: samples with equal times keep the file's order),
+because the turn, the sweeps and the noise floor are read along the sample sequence.
 """
 
 from __future__ import annotations
@@ -37,7 +39,8 @@ class Instrument:
         Nominal geometry from the sidecar (unit views and polarizer angles).
     site : Site
     t_s : ndarray (n,)
-        Recorded sample times [s since 1970-01-01 UTC].
+        Recorded sample times [s since 1970-01-01 UTC], in time order (the other per-sample
+        arrays follow the same order).
     yaw_deg : ndarray (n,)
         Recorded yaw converted to clockwise [deg], unwrapped within each sweep.
     sweep : ndarray (n,) of int
@@ -157,9 +160,14 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         raise InstrumentDataError(f"{where}: yaw_deg is not a finite number in row {row} "
                                   f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
                                   "sample is needed")
+    t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
+    readings, flagged = data.readings, data.flags.bad.copy()
+    if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
+        order = np.argsort(t_s, kind="stable")
+        table, yaw, t_s = table.iloc[order].reset_index(drop=True), yaw[order], t_s[order]
+        readings, flagged = readings[order], flagged[order]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
-    t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
     sweep = _sweeps(table, t_s)
     if np.unique(sweep).size < 2:
         raise InsufficientDataError(
@@ -180,8 +188,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     return Instrument(
         sensor=sensor, site=data.site, t_s=t_s, yaw_deg=yaw, sweep=sweep,
         rotating=_rotating(yaw, sweep), pitch_deg=att["pitch_deg"], roll_deg=att["roll_deg"],
-        readings=data.readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
-        columns=list(data.columns), flagged=data.flags.bad.copy(),
+        readings=readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
+        columns=list(data.columns), flagged=flagged,
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
         source={"path": where, "schema": data.sidecar["schema"],
                 "readings": data.sidecar["readings"], "samples": int(len(table)),
