@@ -202,6 +202,17 @@ def test_rows_out_of_time_order_are_put_in_time_order(session):
         np.testing.assert_array_equal(getattr(shuffled, name), getattr(inst, name), err_msg=name)
 
 
+def test_clock_glitch_in_one_row(session):
+    """One sample stamped 2000-01-01 (a reset real-time clock) in a 2022 session is named
+    with its row; before, the sun's track was built over the 22 years between them (minutes
+    and gigabytes) and the glitched sample fitted as if it belonged to the session."""
+    t = session.table.copy()
+    t.loc[7, "time"] = pd.Timestamp("2000-01-01T12:00:00+00:00")
+    with pytest.raises(InstrumentDataError, match=r"time 2000-01-01 14:00:00\+02:00 in row 7 "
+                                                  r"is 8\d{3}\.\d days from the session"):
+        instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+
+
 def test_sweep_shorter_than_the_thinning_step():
     """A sweep of one sample (an aborted recording) between two long ones: the fits use
     every k-th sample, which skips it, yet its heading offset is a parameter of the full

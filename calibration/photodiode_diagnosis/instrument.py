@@ -21,7 +21,14 @@ from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError
 
-__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "instrument_from_photodiodes"]
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS",
+           "instrument_from_photodiodes"]
+
+MAX_SPAN_DAYS = 7.0
+"""Samples farther than this from the file's median time are not of the same session [days]:
+the fit shares the instrument's gains, offsets and the sky's DoP scale over the whole file,
+and such a sample is a clock glitch (an unset or reset real-time clock reads 1970 or 2000),
+which would also make the sun's track span decades."""
 
 ROTATING_RATE_DEG_PER_SAMPLE = 0.2
 """A sample is *rotating* when the yaw changes by more than this per sample [deg] (median over
@@ -149,7 +156,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     Raises
     ------
     InstrumentDataError
-        For a yaw that is not a finite number, an empty sweep label, or a unit without columns.
+        For a yaw that is not a finite number, a time more than :data:`MAX_SPAN_DAYS` from
+        the session's median time, an empty sweep label, or a unit without columns.
     InsufficientDataError
         With fewer than two sweeps (a held-out split needs whole sweeps).
     """
@@ -161,6 +169,14 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                                   f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
                                   "sample is needed")
     t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
+    if t_s.size:
+        far = np.abs(t_s - np.median(t_s)) / 86400.0
+        if far.max() > MAX_SPAN_DAYS:
+            row = int(np.argmax(far))
+            raise InstrumentDataError(
+                f"{where}: time {table['time'].iloc[row]} in row {row} is {far[row]:.1f} days "
+                f"from the session's median time; samples more than {MAX_SPAN_DAYS:g} days "
+                "apart are not one session (a clock glitch?): fix or drop that row")
     readings, flagged = data.readings, data.flags.bad.copy()
     if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
         order = np.argsort(t_s, kind="stable")
