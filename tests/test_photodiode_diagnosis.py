@@ -213,6 +213,19 @@ def test_clock_glitch_in_one_row(session):
         instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
 
 
+def test_training_sweeps_without_usable_readings():
+    """A recording with the sensor unplugged (every reading of one sweep missing) and two
+    sweeps: the fold that trains on it has nothing to fit, and its held-out gap would be the
+    unfitted model's; named as too little data, with the empty sweep."""
+    from calibration.diagnosis import InsufficientDataError
+    data = ring_session(n_sweeps=2, per_sweep=60)
+    t = data.table.copy()
+    t.loc[t["sweep"] == 1, data.columns] = np.nan
+    with pytest.raises(InsufficientDataError, match=r"held-out fold 0: its training sweeps hold "
+                                                    r"0 usable readings.*sweeps \[1\]"):
+        diagnose_photodiodes(PhotodiodeData(t, data.sidecar), ("yaw_scale",), n_folds=2)
+
+
 def test_sweep_shorter_than_the_thinning_step():
     """A sweep of one sample (an aborted recording) between two long ones: the fits use
     every k-th sample, which skips it, yet its heading offset is a parameter of the full
