@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from calibration.diagnosis import InsufficientDataError
 from calibration.photodiode_diagnosis import (
     InstrumentDataError,
     SunTooLowError,
@@ -200,6 +201,16 @@ def test_rows_out_of_time_order_are_put_in_time_order(session):
     assert np.all(np.diff(shuffled.t_s) >= 0)
     for name in ("t_s", "yaw_deg", "sweep", "rotating", "readings", "flagged"):
         np.testing.assert_array_equal(getattr(shuffled, name), getattr(inst, name), err_msg=name)
+    t["sweep"] = t["sweep"].astype(float)
+    t.loc[4, "sweep"] = np.nan                      # messages name the row of the file
+    with pytest.raises(InstrumentDataError, match="column 'sweep' is empty in row 4;"):
+        instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+
+
+def test_empty_table_says_so(session):
+    with pytest.raises(InsufficientDataError, match="no samples; the diagnosis fits"):
+        instrument_from_photodiodes(PhotodiodeData(session.table.iloc[:0].copy(),
+                                                   session.sidecar))
 
 
 def test_clock_glitch_in_one_row(session):
@@ -217,7 +228,6 @@ def test_training_sweeps_without_usable_readings():
     """A recording with the sensor unplugged (every reading of one sweep missing) and two
     sweeps: the fold that trains on it has nothing to fit, and its held-out gap would be the
     unfitted model's; named as too little data, with the empty sweep."""
-    from calibration.diagnosis import InsufficientDataError
     data = ring_session(n_sweeps=2, per_sweep=60)
     t = data.table.copy()
     t.loc[t["sweep"] == 1, data.columns] = np.nan

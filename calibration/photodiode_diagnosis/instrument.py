@@ -116,13 +116,14 @@ class Instrument:
                           self.source)
 
 
-def _sweeps(table, t_s: np.ndarray) -> np.ndarray:
+def _sweeps(table, t_s: np.ndarray, rows: np.ndarray, where: str) -> np.ndarray:
+    """Sweep index of every sample; ``rows`` (the file row of each sample) for messages."""
     if "sweep" in table.columns:
         raw = table["sweep"].to_numpy()
         if table["sweep"].isna().any():
-            row = int(np.flatnonzero(table["sweep"].isna().to_numpy())[0])
-            raise InstrumentDataError(f"column 'sweep' is empty in row {row}; give every "
-                                      "sample its sweep or drop the column")
+            row = int(rows[np.flatnonzero(table["sweep"].isna().to_numpy())[0]])
+            raise InstrumentDataError(f"{where}: column 'sweep' is empty in row {row}; give "
+                                      "every sample its sweep or drop the column")
         # sweeps in order of first appearance
         _, first, inv = np.unique(raw, return_index=True, return_inverse=True)
         order = np.argsort(np.argsort(first))
@@ -178,17 +179,19 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                 f"from the session's median time; samples more than {MAX_SPAN_DAYS:g} days "
                 "apart are not one session (a clock glitch?): fix or drop that row")
     readings, flagged = data.readings, data.flags.bad.copy()
+    rows = np.arange(len(table))
     if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
-        order = np.argsort(t_s, kind="stable")
-        table, yaw, t_s = table.iloc[order].reset_index(drop=True), yaw[order], t_s[order]
-        readings, flagged = readings[order], flagged[order]
+        rows = np.argsort(t_s, kind="stable")
+        table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
+        readings, flagged = readings[rows], flagged[rows]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
-    sweep = _sweeps(table, t_s)
+    sweep = _sweeps(table, t_s, rows, where)
     if np.unique(sweep).size < 2:
+        found = "no samples" if len(table) == 0 else f"only one sweep in {len(table)} samples"
         raise InsufficientDataError(
-            f"{where}: only one sweep in {len(table)} samples; the diagnosis fits on some "
-            "sweeps and scores on held-out ones: record at least two (column 'sweep')")
+            f"{where}: {found}; the diagnosis fits on some sweeps and scores on held-out ones: "
+            "record at least two (column 'sweep')")
     yaw = _unwrap_per_sweep(yaw, sweep)
     att = {}
     for c in ("pitch_deg", "roll_deg"):
