@@ -23,7 +23,9 @@ __all__ = ["MEASUREMENT_SCHEMA", "REQUIRED_COLUMNS", "CHANNEL_COLUMNS", "Measure
 MEASUREMENT_SCHEMA = "skysim.measurement/1"
 CHANNEL_COLUMNS = ("U1_V", "U2_V", "U3_V")
 REQUIRED_COLUMNS = ("time", "heading_deg") + CHANNEL_COLUMNS
-_OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d)$"
+_OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d|:\d\d(?:\.\d+)?[+-]\d\d)$"
+"""A UTC offset ending an ISO 8601 time: ``Z``, ``+hh:mm``, ``+hhmm``, or ``+hh`` right after
+the time of day (so that the day of a bare date, ``2013-05-22``, is not read as an offset)."""
 
 
 class MeasurementFormatError(ValueError):

@@ -191,6 +191,21 @@ def test_bad_table_values(tmp_path):
         PhotodiodeData(table, _sidecar())
 
 
+def test_times_with_an_hour_only_offset(tmp_path):
+    """ISO 8601 allows an offset of whole hours, ``+02``; it was refused as 'no UTC offset'.
+    A bare date still has none (its day is not an offset)."""
+    table = _table()
+    path = tmp_path / "x.csv"
+    table.assign(time=table["time"].dt.strftime("%Y-%m-%dT%H:%M:%S+08")).to_csv(path,
+                                                                              index=False)
+    sidecar_path(path).write_text(json.dumps(_sidecar()))
+    assert (read_photodiodes(path).table["time"] == table["time"]).all()
+    table = _table()
+    table["time"] = table["time"].dt.strftime("%Y-%m-%d")
+    with pytest.raises(PhotodiodeFormatError, match="time '2020-06-15' in row 0 has no UTC"):
+        PhotodiodeData(table, _sidecar())
+
+
 def test_atomic_writer_leaves_nothing_on_failure(tmp_path):
     data = PhotodiodeData(_table(), _sidecar())
     with pytest.raises(ValueError, match="unsupported extension"):
