@@ -17,7 +17,6 @@ file) and, per sample, repeated timestamps.
 
 from __future__ import annotations
 
-import numbers
 import re
 from dataclasses import dataclass
 from pathlib import Path
@@ -216,9 +215,13 @@ def _require(cond: bool, where: str, message: str):
 
 
 def _is_number(value) -> bool:
-    """True for a finite real number (not a bool, not a string)."""
-    return (isinstance(value, numbers.Real) and not isinstance(value, bool)
-            and bool(np.isfinite(value)))
+    """True for a finite number, or text that reads as one (``"45"``); not a bool."""
+    if isinstance(value, bool):
+        return False
+    try:
+        return bool(np.isfinite(float(value)))
+    except (TypeError, ValueError, OverflowError):
+        return False
 
 
 def _validate_sidecar(sidecar: dict, where: str) -> None:

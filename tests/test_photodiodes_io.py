@@ -165,6 +165,14 @@ def test_malformed_unit_values(key, value, match):
         PhotodiodeData(_table(), side)
 
 
+def test_unit_values_as_numeric_text_still_read():
+    side = _sidecar()
+    side["units"][1].update(azimuth_deg="90", elevation_deg="45.0",
+                            photodiodes=["0", "45", "90", "135"])
+    assert PhotodiodeData(_table(), side).columns[4:] == ["u1_p000", "u1_p045", "u1_p090",
+                                                          "u1_p135"]
+
+
 def test_missing_site_and_missing_sidecar(tmp_path):
     side = _sidecar()
     del side["site"]
