@@ -38,6 +38,11 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
         if getattr(values.dt, "tz", None) is None:
             raise MeasurementFormatError(f"{where}: column 'time' is timezone-naive")
         return values
+    if values.isna().any():
+        row = int(np.flatnonzero(values.isna().to_numpy())[0])
+        raise MeasurementFormatError(
+            f"{where}: time is empty in row {row}; every sample needs its ISO 8601 time with "
+            "offset, e.g. 2013-05-22T17:10:00+08:00")
     s = values.astype(str)
     ok = s.str.contains(_OFFSET_RE, regex=True)
     if not ok.all():

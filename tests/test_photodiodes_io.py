@@ -214,6 +214,20 @@ def test_times_with_an_hour_only_offset(tmp_path):
         PhotodiodeData(table, _sidecar())
 
 
+def test_empty_time_cell_is_named(tmp_path):
+    """An empty time cell (a truncated last line) was reported as "time nan ... has no UTC
+    offset"."""
+    table = _table()
+    path = tmp_path / "x.csv"
+    table.assign(time=table["time"].astype(str)).to_csv(path, index=False)
+    lines = path.read_text().splitlines()
+    lines[4] = "," + lines[4].split(",", 1)[1]                    # data row 3 without a time
+    path.write_text("\n".join(lines) + "\n")
+    sidecar_path(path).write_text(json.dumps(_sidecar()))
+    with pytest.raises(PhotodiodeFormatError, match="time is empty in row 3;"):
+        read_photodiodes(path)
+
+
 def test_atomic_writer_leaves_nothing_on_failure(tmp_path):
     data = PhotodiodeData(_table(), _sidecar())
     with pytest.raises(ValueError, match="unsupported extension"):
