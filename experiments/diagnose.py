@@ -500,8 +500,8 @@ def _diagnose_cmd(args) -> int:
     from calibration.diagnosis import load_diagnosis_data
     if _photodiode_instrument(args.data):
         return _diagnose_photodiodes_cmd(args)
+    data = load_diagnosis_data(args.data)   # first: a broken sidecar is the error to report
     effects = _effects_arg(args.effects)
-    data = load_diagnosis_data(args.data)
     doc = diagnose(data, effects, n_folds=args.folds, seed=args.seed)
     out, _ = _write_diagnosis(args, doc, diagnosis_markdown, plot_diagnosis)
     v = doc["verdict"]

@@ -23,7 +23,9 @@ __all__ = ["MEASUREMENT_SCHEMA", "REQUIRED_COLUMNS", "CHANNEL_COLUMNS", "Measure
 MEASUREMENT_SCHEMA = "skysim.measurement/1"
 CHANNEL_COLUMNS = ("U1_V", "U2_V", "U3_V")
 REQUIRED_COLUMNS = ("time", "heading_deg") + CHANNEL_COLUMNS
-_OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d)$"
+_OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d|:\d\d(?:\.\d+)?[+-]\d\d)$"
+"""A UTC offset ending an ISO 8601 time: ``Z``, ``+hh:mm``, ``+hhmm``, or ``+hh`` right after
+the time of day (so that the day of a bare date, ``2013-05-22``, is not read as an offset)."""
 
 
 class MeasurementFormatError(ValueError):
@@ -36,6 +38,11 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
         if getattr(values.dt, "tz", None) is None:
             raise MeasurementFormatError(f"{where}: column 'time' is timezone-naive")
         return values
+    if values.isna().any():
+        row = int(np.flatnonzero(values.isna().to_numpy())[0])
+        raise MeasurementFormatError(
+            f"{where}: time is empty in row {row}; every sample needs its ISO 8601 time with "
+            "offset, e.g. 2013-05-22T17:10:00+08:00")
     s = values.astype(str)
     ok = s.str.contains(_OFFSET_RE, regex=True)
     if not ok.all():

@@ -214,12 +214,28 @@ def _require(cond: bool, where: str, message: str):
         raise PhotodiodeFormatError(f"{where}: {message}")
 
 
+def _is_number(value) -> bool:
+    """True for a finite number, or text that reads as one (``"45"``); not a bool."""
+    if isinstance(value, bool):
+        return False
+    try:
+        return bool(np.isfinite(float(value)))
+    except (TypeError, ValueError, OverflowError):
+        return False
+
+
 def _validate_sidecar(sidecar: dict, where: str) -> None:
     _require(isinstance(sidecar, dict), where, "sidecar must be a JSON object")
     _require(sidecar.get("schema") == PHOTODIODES_SCHEMA, where,
              f"sidecar schema is {sidecar.get('schema')!r}, expected {PHOTODIODES_SCHEMA!r}")
     _require("site" in sidecar, where, "sidecar has no 'site' (latitude_deg, longitude_deg, "
              "altitude_m); the sun position cannot be computed without it")
+    site = sidecar["site"]
+    _require(isinstance(site, dict) and all(_is_number(site.get(k)) for k in
+                                            ("latitude_deg", "longitude_deg"))
+             and _is_number(site.get("altitude_m", 0.0)), where,
+             f"sidecar 'site' must give the numbers latitude_deg, longitude_deg (and "
+             f"altitude_m) [deg, m]; got {site!r}")
     for key, valid in (("yaw_reference", _YAW_REFERENCES), ("yaw_sense", _YAW_SENSES),
                        ("readings", _READINGS)):
         _require(sidecar.get(key) in valid, where,
@@ -235,8 +251,15 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
     for i, u in enumerate(units):
         _require(isinstance(u, dict) and {"azimuth_deg", "elevation_deg", "photodiodes"} <= set(u),
                  where, f"unit {i} must give azimuth_deg, elevation_deg and photodiodes; got {u!r}")
+        for key in ("azimuth_deg", "elevation_deg"):
+            _require(_is_number(u[key]), where,
+                     f"unit {i} {key} must be a finite number [deg]; got {u[key]!r}")
         _require(-90.0 <= float(u["elevation_deg"]) <= 90.0, where,
                  f"unit {i} elevation_deg {u['elevation_deg']!r} is outside [-90, 90]")
+        _require(isinstance(u["photodiodes"], list)
+                 and all(_is_number(a) for a in u["photodiodes"]), where,
+                 f"unit {i} photodiodes must be a list of polarizer angles [deg]; "
+                 f"got {u['photodiodes']!r}")
         pds = list(u["photodiodes"])
         _require(len(pds) >= 3 and len({float(a) % 180 for a in pds}) >= 3, where,
                  f"unit {i} needs at least 3 photodiodes at distinct polarizer angles (mod 180) "

@@ -16,6 +16,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
+from calibration.diagnosis import InsufficientDataError
 from calibration.photodiode_diagnosis import (
     InstrumentDataError,
     SunTooLowError,
@@ -190,6 +191,68 @@ def test_bad_input(session):
     assert not is_three_pair_sensor(session.sidecar)
 
 
+def test_rows_out_of_time_order_are_put_in_time_order(session):
+    """A logger that writes its buffers out of order: the turn, the sweeps and the noise
+    floor are read along the samples, so the adapter sorts them by time (stably) and the
+    diagnosis sees the same instrument as from the sorted file."""
+    t = session.table.sample(frac=1.0, random_state=3).reset_index(drop=True)
+    shuffled = instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+    inst = instrument_from_photodiodes(session)
+    assert np.all(np.diff(shuffled.t_s) >= 0)
+    for name in ("t_s", "yaw_deg", "sweep", "rotating", "readings", "flagged"):
+        np.testing.assert_array_equal(getattr(shuffled, name), getattr(inst, name), err_msg=name)
+    t["sweep"] = t["sweep"].astype(float)
+    t.loc[4, "sweep"] = np.nan                      # messages name the row of the file
+    with pytest.raises(InstrumentDataError, match="column 'sweep' is empty in row 4;"):
+        instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+
+
+def test_empty_table_says_so(session):
+    with pytest.raises(InsufficientDataError, match="no samples; the diagnosis fits"):
+        instrument_from_photodiodes(PhotodiodeData(session.table.iloc[:0].copy(),
+                                                   session.sidecar))
+
+
+def test_clock_glitch_in_one_row(session):
+    """One sample stamped 2000-01-01 (a reset real-time clock) in a 2022 session is named
+    with its row; before, the sun's track was built over the 22 years between them (minutes
+    and gigabytes) and the glitched sample fitted as if it belonged to the session."""
+    t = session.table.copy()
+    t.loc[7, "time"] = pd.Timestamp("2000-01-01T12:00:00+00:00")
+    with pytest.raises(InstrumentDataError, match=r"time 2000-01-01 14:00:00\+02:00 in row 7 "
+                                                  r"is 8\d{3}\.\d days from the session"):
+        instrument_from_photodiodes(PhotodiodeData(t, session.sidecar))
+
+
+def test_training_sweeps_without_usable_readings():
+    """A recording with the sensor unplugged (every reading of one sweep missing) and two
+    sweeps: the fold that trains on it has nothing to fit, and its held-out gap would be the
+    unfitted model's; named as too little data, with the empty sweep."""
+    data = ring_session(n_sweeps=2, per_sweep=60)
+    t = data.table.copy()
+    t.loc[t["sweep"] == 1, data.columns] = np.nan
+    with pytest.raises(InsufficientDataError, match=r"held-out fold 0: its training sweeps hold "
+                                                    r"0 usable readings.*sweeps \[1\]"):
+        diagnose_photodiodes(PhotodiodeData(t, data.sidecar), ("yaw_scale",), n_folds=2)
+
+
+def test_sweep_shorter_than_the_thinning_step():
+    """A sweep of one sample (an aborted recording) between two long ones: the fits use
+    every k-th sample, which skips it, yet its heading offset is a parameter of the full
+    model; the thinning keeps one sample of every sweep."""
+    from calibration.photodiode_diagnosis.run import _thin
+    data = ring_session(n_sweeps=4, per_sweep=600)
+    t = data.table
+    keep = ((t["sweep"] != 1) | (t.index == 600)) & (t.index != 0)   # sweep 1: one sample
+    data = PhotodiodeData(t[keep].reset_index(drop=True), data.sidecar)
+    inst = instrument_from_photodiodes(data)
+    assert inst.n == 1800 and inst.n_sweeps == 4 and np.flatnonzero(inst.sweep == 1) == [599]
+    thin = _thin(inst)                                   # every 2nd sample skips row 599
+    assert thin.n_sweeps == 4 and thin.n == 901
+    doc = diagnose_photodiodes(data, ("yaw_scale",), n_folds=2)
+    assert doc["data"]["sweeps"] == 4 and len(doc["base_fit"]["heading_offset_deg"]) == 4
+
+
 @pytest.mark.skipif(not REAL.is_dir(), reason="reference recordings ../shared/reference/"
                     "gkanias2023 not present")
 def test_real_session_faults():
@@ -223,6 +286,43 @@ def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
     assert doc["heading_error"]["base_deg"] < 1.0          # noise-free compass: sub-degree
     assert (out / "report.md").exists() and (out / "residuals_by_slice.png").exists()
     assert main(["diagnose", str(path), "--effects", "nope"]) == 2
+
+
+@pytest.mark.parametrize("units", [{"a": 1}, [{"azimuth_deg": 0, "elevation_deg": 45,
+                                                "photodiodes": 4}],
+                                   [{"azimuth_deg": 0, "elevation_deg": 45,
+                                     "photodiodes": [0, None, 90]}]])
+def test_diagnose_command_names_malformed_units(tmp_path, session, capsys, units):
+    """A malformed sidecar ``units`` is the reader's one-line error, not a crash of the
+    three-pair-sensor check that picks the diagnosis."""
+    from experiments.cli import main
+    side = dict(session.sidecar, units=units)
+    assert not is_three_pair_sensor(side)
+    path = tmp_path / "ring.csv"
+    session.write(path)
+    path.with_name("ring.csv.json").write_text(json.dumps(side))
+    assert main(["diagnose", str(path), "--effects", "yaw_scale"]) == 2
+    err = capsys.readouterr().err
+    assert "internal error" not in err and "unit" in err and "photodiodes" in err
+
+
+@pytest.mark.parametrize("text,match", [
+    ("{bad", "not valid JSON"), ("[1, 2]", "must be a JSON object; got list"),
+    (None, "schema 'skysim.photodiodes/2' is neither"),
+])
+def test_diagnose_command_reports_a_broken_sidecar_before_the_effects(tmp_path, session,
+                                                                     capsys, text, match):
+    """A sidecar that is not JSON, not an object or of another schema is the error shown,
+    not an 'unknown effect' for a ring candidate checked against the wrong instrument."""
+    from experiments.cli import main
+    path = tmp_path / "ring.csv"
+    session.write(path)
+    if text is None:
+        text = json.dumps(dict(session.sidecar, schema="skysim.photodiodes/2"))
+    path.with_name("ring.csv.json").write_text(text)
+    assert main(["diagnose", str(path), "--effects", "yaw_scale"]) == 2
+    err = capsys.readouterr().err
+    assert match in err and "unknown effect" not in err
 
 
 def test_injector_does_what_it_says(session):

@@ -135,6 +135,44 @@ def test_malformed_sidecar(key, value, match):
         PhotodiodeData(_table(), side)
 
 
+@pytest.mark.parametrize("site,match", [
+    ("Sardinia", "'site' must give the numbers latitude_deg.*got 'Sardinia'"),
+    ({"latitude_deg": 39.2}, "'site' must give the numbers.*got {'latitude_deg': 39.2}"),
+    ({"latitude_deg": 39.2, "longitude_deg": None}, "'longitude_deg': None"),
+    ({"latitude_deg": 39.2, "longitude_deg": 8.4, "altitude_m": "sea"}, "'altitude_m': 'sea'"),
+])
+def test_malformed_site(site, match):
+    side = _sidecar()
+    side["site"] = site
+    with pytest.raises(PhotodiodeFormatError, match=match):
+        PhotodiodeData(_table(), side)
+
+
+@pytest.mark.parametrize("key,value,match", [
+    ("elevation_deg", "high", "unit 1 elevation_deg must be a finite number.*got 'high'"),
+    ("elevation_deg", None, "unit 1 elevation_deg must be a finite number.*got None"),
+    ("azimuth_deg", "east", "unit 1 azimuth_deg must be a finite number.*got 'east'"),
+    ("azimuth_deg", float("nan"), "unit 1 azimuth_deg must be a finite number.*got nan"),
+    ("photodiodes", 4, "unit 1 photodiodes must be a list of polarizer angles.*got 4"),
+    ("photodiodes", "0,45,90,135", "unit 1 photodiodes must be a list.*got '0,45,90,135'"),
+    ("photodiodes", [0, 45, None, 135], r"got \[0, 45, None, 135\]"),
+])
+def test_malformed_unit_values(key, value, match):
+    """A hand-edited sidecar's unit value of the wrong type is named, with its unit."""
+    side = _sidecar()
+    side["units"][1][key] = value
+    with pytest.raises(PhotodiodeFormatError, match=match):
+        PhotodiodeData(_table(), side)
+
+
+def test_unit_values_as_numeric_text_still_read():
+    side = _sidecar()
+    side["units"][1].update(azimuth_deg="90", elevation_deg="45.0",
+                            photodiodes=["0", "45", "90", "135"])
+    assert PhotodiodeData(_table(), side).columns[4:] == ["u1_p000", "u1_p045", "u1_p090",
+                                                          "u1_p135"]
+
+
 def test_missing_site_and_missing_sidecar(tmp_path):
     side = _sidecar()
     del side["site"]
@@ -159,6 +197,35 @@ def test_bad_table_values(tmp_path):
     table.loc[1, "yaw_deg"] = np.nan
     with pytest.raises(PhotodiodeFormatError, match="yaw_deg"):
         PhotodiodeData(table, _sidecar())
+
+
+def test_times_with_an_hour_only_offset(tmp_path):
+    """ISO 8601 allows an offset of whole hours, ``+02``; it was refused as 'no UTC offset'.
+    A bare date still has none (its day is not an offset)."""
+    table = _table()
+    path = tmp_path / "x.csv"
+    table.assign(time=table["time"].dt.strftime("%Y-%m-%dT%H:%M:%S+08")).to_csv(path,
+                                                                              index=False)
+    sidecar_path(path).write_text(json.dumps(_sidecar()))
+    assert (read_photodiodes(path).table["time"] == table["time"]).all()
+    table = _table()
+    table["time"] = table["time"].dt.strftime("%Y-%m-%d")
+    with pytest.raises(PhotodiodeFormatError, match="time '2020-06-15' in row 0 has no UTC"):
+        PhotodiodeData(table, _sidecar())
+
+
+def test_empty_time_cell_is_named(tmp_path):
+    """An empty time cell (a truncated last line) was reported as "time nan ... has no UTC
+    offset"."""
+    table = _table()
+    path = tmp_path / "x.csv"
+    table.assign(time=table["time"].astype(str)).to_csv(path, index=False)
+    lines = path.read_text().splitlines()
+    lines[4] = "," + lines[4].split(",", 1)[1]                    # data row 3 without a time
+    path.write_text("\n".join(lines) + "\n")
+    sidecar_path(path).write_text(json.dumps(_sidecar()))
+    with pytest.raises(PhotodiodeFormatError, match="time is empty in row 3;"):
+        read_photodiodes(path)
 
 
 def test_atomic_writer_leaves_nothing_on_failure(tmp_path):

@@ -22,7 +22,16 @@ __all__ = ["RING_EFFECT_NAMES", "EffectUnavailableError", "Instrument", "Instrum
 
 def is_three_pair_sensor(sidecar: dict) -> bool:
     """True for a one-unit instrument with the three orthogonal pairs 60/150, 0/90, 120/30 deg
-    (the three-pair sensor, diagnosed through its log-ratio channels)."""
-    units = sidecar.get("units") or []
+    (the three-pair sensor, diagnosed through its log-ratio channels).
+
+    False for a malformed ``units`` (the reader then says what is wrong with it).
+    """
+    units = sidecar.get("units")
     need = {60, 150, 0, 90, 120, 30}
-    return len(units) == 1 and {round(float(a)) % 180 for a in units[0]["photodiodes"]} >= need
+    if not (isinstance(units, list) and len(units) == 1 and isinstance(units[0], dict)
+            and isinstance(units[0].get("photodiodes"), list)):
+        return False
+    try:
+        return {round(float(a)) % 180 for a in units[0]["photodiodes"]} >= need
+    except (TypeError, ValueError, OverflowError):
+        return False

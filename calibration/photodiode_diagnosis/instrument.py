@@ -4,7 +4,9 @@ Any multi-unit instrument: N units x M photodiodes, any unit azimuth/elevation, 
 angles, counts or volts, absolute or relative yaw in either sense. The adapter converts the
 yaw to the project's heading convention (clockwise from north, unwrapped along each sweep so
 that a turn stays one continuous angle), finds the sweeps and whether the platform is turning,
-and keeps the reader's per-reading flags. It never drops a sample.
+and keeps the reader's per-reading flags. It never drops a sample; rows written out of time
+order are put in time order (a stable sort: samples with equal times keep the file's order),
+because the turn, the sweeps and the noise floor are read along the sample sequence.
 """
 
 from __future__ import annotations
@@ -19,7 +21,14 @@ from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError
 
-__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "instrument_from_photodiodes"]
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS",
+           "instrument_from_photodiodes"]
+
+MAX_SPAN_DAYS = 7.0
+"""Samples farther than this from the file's median time are not of the same session [days]:
+the fit shares the instrument's gains, offsets and the sky's DoP scale over the whole file,
+and such a sample is a clock glitch (an unset or reset real-time clock reads 1970 or 2000),
+which would also make the sun's track span decades."""
 
 ROTATING_RATE_DEG_PER_SAMPLE = 0.2
 """A sample is *rotating* when the yaw changes by more than this per sample [deg] (median over
@@ -37,7 +46,8 @@ class Instrument:
         Nominal geometry from the sidecar (unit views and polarizer angles).
     site : Site
     t_s : ndarray (n,)
-        Recorded sample times [s since 1970-01-01 UTC].
+        Recorded sample times [s since 1970-01-01 UTC], in time order (the other per-sample
+        arrays follow the same order).
     yaw_deg : ndarray (n,)
         Recorded yaw converted to clockwise [deg], unwrapped within each sweep.
     sweep : ndarray (n,) of int
@@ -106,13 +116,14 @@ class Instrument:
                           self.source)
 
 
-def _sweeps(table, t_s: np.ndarray) -> np.ndarray:
+def _sweeps(table, t_s: np.ndarray, rows: np.ndarray, where: str) -> np.ndarray:
+    """Sweep index of every sample; ``rows`` (the file row of each sample) for messages."""
     if "sweep" in table.columns:
         raw = table["sweep"].to_numpy()
         if table["sweep"].isna().any():
-            row = int(np.flatnonzero(table["sweep"].isna().to_numpy())[0])
-            raise InstrumentDataError(f"column 'sweep' is empty in row {row}; give every "
-                                      "sample its sweep or drop the column")
+            row = int(rows[np.flatnonzero(table["sweep"].isna().to_numpy())[0]])
+            raise InstrumentDataError(f"{where}: column 'sweep' is empty in row {row}; give "
+                                      "every sample its sweep or drop the column")
         # sweeps in order of first appearance
         _, first, inv = np.unique(raw, return_index=True, return_inverse=True)
         order = np.argsort(np.argsort(first))
@@ -146,7 +157,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     Raises
     ------
     InstrumentDataError
-        For a yaw that is not a finite number, an empty sweep label, or a unit without columns.
+        For a yaw that is not a finite number, a time more than :data:`MAX_SPAN_DAYS` from
+        the session's median time, an empty sweep label, or a unit without columns.
     InsufficientDataError
         With fewer than two sweeps (a held-out split needs whole sweeps).
     """
@@ -157,14 +169,29 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         raise InstrumentDataError(f"{where}: yaw_deg is not a finite number in row {row} "
                                   f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
                                   "sample is needed")
+    t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
+    if t_s.size:
+        far = np.abs(t_s - np.median(t_s)) / 86400.0
+        if far.max() > MAX_SPAN_DAYS:
+            row = int(np.argmax(far))
+            raise InstrumentDataError(
+                f"{where}: time {table['time'].iloc[row]} in row {row} is {far[row]:.1f} days "
+                f"from the session's median time; samples more than {MAX_SPAN_DAYS:g} days "
+                "apart are not one session (a clock glitch?): fix or drop that row")
+    readings, flagged = data.readings, data.flags.bad.copy()
+    rows = np.arange(len(table))
+    if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
+        rows = np.argsort(t_s, kind="stable")
+        table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
+        readings, flagged = readings[rows], flagged[rows]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
-    t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
-    sweep = _sweeps(table, t_s)
+    sweep = _sweeps(table, t_s, rows, where)
     if np.unique(sweep).size < 2:
+        found = "no samples" if len(table) == 0 else f"only one sweep in {len(table)} samples"
         raise InsufficientDataError(
-            f"{where}: only one sweep in {len(table)} samples; the diagnosis fits on some "
-            "sweeps and scores on held-out ones: record at least two (column 'sweep')")
+            f"{where}: {found}; the diagnosis fits on some sweeps and scores on held-out ones: "
+            "record at least two (column 'sweep')")
     yaw = _unwrap_per_sweep(yaw, sweep)
     att = {}
     for c in ("pitch_deg", "roll_deg"):
@@ -180,8 +207,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     return Instrument(
         sensor=sensor, site=data.site, t_s=t_s, yaw_deg=yaw, sweep=sweep,
         rotating=_rotating(yaw, sweep), pitch_deg=att["pitch_deg"], roll_deg=att["roll_deg"],
-        readings=data.readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
-        columns=list(data.columns), flagged=data.flags.bad.copy(),
+        readings=readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
+        columns=list(data.columns), flagged=flagged,
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
         source={"path": where, "schema": data.sidecar["schema"],
                 "readings": data.sidecar["readings"], "samples": int(len(table)),

@@ -46,8 +46,16 @@ start, so its descent is short); a fit stopped here is reported ``converged: fal
 
 
 def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
+    """Every k-th sample (about ``target`` remain), and the first sample of any sweep shorter
+    than k that this skips: each sweep keeps its heading offset, so the thinned fit has the
+    same parameters as the full model."""
     k = max(1, int(np.ceil(inst.n / target)))
-    return inst if k == 1 else inst.subset(np.arange(0, inst.n, k))
+    if k == 1:
+        return inst
+    rows = np.arange(0, inst.n, k)
+    ids, first = np.unique(inst.sweep, return_index=True)
+    missed = first[~np.isin(ids, inst.sweep[rows])]
+    return inst.subset(np.union1d(rows, missed) if missed.size else rows)
 
 
 def held_out_folds(sweep, n_folds: int) -> np.ndarray:
@@ -330,7 +338,18 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
 
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
                         seed: int = 0, max_iter: int = 25) -> dict:
-    """Diagnose a photodiode instrument (see module doc); returns the report dict."""
+    """Diagnose a photodiode instrument (see module doc); returns the report dict.
+
+    Raises
+    ------
+    SunTooLowError
+        With the sun below the twilight limit at a sample.
+    InstrumentDataError
+        When every reading is saturated.
+    InsufficientDataError
+        For folds that do not fit the sweeps, or a fold whose training sweeps hold fewer
+        usable readings than the base fit has parameters (the other sweeps have none).
+    """
     sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
@@ -388,6 +407,13 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
         itr, iho = _thin(work.subset(tr)), work.subset(ho)
         ftr = Forward(itr, sun=sun, polarizer_sign=sign)
+        if ftr.usable.sum() < ftr.layout.size:
+            empty = [int(s) for s in range(work.n_sweeps) if not full.usable[work.sweep == s].any()]
+            raise InsufficientDataError(
+                f"held-out fold {int(f)}: its training sweeps hold {int(ftr.usable.sum())} usable "
+                f"readings, fewer than the {ftr.layout.size} parameters of the base fit; sweeps "
+                f"{empty} (0-based, in order of appearance) have no usable reading (all missing, "
+                "zero or saturated): drop them from the file")
         t0 = np.r_[first.theta[:L.n_base], _sweep_headings(first.theta, L, work, tr, ftr)]
         btr = fit(ftr, t0, sigma=sigma, max_iter=max_iter)
         fho = Forward(iho, sun=sun, polarizer_sign=sign)
