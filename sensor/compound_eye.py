@@ -243,11 +243,9 @@ class CompoundEyeSensor:
         R_ns = R_nb @ self.body_installation().as_matrix()
         M_su = self.unit_matrices(True)                                     # (m, 3, 3)
         n, m = R_ns.shape[0], M_su.shape[0]
-        # R_nu[s, u] = R_ns[s] @ M_su[u] for every sample and unit, as one (3n x 3) @ (3 x 3m)
-        # matrix product (a batched einsum over (n, m) is several times slower)
-        R_nu = (R_ns.reshape(3 * n, 3) @ M_su.transpose(1, 0, 2).reshape(3, 3 * m)
-                ).reshape(n, 3, m, 3).transpose(0, 2, 1, 3)                   # (n, m, 3, 3)
-        view = R_nu[..., 2]
+        # each unit's optical axis (its z column) in ENU for every sample: one (3n x 3) @
+        # (3 x m) matrix product (a batched einsum over (n, m) is several times slower)
+        view = (R_ns.reshape(3 * n, 3) @ M_su[:, :, 2].T).reshape(n, 3, m).transpose(0, 2, 1)
         el, az = elevation_azimuth(view)
         below = el < 0.0
         if below.any():

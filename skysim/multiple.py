@@ -328,7 +328,9 @@ def prefetch_modes(skies, sun_elevation_deg) -> None:
     """
     skies = list(skies)
     first = skies[0]
-    shared = lambda s: (s.n_zenith, s.depolarization_ratio, s.settings, s.sun_step_deg)  # noqa: E731
+    def shared(s):
+        return s.n_zenith, s.depolarization_ratio, s.settings, s.sun_step_deg
+
     if any(shared(s) != shared(first) for s in skies):
         raise ValueError("prefetch_modes needs skies that differ only in tau and albedo")
     nodes = {e for s in np.unique(np.asarray(sun_elevation_deg, float))

@@ -60,7 +60,8 @@ class Layout:
     """Positions of the parameter groups in the parameter vector.
 
     Order: ``lambda_p`` (P log-gains), ``o_p`` (P offsets, in units of the session's median
-    reading), ``beta_p`` (P polarizer-angle deviations of each photodiode [deg]), ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``epsilon_u``,
+    reading), ``beta_p`` (P polarizer-angle deviations of each photodiode [deg]),
+    ``delta_u`` (U polarizer offsets [deg]), ``s`` (DoP scale), ``epsilon_u``,
     ``alpha_u`` (U elevation and U azimuth offsets of the unit axes [deg]), ``h_k`` (one heading
     offset per sweep [deg]; one shared offset for absolute yaw), effect parameters.
     """
