@@ -199,6 +199,14 @@ def photodiode_report_markdown(doc: dict) -> str:
                          f"{100 * c['shrink']:.1f} % | {c['score']:.0f} |")
         else:
             lines.append(f"| {c['effect']} | unavailable: {c['error']} | | |")
+    sens = next((c["sensitivity"] for c in doc["candidates"] if "sensitivity" in c), None)
+    if sens is not None:
+        per_deg = sens["s_per_deg_of_sun_elevation"]
+        lines += ["", f"The clock offset is read from {sens['read_from']}; the sun's elevation "
+                      f"changes {sens['sun_elevation_rate_deg_per_h']:+.2f} deg/h here, so "
+                  + (f"each degree of misfit between the sky model and the sky in the sun's "
+                     f"apparent elevation moves the fitted clock by {per_deg / 60:.1f} min."
+                     if per_deg is not None else "the data cannot pin the clock.")]
     return "\n".join(lines) + "\n"
 
 

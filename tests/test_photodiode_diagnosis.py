@@ -161,6 +161,29 @@ def test_clock_offset_hours_found(session):
                                n_folds=3)
     assert doc["verdict"]["effect"] == "clock_offset"
     assert abs(doc["verdict"]["params"]["clock_offset_s"]["value"] - 9000.0) < 600.0
+    sens = next(c["sensitivity"] for c in doc["candidates"] if c["effect"] == "clock_offset")
+    assert "elevation only" in sens["read_from"]
+
+
+def test_clock_sensitivity_matches_pvlib_spa():
+    """The sun's elevation and azimuth rates behind the clock's resolution, against pvlib's
+    SPA (an independent ephemeris) differenced over +-5 min: the ephemerides agree to
+    ~0.01 deg, so the rates over a 600 s baseline agree to 0.01 * 2 / (1/6 h) ~ 0.12 deg/h;
+    stated bound 0.2 deg/h. At 10:00 local in May the sun climbs ~11 deg/h, so one degree of
+    sky-model misfit in its elevation is ~5.4 min of clock."""
+    pvlib = pytest.importorskip("pvlib")
+    from calibration.photodiode_diagnosis.run import clock_sensitivity
+    t0 = pd.Timestamp("2022-05-12T08:00:00Z")
+    sun = SunTrack(SITE, t0.value / 1e9 - 3600, t0.value / 1e9 + 3600, margin_s=0.0)
+    sens = clock_sensitivity(sun, t0.value / 1e9, absolute_yaw=False)
+    times = pd.DatetimeIndex([t0 - pd.Timedelta(seconds=300), t0 + pd.Timedelta(seconds=300)])
+    spa = pvlib.solarposition.spa_python(times, SITE.latitude_deg, SITE.longitude_deg)
+    el_rate = float(np.diff(spa["elevation"].to_numpy())[0]) * 6.0
+    az_rate = float(np.diff(spa["azimuth"].to_numpy())[0]) * 6.0
+    assert abs(sens["sun_elevation_rate_deg_per_h"] - el_rate) < 0.2
+    assert abs(sens["sun_azimuth_rate_deg_per_h"] - az_rate) < 0.2
+    assert sens["s_per_deg_of_sun_elevation"] == pytest.approx(3600 / abs(el_rate), rel=0.02)
+    assert "azimuth" in clock_sensitivity(sun, t0.value / 1e9, absolute_yaw=True)["read_from"]
 
 
 def test_twilight_and_too_low_sun():

@@ -210,6 +210,43 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     return picked
 
 
+def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
+                      half_step_s: float = 300.0) -> dict:
+    """What pins a clock offset in a session: the sun's elevation and azimuth rates at ``t_s``.
+
+    A clock offset moves the sun along its daily path. With relative yaw the per-sweep heading
+    offsets absorb the sun's azimuth, so the clock is read from the sun's elevation alone and
+    ``s_per_deg_of_sun_elevation`` (= 3600 / |elevation rate|) is how far a misfit of one
+    degree between the sky model and the real sky in the sun's apparent elevation moves the
+    fitted clock; near the sun's culmination that runs to hours.
+
+    Parameters
+    ----------
+    sun : SunTrack
+    t_s : float
+        Time [s since epoch, UTC].
+    absolute_yaw : bool
+    half_step_s : float
+        Half-width of the central difference [s] (the rates change by < 1 % over 10 min).
+
+    Returns
+    -------
+    dict
+        ``sun_elevation_rate_deg_per_h``, ``sun_azimuth_rate_deg_per_h``, ``read_from`` and
+        ``s_per_deg_of_sun_elevation`` (None when the elevation rate is below 1e-6 deg/h).
+    """
+    e1, a1 = _sun_el_az(sun, t_s + half_step_s)
+    e0, a0 = _sun_el_az(sun, t_s - half_step_s)
+    k = 3600.0 / (2.0 * half_step_s)
+    rate_el, rate_az = (e1 - e0) * k, float(wrap_deg(a1 - a0)) * k
+    return {"sun_elevation_rate_deg_per_h": rate_el, "sun_azimuth_rate_deg_per_h": rate_az,
+            "read_from": ("the sun's elevation and azimuth" if absolute_yaw else
+                          "the sun's elevation only (relative yaw: the per-sweep heading "
+                          "offsets absorb its azimuth)"),
+            "s_per_deg_of_sun_elevation": (3600.0 / abs(rate_el) if abs(rate_el) > 1e-6
+                                           else None)}
+
+
 def _sun_el_az(sun: SunTrack, t_s: float):
     from skysim.geometry import elevation_azimuth
     el, az = elevation_azimuth(sun(np.array([t_s])))
@@ -456,6 +493,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                      "params": {n: {"value": float(np.mean(P[:, j])),
                                     "fold_spread": float(np.std(P[:, j])), "unit": un}
                                 for j, (n, un) in enumerate(zip(e.names, e.units))}})
+        if e.name == "clock_offset":
+            rows[-1]["sensitivity"] = clock_sensitivity(sun, float(np.mean(work.t_s)),
+                                                        work.absolute_yaw)
     rows.sort(key=lambda r: r.get("score", np.inf))
     avail = [r for r in rows if r.get("available", True)]
     if g0 <= floor * (1 + NONE_MARGIN):
