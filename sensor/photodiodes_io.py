@@ -254,8 +254,9 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
         for key in ("azimuth_deg", "elevation_deg"):
             _require(_is_number(u[key]), where,
                      f"unit {i} {key} must be a finite number [deg]; got {u[key]!r}")
-        _require(-90.0 <= float(u["elevation_deg"]) <= 90.0, where,
-                 f"unit {i} elevation_deg {u['elevation_deg']!r} is outside [-90, 90]")
+        _require(0.0 <= float(u["elevation_deg"]) <= 90.0, where,
+                 f"unit {i} elevation_deg {u['elevation_deg']!r} is outside [0, 90]: a sky "
+                 "polarization unit looks at or above the body's x-y plane")
         _require(isinstance(u["photodiodes"], list)
                  and all(_is_number(a) for a in u["photodiodes"]), where,
                  f"unit {i} photodiodes must be a list of polarizer angles [deg]; "

@@ -9,6 +9,7 @@ them within what the noise allows) and closed-form limits.
 from __future__ import annotations
 
 import json
+import warnings
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,6 +21,7 @@ from calibration.diagnosis import InsufficientDataError
 from calibration.photodiode_diagnosis import (
     InstrumentDataError,
     SunTooLowError,
+    YawInRadiansWarning,
     diagnose_photodiodes,
     instrument_from_photodiodes,
     is_three_pair_sensor,
@@ -212,6 +214,21 @@ def test_bad_input(session):
     with pytest.raises(Exception, match="folds"):
         held_out_folds(np.repeat([0, 1, 2], 5), 1)
     assert not is_three_pair_sensor(session.sidecar)
+
+
+def test_yaw_in_radians_is_warned_about(session):
+    """A yaw column written in radians (a full turn reads as 6.3 'deg') is warned about with
+    its range; the same turn in degrees, and a platform standing within +-pi deg, are not."""
+    rad = session.table.copy()
+    rad["yaw_deg"] = np.radians(rad["yaw_deg"])
+    with pytest.warns(YawInRadiansWarning, match=r"within \+-pi .* if the column is in radians"):
+        instrument_from_photodiodes(PhotodiodeData(rad, session.sidecar))
+    still = session.table.copy()
+    still["yaw_deg"] = np.clip(still["yaw_deg"], -1.4, 1.4)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", YawInRadiansWarning)
+        instrument_from_photodiodes(PhotodiodeData(session.table, session.sidecar))
+        instrument_from_photodiodes(PhotodiodeData(still, session.sidecar))
 
 
 def test_rows_out_of_time_order_are_put_in_time_order(session):

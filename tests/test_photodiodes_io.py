@@ -151,6 +151,7 @@ def test_malformed_site(site, match):
 @pytest.mark.parametrize("key,value,match", [
     ("elevation_deg", "high", "unit 1 elevation_deg must be a finite number.*got 'high'"),
     ("elevation_deg", None, "unit 1 elevation_deg must be a finite number.*got None"),
+    ("elevation_deg", -5.0, r"unit 1 elevation_deg -5.0 is outside \[0, 90\]"),
     ("azimuth_deg", "east", "unit 1 azimuth_deg must be a finite number.*got 'east'"),
     ("azimuth_deg", float("nan"), "unit 1 azimuth_deg must be a finite number.*got nan"),
     ("photodiodes", 4, "unit 1 photodiodes must be a list of polarizer angles.*got 4"),

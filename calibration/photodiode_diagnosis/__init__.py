@@ -9,7 +9,8 @@ error). Method and report: ``docs/diagnosis.md``.
 """
 
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
-from .errors import InstrumentDataError, NoUsableChannelsError, SunTooLowError
+from .errors import (InstrumentDataError, NoUsableChannelsError, SunTooLowError,
+                     YawInRadiansWarning)
 from .faults import screen
 from .instrument import Instrument, instrument_from_photodiodes
 from .run import diagnose_instrument, diagnose_photodiodes
@@ -17,7 +18,7 @@ from .run import diagnose_instrument, diagnose_photodiodes
 __all__ = ["RING_EFFECT_NAMES", "EffectUnavailableError", "Instrument", "InstrumentDataError",
            "NoUsableChannelsError", "SunTooLowError", "diagnose_instrument",
            "diagnose_photodiodes", "get_ring_effect", "instrument_from_photodiodes",
-           "is_three_pair_sensor", "screen"]
+           "is_three_pair_sensor", "screen", "YawInRadiansWarning"]
 
 
 def is_three_pair_sensor(sidecar: dict) -> bool:

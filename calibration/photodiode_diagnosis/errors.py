@@ -5,7 +5,7 @@ from __future__ import annotations
 from ..diagnosis import DiagnosisError, InsufficientDataError
 
 __all__ = ["InstrumentDataError", "InsufficientDataError", "NoUsableChannelsError",
-           "SunTooLowError"]
+           "SunTooLowError", "YawInRadiansWarning"]
 
 
 class InstrumentDataError(DiagnosisError, ValueError):
@@ -18,3 +18,8 @@ class NoUsableChannelsError(DiagnosisError, ValueError):
 
 class SunTooLowError(DiagnosisError, ValueError):
     """The sun is below the twilight limit (-10 deg) at a recorded time: the sky is dark."""
+
+
+class YawInRadiansWarning(UserWarning):
+    """Every yaw lies within +-pi while the platform turns by more than pi: the ``yaw_deg``
+    column looks like radians (a full turn then reads as 6.3 deg)."""

@@ -11,6 +11,7 @@ because the turn, the sweeps and the noise floor are read along the sample seque
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -19,7 +20,7 @@ from sensor.compound_eye import CompoundEyeSensor, PhotodiodeModel
 from sensor.photodiodes_io import PhotodiodeData
 from skysim.sun import Site, as_utc_index
 
-from .errors import InsufficientDataError, InstrumentDataError
+from .errors import InsufficientDataError, InstrumentDataError, YawInRadiansWarning
 
 __all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS",
            "instrument_from_photodiodes"]
@@ -29,6 +30,11 @@ MAX_SPAN_DAYS = 7.0
 the fit shares the instrument's gains, offsets and the sky's DoP scale over the whole file,
 and such a sample is a clock glitch (an unset or reset real-time clock reads 1970 or 2000),
 which would also make the sun's track span decades."""
+
+RADIAN_SPAN = 3.0
+"""A yaw column whose values all lie within +-pi but span more than this [its own units] is
+warned about as radians (:class:`YawInRadiansWarning`): a platform that turns by 3 deg or
+more yet never leaves +-3.14 deg is rare, a turn recorded in radians spans up to 2 pi."""
 
 ROTATING_RATE_DEG_PER_SAMPLE = 0.2
 """A sample is *rotating* when the yaw changes by more than this per sample [deg] (median over
@@ -161,6 +167,11 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         the session's median time, an empty sweep label, or a unit without columns.
     InsufficientDataError
         With fewer than two sweeps (a held-out split needs whole sweeps).
+
+    Warns
+    -----
+    YawInRadiansWarning
+        When every yaw lies within +-pi but spans more than :data:`RADIAN_SPAN`.
     """
     table = data.table
     yaw = table["yaw_deg"].to_numpy(dtype=float)
@@ -169,6 +180,11 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         raise InstrumentDataError(f"{where}: yaw_deg is not a finite number in row {row} "
                                   f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
                                   "sample is needed")
+    if yaw.size and np.all(np.abs(yaw) <= np.pi + 1e-9) and np.ptp(yaw) > RADIAN_SPAN:
+        warnings.warn(YawInRadiansWarning(
+            f"{where}: every yaw_deg lies within +-pi ({yaw.min():.3f} to {yaw.max():.3f}) "
+            f"while it spans {np.ptp(yaw):.3f}: if the column is in radians, convert it to "
+            "degrees (a full turn would read as 6.3 deg and no sweep would turn)"), stacklevel=2)
     t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9
     if t_s.size:
         far = np.abs(t_s - np.median(t_s)) / 86400.0
