@@ -273,7 +273,8 @@ def _held_out(fwd_ho: Forward, theta_tr, layout_tr, sigma):
 
 def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     """Heading of every sample [deg] that best explains its readings under the fitted model
-    (grid over 360 deg, then a parabola through the best node and its neighbours)."""
+    (grid over 360 deg, then a parabola through the best node and its neighbours); NaN for a
+    sample without a usable reading (nothing to decode)."""
     grid = np.arange(0.0, 360.0, step_deg)
     cost = np.empty((grid.size, fwd.inst.n))
     try:
@@ -287,7 +288,7 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     c0, cm, cp = cost[k, i], cost[(k - 1) % grid.size, i], cost[(k + 1) % grid.size, i]
     den = cm - 2 * c0 + cp
     shift = np.where(den > 0, 0.5 * (cm - cp) / np.where(den > 0, den, 1.0), 0.0)
-    return grid[k] + np.clip(shift, -1, 1) * step_deg
+    return np.where(fwd.usable.any(axis=1), grid[k] + np.clip(shift, -1, 1) * step_deg, np.nan)
 
 
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
@@ -520,7 +521,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             ref = fwd.headings(t)
             errs.append(wrap_deg(dec - ref))
         e_all = np.concatenate(errs)
-        herr[key] = float(np.sqrt(np.mean(e_all ** 2)))
+        e_all = e_all[np.isfinite(e_all)]
+        herr[key] = float(np.sqrt(np.mean(e_all ** 2))) if e_all.size else None
     # slices of the held-out base residual
     fho_all = Forward(work, sun=sun, polarizer_sign=sign)
     theta_all = np.r_[first.theta[:L.n_base], np.zeros(L.n_heading)]
@@ -537,10 +539,10 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         "schema": DIAGNOSIS_SCHEMA, "instrument": "photodiodes", "verdict": v,
         "candidates": rows, "where": where, "faults": scr.faults,
         "noise_floor": {"rms": floor, "method": "second differences along each sweep"},
-        "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
-                                    "heading [deg]" + ("" if work.absolute_yaw else
-                                                       " (relative yaw: per-sweep offset "
-                                                       "fitted)"),
+        "heading_error": {"metric": "RMS over held-out samples with a usable reading of "
+                                    "decoded minus fitted heading [deg]"
+                                    + ("" if work.absolute_yaw else
+                                       " (relative yaw: per-sweep offset fitted)"),
                           "base_deg": herr.get("base"),
                           "best_deg": herr.get(best) if best in herr else None},
         "base_fit": _base_fit_report(first.theta, L, base, work, sign),
