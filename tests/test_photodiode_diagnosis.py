@@ -195,8 +195,9 @@ def test_twilight_and_too_low_sun():
     assert doc["verdict"]["gap_before"] is not None
     night = twilight.table.copy()
     night["time"] = night["time"] + pd.Timedelta(hours=1.5)
-    with pytest.raises(SunTooLowError, match="below the twilight limit"):
-        diagnose_photodiodes(PhotodiodeData(night, twilight.sidecar), ("yaw_scale",))
+    with pytest.raises(SunTooLowError, match="^night.csv: the sun is at .* below the twilight"):
+        diagnose_photodiodes(PhotodiodeData(night, twilight.sidecar), ("yaw_scale",),
+                             where="night.csv")
 
 
 def test_bad_input(session):
@@ -210,8 +211,9 @@ def test_bad_input(session):
     sat = session.table.copy()
     for c in session.columns:
         sat[c] = session.sidecar["saturation_value"]
-    with pytest.raises(InstrumentDataError, match="saturation"):
-        diagnose_photodiodes(PhotodiodeData(sat, session.sidecar), ("yaw_scale",))
+    with pytest.raises(InstrumentDataError, match="^sat.csv: all .* saturation"):
+        diagnose_photodiodes(PhotodiodeData(sat, session.sidecar), ("yaw_scale",),
+                             where="sat.csv")
     with pytest.raises(Exception, match="folds"):
         held_out_folds(np.repeat([0, 1, 2], 5), 1)
     assert not is_three_pair_sensor(session.sidecar)

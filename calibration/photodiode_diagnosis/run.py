@@ -388,19 +388,20 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         For folds that do not fit the sweeps, or a fold whose training sweeps hold fewer
         usable readings than the base fit has parameters (the other sweeps have none).
     """
+    where = inst.source.get("path", "photodiode data")
     sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
     if sun_el.min() < TWILIGHT_LIMIT_DEG:
         i = int(np.argmin(sun_el))
         raise SunTooLowError(
-            f"the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
+            f"{where}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
             f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
             "Check the times and their UTC offset, or drop the night samples")
     finite = np.isfinite(inst.readings)
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
-            f"all {int(finite.sum())} readings are at or above the saturation value "
+            f"{where}: all {int(finite.sum())} readings are at or above the saturation value "
             f"{inst.source['saturation_value']:g}: shorten the exposure or lower the gain")
     folds = held_out_folds(inst.sweep, n_folds)
     cand = [get_ring_effect(e) for e in effects]
@@ -448,10 +449,10 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         if ftr.usable.sum() < ftr.layout.size:
             empty = [int(s) for s in range(work.n_sweeps) if not full.usable[work.sweep == s].any()]
             raise InsufficientDataError(
-                f"held-out fold {int(f)}: its training sweeps hold {int(ftr.usable.sum())} usable "
-                f"readings, fewer than the {ftr.layout.size} parameters of the base fit; sweeps "
-                f"{empty} (0-based, in order of appearance) have no usable reading (all missing, "
-                "zero or saturated): drop them from the file")
+                f"{where}: held-out fold {int(f)}: its training sweeps hold "
+                f"{int(ftr.usable.sum())} usable readings, fewer than the {ftr.layout.size} "
+                f"parameters of the base fit; sweeps {empty} (0-based, in order of appearance) "
+                "have no usable reading (all missing, zero or saturated): drop them from the file")
         t0 = np.r_[first.theta[:L.n_base], _sweep_headings(first.theta, L, work, tr, ftr)]
         btr = fit(ftr, t0, sigma=sigma, max_iter=max_iter)
         fho = Forward(iho, sun=sun, polarizer_sign=sign)
