@@ -207,6 +207,12 @@ def photodiode_report_markdown(doc: dict) -> str:
                   + (f"each degree of misfit between the sky model and the sky in the sun's "
                      f"apparent elevation moves the fitted clock by {per_deg / 60:.1f} min."
                      if per_deg is not None else "the data cannot pin the clock.")]
+        shift = sens.get("sun_elevation_shift_deg")
+        if shift is not None and "only" in sens["read_from"]:
+            lines += ["", f"The fitted clock offset moves the sun's elevation by {shift:+.2f} deg: "
+                          "a clock error, or a sky whose sun appears that much "
+                          f"{'higher' if shift >= 0 else 'lower'} than the ephemeris's, "
+                          "which these data cannot tell apart."]
     return "\n".join(lines) + "\n"
 
 

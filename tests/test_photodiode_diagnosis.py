@@ -166,6 +166,16 @@ def test_clock_offset_hours_found(session):
     assert abs(doc["verdict"]["params"]["clock_offset_s"]["value"] - 9000.0) < 600.0
     sens = next(c["sensitivity"] for c in doc["candidates"] if c["effect"] == "clock_offset")
     assert "elevation only" in sens["read_from"]
+    # the fitted +2.5 h moves the sun from the recorded ~05:30 UTC to the true ~08:00 UTC (May,
+    # 39 N): about +28 deg; the reported shift is pvlib's SPA elevation difference at the
+    # fitted offset within 0.05 deg (the ephemerides agree to ~0.01 deg)
+    pvlib = pytest.importorskip("pvlib")
+    t_mean = pd.to_datetime(t["time"]).mean()
+    fitted = doc["verdict"]["params"]["clock_offset_s"]["value"]
+    el = pvlib.solarposition.spa_python(
+        pd.DatetimeIndex([t_mean, t_mean + pd.Timedelta(seconds=fitted)]),
+        SITE.latitude_deg, SITE.longitude_deg)["elevation"].to_numpy()
+    assert sens["sun_elevation_shift_deg"] == pytest.approx(el[1] - el[0], abs=0.05)
 
 
 def test_clock_sensitivity_matches_pvlib_spa():

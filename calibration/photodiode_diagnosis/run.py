@@ -218,7 +218,10 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
     offsets absorb the sun's azimuth, so the clock is read from the sun's elevation alone and
     ``s_per_deg_of_sun_elevation`` (= 3600 / |elevation rate|) is how far a misfit of one
     degree between the sky model and the real sky in the sun's apparent elevation moves the
-    fitted clock; near the sun's culmination that runs to hours.
+    fitted clock; near the sun's culmination that runs to hours. The diagnosis adds
+    ``sun_elevation_shift_deg``, the change of the sun's elevation that the fitted offset
+    makes: with relative yaw, a clock error and a sky whose sun appears that much higher
+    (or lower) than the ephemeris's are the same to the data.
 
     Parameters
     ----------
@@ -496,8 +499,12 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                                     "fold_spread": float(np.std(P[:, j])), "unit": un}
                                 for j, (n, un) in enumerate(zip(e.names, e.units))}})
         if e.name == "clock_offset":
-            rows[-1]["sensitivity"] = clock_sensitivity(sun, float(np.mean(work.t_s)),
-                                                        work.absolute_yaw)
+            t_mean = float(np.mean(work.t_s))
+            sens = clock_sensitivity(sun, t_mean, work.absolute_yaw)
+            dt = rows[-1]["params"]["clock_offset_s"]["value"]
+            sens["sun_elevation_shift_deg"] = (_sun_el_az(sun, t_mean + dt)[0]
+                                               - _sun_el_az(sun, t_mean)[0])
+            rows[-1]["sensitivity"] = sens
     rows.sort(key=lambda r: r.get("score", np.inf))
     avail = [r for r in rows if r.get("available", True)]
     if g0 <= floor * (1 + NONE_MARGIN):
