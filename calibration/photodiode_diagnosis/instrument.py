@@ -22,7 +22,7 @@ from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError, YawInRadiansWarning
 
-__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "repeated_samples",
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "held_readings",
            "instrument_from_photodiodes"]
 
 MAX_SPAN_DAYS = 7.0
@@ -67,11 +67,14 @@ class Instrument:
     columns : list of str
         Photodiode column names (P,).
     flagged : ndarray (n, P) bool
-        Readings the reader flagged (saturated, zero, missing, dead), and every reading of a
-        sample that repeats the previous one (:func:`repeated_samples`).
+        Readings the reader flagged (saturated, zero, missing, dead) and the readings a unit
+        holds from its previous conversion (:func:`held_readings`).
     absolute_yaw : bool
         True when the yaw is a heading from north (``yaw_reference == "north"``).
     source : dict
+    held : ndarray (n, P) bool, optional
+        The held readings among ``flagged`` (:func:`held_readings`): excluded from fits, but
+        part of what the instrument outputs at a sample, so heading decoding uses them.
     """
 
     sensor: CompoundEyeSensor
@@ -89,6 +92,7 @@ class Instrument:
     flagged: np.ndarray
     absolute_yaw: bool
     source: dict = field(default_factory=dict)
+    held: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -109,7 +113,8 @@ class Instrument:
         return Instrument(self.sensor, self.site, self.t_s[rows], self.yaw_deg[rows], sweep,
                           self.rotating[rows], self.pitch_deg[rows], self.roll_deg[rows],
                           self.readings[rows], self.pd_unit, self.pd_angle_deg, self.columns,
-                          self.flagged[rows], self.absolute_yaw, self.source)
+                          self.flagged[rows], self.absolute_yaw, self.source,
+                          None if self.held is None else self.held[rows])
 
     def with_readings(self, readings) -> "Instrument":
         """The same instrument and samples with other readings (same shape)."""
@@ -120,7 +125,7 @@ class Instrument:
         return Instrument(self.sensor, self.site, self.t_s, self.yaw_deg, self.sweep,
                           self.rotating, self.pitch_deg, self.roll_deg, readings, self.pd_unit,
                           self.pd_angle_deg, self.columns, self.flagged, self.absolute_yaw,
-                          self.source)
+                          self.source, self.held)
 
 
 def _sweeps(table, t_s: np.ndarray, rows: np.ndarray, where: str) -> np.ndarray:
@@ -158,24 +163,34 @@ def _rotating(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
     return np.median(windows, axis=1) > ROTATING_RATE_DEG_PER_SAMPLE
 
 
-def repeated_samples(readings: np.ndarray) -> np.ndarray:
-    """Samples (n,) whose every reading equals the previous sample's (missing values equal).
+def held_readings(readings: np.ndarray, pd_unit: np.ndarray) -> np.ndarray:
+    """Readings (n, P) that repeat their unit's previous conversion (sample and hold).
 
-    A logger that writes a sample before its converters have finished the next conversion
-    repeats the last one: on the reference ring 4.5 % of the daylight samples repeat all 32
-    readings of the previous sample (2-7 % per session), most while the platform stands
-    still, 8 % of them while it turns. With 32 noisy channels a real repeat of every value is
-    no coincidence. A repeat is no new measurement: kept, its noise, equal to its
-    predecessor's, biases the noise floor low (zero differences), and while turning it is
-    fitted at a heading it was not measured at. The first sample of a run is the conversion
-    and is kept.
+    A unit's reading at a sample is *held* when every photodiode of that unit reads exactly
+    what it read at the previous sample (missing values count as equal; a unit with no finite
+    reading is not marked). A multiplexed logger converts one or two units per sample and
+    holds the others: on the reference ring 78-82 % of every unit's daylight readings are
+    held, a unit converting about every 4.8 samples, its four photodiodes always together.
+    A held reading is no new measurement, and while the platform turns (about 1 deg per
+    sample there) it belongs to the heading of its conversion up to a few samples earlier,
+    not to the sample's; kept, it also adds zero second differences that bias the noise
+    floor low. With 4 noisy photodiodes at tens of counts or more, an equal conversion by
+    chance is rare; at a few counts (a dark twilight sky) it is common, but such units carry
+    no polarization signal and the fault screen excludes them as zero or dead.
     """
     r = np.asarray(readings, float)
-    if r.shape[0] < 2:
-        return np.zeros(r.shape[0], bool)
+    n, P = r.shape
+    out = np.zeros((n, P), bool)
+    if n < 2:
+        return out
     a, b = r[1:], r[:-1]
     same = (a == b) | (np.isnan(a) & np.isnan(b))
-    return np.r_[False, same.all(axis=1) & np.isfinite(a).any(axis=1)]
+    finite = np.isfinite(a)
+    for u in np.unique(pd_unit):
+        cols = np.flatnonzero(pd_unit == u)
+        held = same[:, cols].all(axis=1) & finite[:, cols].any(axis=1)
+        out[1:, cols] = held[:, None]
+    return out
 
 
 def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode data") -> Instrument:
@@ -189,8 +204,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     InsufficientDataError
         With fewer than two sweeps (a held-out split needs whole sweeps).
 
-    Samples that repeat every reading of the previous one are excluded
-    (:func:`repeated_samples`) and counted in ``source["repeated_samples"]``.
+    Readings a unit holds from its previous conversion are excluded (:func:`held_readings`)
+    and counted in ``source["held_readings"]``.
 
     Warns
     -----
@@ -224,8 +239,6 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         rows = np.argsort(t_s, kind="stable")
         table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
         readings, flagged = readings[rows], flagged[rows]
-    repeated = repeated_samples(readings)
-    flagged = flagged | repeated[:, None]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
     sweep = _sweeps(table, t_s, rows, where)
@@ -242,6 +255,8 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     counts = PhotodiodeModel(counts_per_radiance=1.0, noise_counts=0.0)
     sensor = CompoundEyeSensor.from_sidecar(data.sidecar, counts)
     pd_unit = np.array([i for i, u in enumerate(data.units) for _ in u["photodiodes"]])
+    held = held_readings(readings, pd_unit)
+    flagged = flagged | held
     pd_angle = np.array([float(a) for u in data.units for a in u["photodiodes"]])
     for i in range(sensor.n_units):
         if not np.any(pd_unit == i):
@@ -250,7 +265,7 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         sensor=sensor, site=data.site, t_s=t_s, yaw_deg=yaw, sweep=sweep,
         rotating=_rotating(yaw, sweep), pitch_deg=att["pitch_deg"], roll_deg=att["roll_deg"],
         readings=readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
-        columns=list(data.columns), flagged=flagged,
+        columns=list(data.columns), flagged=flagged, held=held,
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
         source={"path": where, "schema": data.sidecar["schema"],
                 "readings": data.sidecar["readings"], "samples": int(len(table)),
@@ -259,4 +274,4 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                 "yaw_reference": data.sidecar["yaw_reference"],
                 "yaw_sense": data.sidecar["yaw_sense"],
                 "saturation_value": float(data.sidecar["saturation_value"]),
-                "repeated_samples": int(repeated.sum())})
+                "held_readings": int(held.sum())})

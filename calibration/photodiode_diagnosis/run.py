@@ -88,12 +88,22 @@ def _rms(r, w) -> float:
 
 
 def noise_floor(residual, usable, sweep) -> float:
-    """White-noise RMS of relative residuals from second differences along each sweep
-    (von Neumann et al. 1941, doi:10.1214/aoms/1177731746): ``mean(d2^2) / 6``."""
-    same = (sweep[2:] == sweep[1:-1]) & (sweep[1:-1] == sweep[:-2])
-    ok = usable[2:] & usable[1:-1] & usable[:-2] & same[:, None]
-    d2 = residual[2:] - 2 * residual[1:-1] + residual[:-2]
-    return float(np.sqrt(np.sum(np.where(ok, d2, 0.0) ** 2) / max(ok.sum(), 1) / 6.0))
+    """White-noise RMS of relative residuals from second differences of each photodiode's
+    consecutive usable readings within a sweep (von Neumann et al. 1941,
+    doi:10.1214/aoms/1177731746): ``mean(d2^2) / 6``. Excluded readings (held, saturated,
+    glare) are skipped rather than breaking the sequence, so a unit converting every few
+    samples still has a floor."""
+    num, cnt = 0.0, 0
+    for p in range(residual.shape[1]):
+        i = np.flatnonzero(usable[:, p])
+        if i.size < 3:
+            continue
+        r, s = residual[i, p], sweep[i]
+        same = (s[2:] == s[1:-1]) & (s[1:-1] == s[:-2])
+        d2 = r[2:] - 2 * r[1:-1] + r[:-2]
+        num += float(np.sum(d2[same] ** 2))
+        cnt += int(same.sum())
+    return float(np.sqrt(num / max(cnt, 1) / 6.0))
 
 
 def orient(fwd: Forward, theta) -> tuple[float, np.ndarray]:
@@ -248,6 +258,19 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
                           "offsets absorb its azimuth)"),
             "s_per_deg_of_sun_elevation": (3600.0 / abs(rate_el) if abs(rate_el) > 1e-6
                                            else None)}
+
+
+def instrument_output(inst: Instrument) -> Instrument:
+    """The instrument as its output reads at every sample: a held reading (flagged, see
+    :func:`calibration.photodiode_diagnosis.instrument.held_readings`) is usable where the
+    conversion it holds was. A compass reads its held outputs, so heading decoding uses
+    them; fits and gaps use the conversions only."""
+    if inst.held is None or not inst.held.any():
+        return inst
+    n, P = inst.readings.shape
+    ok = ~inst.flagged
+    last = np.maximum.accumulate(np.where(inst.held, 0, np.arange(n)[:, None]), axis=0)
+    return replace(inst, flagged=~ok[last, np.arange(P)[None, :]])
 
 
 def _sun_el_az(sun: SunTrack, t_s: float):
@@ -440,6 +463,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     fold_params = {e.name: [] for e in cand}
     fold_converged = {e.name: [] for e in cand}
     unavailable, decoders = {}, {}
+    output = instrument_output(work)
     for e in cand:
         try:
             e.available(sun_el)
@@ -525,6 +549,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             continue
         errs = []
         for fwd, t, ho in decoders[key]:
+            fwd = Forward(output.subset(ho), fwd.effect, sun=sun, polarizer_sign=sign)
             dec = decode_headings(fwd, t)
             ref = fwd.headings(t)
             errs.append(wrap_deg(dec - ref))
@@ -547,8 +572,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         "schema": DIAGNOSIS_SCHEMA, "instrument": "photodiodes", "verdict": v,
         "candidates": rows, "where": where, "faults": scr.faults,
         "noise_floor": {"rms": floor, "method": "second differences along each sweep"},
-        "heading_error": {"metric": "RMS over held-out samples with a usable reading of "
-                                    "decoded minus fitted heading [deg]"
+        "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
+                                    "heading [deg], decoded from the instrument's output "
+                                    "(held readings included)"
                                     + ("" if work.absolute_yaw else
                                        " (relative yaw: per-sweep offset fitted)"),
                           "base_deg": herr.get("base"),
