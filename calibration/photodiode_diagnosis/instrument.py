@@ -170,7 +170,7 @@ def held_readings(readings: np.ndarray, pd_unit: np.ndarray) -> np.ndarray:
     what it read at the previous sample (missing values count as equal; a unit with no finite
     reading is not marked). A multiplexed logger converts one or two units per sample and
     holds the others: on the reference ring 78-82 % of every unit's daylight readings are
-    held, a unit converting about every 4.8 samples, its four photodiodes always together.
+    held, a unit converting its four photodiodes together about every 4.8 samples.
     A held reading is no new measurement, and while the platform turns (about 1 deg per
     sample there) it belongs to the heading of its conversion up to a few samples earlier,
     not to the sample's; kept, it also adds zero second differences that bias the noise
