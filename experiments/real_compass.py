@@ -137,7 +137,7 @@ def plot_day(table: pd.DataFrame, path: Path) -> None:
         x = t["sun_elevation_deg"]
         ax[0].plot(x, 100 * t["gap_base"], "o", label="base model")
         ax[0].plot(x, 100 * t["gap_best"].astype(float), "s", label="best candidate")
-        ax[1].plot(x, t["heading_rms_base_deg"], "o", label="base model")
+        ax[1].plot(x, t["heading_rms_base_deg"].astype(float), "o", label="base model")
         ax[1].plot(x, t["heading_rms_best_deg"].astype(float), "s", label="best candidate")
         if "unit_elevation_offset_deg" in t:
             ax[2].plot(x, t["unit_elevation_offset_deg"].astype(float), "o",
@@ -208,7 +208,7 @@ def photodiode_report_markdown(doc: dict) -> str:
                      f"apparent elevation moves the fitted clock by {per_deg / 60:.1f} min."
                      if per_deg is not None else "the data cannot pin the clock.")]
         shift = sens.get("sun_elevation_shift_deg")
-        if shift is not None and "only" in sens["read_from"]:
+        if shift is not None and np.isfinite(shift) and not sens.get("absolute_yaw", False):
             lines += ["", f"The fitted clock offset moves the sun's elevation by {shift:+.2f} deg: "
                           "a clock error, or a sky whose sun appears that much "
                           f"{'higher' if shift >= 0 else 'lower'} than the ephemeris's, "

@@ -231,10 +231,14 @@ def test_bad_input(session):
 
 def test_yaw_in_radians_is_warned_about(session):
     """A yaw column written in radians (a full turn reads as 6.3 'deg') is warned about with
-    its range; the same turn in degrees, and a platform standing within +-pi deg, are not."""
+    its range, in +-pi or in [0, 2 pi]; the same turn in degrees is not, nor a platform that
+    stays within +-1.4 deg (span 2.8, below the 3 that is warned about)."""
     rad = session.table.copy()
     rad["yaw_deg"] = np.radians(rad["yaw_deg"])
     with pytest.warns(YawInRadiansWarning, match=r"within \+-pi .* if the column is in radians"):
+        instrument_from_photodiodes(PhotodiodeData(rad, session.sidecar))
+    rad["yaw_deg"] = rad["yaw_deg"] % (2 * np.pi)          # radians in [0, 2 pi)
+    with pytest.warns(YawInRadiansWarning, match=r"\[0, 2 pi\]"):
         instrument_from_photodiodes(PhotodiodeData(rad, session.sidecar))
     still = session.table.copy()
     still["yaw_deg"] = np.clip(still["yaw_deg"], -1.4, 1.4)

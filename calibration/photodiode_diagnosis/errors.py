@@ -21,5 +21,5 @@ class SunTooLowError(DiagnosisError, ValueError):
 
 
 class YawInRadiansWarning(UserWarning):
-    """Every yaw lies within +-pi while the yaw spans more than 3: the ``yaw_deg`` column
-    looks like radians (a full turn then reads as 6.3 deg)."""
+    """Every yaw lies within +-pi (or [0, 2 pi]) while the yaw spans more than 3: the
+    ``yaw_deg`` column looks like radians (a full turn then reads as 6.3 deg)."""

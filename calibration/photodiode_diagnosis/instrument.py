@@ -32,9 +32,10 @@ and such a sample is a clock glitch (an unset or reset real-time clock reads 197
 which would also make the sun's track span decades."""
 
 RADIAN_SPAN = 3.0
-"""A yaw column whose values all lie within +-pi but span more than this [its own units] is
-warned about as radians (:class:`YawInRadiansWarning`): a platform that turns by 3 deg or
-more yet never leaves +-3.14 deg is rare, a turn recorded in radians spans up to 2 pi."""
+"""A yaw column whose values all lie within +-pi (or within [0, 2 pi]) but span more than this
+[its own units] is warned about as radians (:class:`YawInRadiansWarning`): a platform that
+turns by 3 deg or more yet never leaves +-3.14 deg (or 0-6.28 deg) is rare, a turn recorded
+in radians spans up to 2 pi."""
 
 ROTATING_RATE_DEG_PER_SAMPLE = 0.2
 """A sample is *rotating* when the yaw changes by more than this per sample [deg] (median over
@@ -210,7 +211,7 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
     Warns
     -----
     YawInRadiansWarning
-        When every yaw lies within +-pi but spans more than :data:`RADIAN_SPAN`.
+        When every yaw lies within +-pi or [0, 2 pi] but spans more than :data:`RADIAN_SPAN`.
     """
     table = data.table
     yaw = table["yaw_deg"].to_numpy(dtype=float)
@@ -219,9 +220,12 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         raise InstrumentDataError(f"{where}: yaw_deg is not a finite number in row {row} "
                                   f"({table['yaw_deg'].iloc[row]!r}); the heading of every "
                                   "sample is needed")
-    if yaw.size and np.all(np.abs(yaw) <= np.pi + 1e-9) and np.ptp(yaw) > RADIAN_SPAN:
+    radian_range = (np.all(np.abs(yaw) <= np.pi + 1e-9)
+                    or np.all((yaw >= 0.0) & (yaw <= 2 * np.pi + 1e-9))) if yaw.size else False
+    if radian_range and np.ptp(yaw) > RADIAN_SPAN:
         warnings.warn(YawInRadiansWarning(
-            f"{where}: every yaw_deg lies within +-pi ({yaw.min():.3f} to {yaw.max():.3f}) "
+            f"{where}: every yaw_deg lies within +-pi or [0, 2 pi] ({yaw.min():.3f} to "
+            f"{yaw.max():.3f}) "
             f"while it spans {np.ptp(yaw):.3f}: if the column is in radians, convert it to "
             "degrees (a full turn would read as 6.3 deg and no sweep would turn)"), stacklevel=2)
     t_s = as_utc_index(table["time"]).as_unit("ns").asi8 / 1e9

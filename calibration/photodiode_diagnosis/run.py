@@ -253,6 +253,7 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
     k = 3600.0 / (2.0 * half_step_s)
     rate_el, rate_az = (e1 - e0) * k, float(wrap_deg(a1 - a0)) * k
     return {"sun_elevation_rate_deg_per_h": rate_el, "sun_azimuth_rate_deg_per_h": rate_az,
+            "absolute_yaw": bool(absolute_yaw),
             "read_from": ("the sun's elevation and azimuth" if absolute_yaw else
                           "the sun's elevation only (relative yaw: the per-sweep heading "
                           "offsets absorb its azimuth)"),
@@ -414,20 +415,20 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         For folds that do not fit the sweeps, or a fold whose training sweeps hold fewer
         usable readings than the base fit has parameters (the other sweeps have none).
     """
-    where = inst.source.get("path", "photodiode data")
+    path = inst.source.get("path", "photodiode data")
     sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
     if sun_el.min() < TWILIGHT_LIMIT_DEG:
         i = int(np.argmin(sun_el))
         raise SunTooLowError(
-            f"{where}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
+            f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
             f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
             "Check the times and their UTC offset, or drop the night samples")
     finite = np.isfinite(inst.readings)
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
-            f"{where}: all {int(finite.sum())} readings are at or above the saturation value "
+            f"{path}: all {int(finite.sum())} readings are at or above the saturation value "
             f"{inst.source['saturation_value']:g}: shorten the exposure or lower the gain")
     folds = held_out_folds(inst.sweep, n_folds)
     cand = [get_ring_effect(e) for e in effects]
@@ -476,7 +477,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         if ftr.usable.sum() < ftr.layout.size:
             empty = [int(s) for s in range(work.n_sweeps) if not full.usable[work.sweep == s].any()]
             raise InsufficientDataError(
-                f"{where}: held-out fold {int(f)}: its training sweeps hold "
+                f"{path}: held-out fold {int(f)}: its training sweeps hold "
                 f"{int(ftr.usable.sum())} usable readings, fewer than the {ftr.layout.size} "
                 f"parameters of the base fit; sweeps {empty} (0-based, in order of appearance) "
                 "have no usable reading (all missing, zero or saturated): drop them from the file")
