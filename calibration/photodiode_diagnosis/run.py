@@ -261,17 +261,29 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
                                            else None)}
 
 
+def conversion_rows(inst: Instrument) -> np.ndarray:
+    """Row (n, U) of the conversion each unit's reading holds at every sample (the sample
+    itself where the reading is fresh; see
+    :func:`calibration.photodiode_diagnosis.instrument.held_readings`)."""
+    n = inst.n
+    rows = np.tile(np.arange(n)[:, None], (1, inst.n_units))
+    if inst.held is None:
+        return rows
+    first = np.array([np.flatnonzero(inst.pd_unit == u)[0] for u in range(inst.n_units)])
+    return np.maximum.accumulate(np.where(inst.held[:, first], 0, rows), axis=0)
+
+
 def instrument_output(inst: Instrument) -> Instrument:
     """The instrument as its output reads at every sample: a held reading (flagged, see
     :func:`calibration.photodiode_diagnosis.instrument.held_readings`) is usable where the
-    conversion it holds was. A compass reads its held outputs, so heading decoding uses
-    them; fits and gaps use the conversions only."""
+    conversion it holds was and lies in the same sweep. A compass reads its held outputs, so
+    heading decoding uses them; fits and gaps use the conversions only."""
     if inst.held is None or not inst.held.any():
         return inst
-    n, P = inst.readings.shape
-    ok = ~inst.flagged
-    last = np.maximum.accumulate(np.where(inst.held, 0, np.arange(n)[:, None]), axis=0)
-    return replace(inst, flagged=~ok[last, np.arange(P)[None, :]])
+    conv = conversion_rows(inst)[:, inst.pd_unit]              # (n, P)
+    ok = ~inst.flagged[conv, np.arange(inst.readings.shape[1])[None, :]]
+    ok &= inst.sweep[conv] == inst.sweep[:, None]
+    return replace(inst, flagged=~ok)
 
 
 def _sun_el_az(sun: SunTrack, t_s: float):
@@ -301,17 +313,31 @@ def _held_out(fwd_ho: Forward, theta_tr, layout_tr, sigma):
 def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     """Heading of every sample [deg] that best explains its readings under the fitted model
     (grid over 360 deg, then a parabola through the best node and its neighbours); NaN for a
-    sample without a usable reading (nothing to decode)."""
+    sample without a usable reading (nothing to decode).
+
+    A unit whose reading holds an earlier conversion (:func:`conversion_rows`) is predicted
+    at the decoded heading minus the turn since that conversion (from the fitted headings of
+    the two samples): a multiplexed compass knows when each unit converted, and so its
+    decoded heading does not lag while it turns.
+    """
     grid = np.arange(0.0, 360.0, step_deg)
-    cost = np.empty((grid.size, fwd.inst.n))
+    n = fwd.inst.n
+    cost = np.zeros((grid.size, n))
+    conv = conversion_rows(fwd.inst)
+    heading = fwd.headings(theta)
+    lag = heading[:, None] - heading[conv]                      # (n, U) [deg]
+    groups = ([(np.ones(fwd.inst.readings.shape[1], bool), np.zeros(n))]
+              if not np.any(lag) else
+              [(fwd.inst.pd_unit == u, lag[:, u]) for u in range(fwd.inst.n_units)])
     try:
-        for g, h in enumerate(grid):
-            fwd.heading_override = np.full(fwd.inst.n, h)
-            cost[g] = np.sum(fwd.residual(theta) ** 2, axis=1)
+        for cols, lag_u in groups:
+            for g, h in enumerate(grid):
+                fwd.heading_override = h - lag_u
+                cost[g] += np.sum(fwd.residual(theta)[:, cols] ** 2, axis=1)
     finally:
         fwd.heading_override = None
     k = np.argmin(cost, axis=0)
-    i = np.arange(fwd.inst.n)
+    i = np.arange(n)
     c0, cm, cp = cost[k, i], cost[(k - 1) % grid.size, i], cost[(k + 1) % grid.size, i]
     den = cm - 2 * c0 + cp
     shift = np.where(den > 0, 0.5 * (cm - cp) / np.where(den > 0, den, 1.0), 0.0)
@@ -575,7 +601,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         "noise_floor": {"rms": floor, "method": "second differences along each sweep"},
         "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
                                     "heading [deg], decoded from the instrument's output "
-                                    "(held readings included)"
+                                    "(held readings at the heading of their conversion)"
                                     + ("" if work.absolute_yaw else
                                        " (relative yaw: per-sweep offset fitted)"),
                           "base_deg": herr.get("base"),
