@@ -310,6 +310,34 @@ def _held_out(fwd_ho: Forward, theta_tr, layout_tr, sigma):
     return res.theta, fwd_ho.residual(res.theta)
 
 
+def _grid_decode(fwd: Forward, theta, centre, offsets, lag=None) -> np.ndarray:
+    """Headings ``centre + offsets[k]`` (n,) scored per sample, the best refined by a
+    parabola through its neighbours; ``lag`` (n, U) shifts each unit's prediction to the
+    heading of its conversion."""
+    n, K = fwd.inst.n, offsets.size
+    cost = np.zeros((K, n))
+    groups = ([(slice(None), 0.0)] if lag is None else
+              [(fwd.inst.pd_unit == u, lag[:, u]) for u in range(fwd.inst.n_units)])
+    try:
+        for cols, lag_u in groups:
+            for g, d in enumerate(offsets):
+                fwd.heading_override = centre + d - lag_u
+                cost[g] += np.sum(fwd.residual(theta)[:, cols] ** 2, axis=1)
+    finally:
+        fwd.heading_override = None
+    k = np.argmin(cost, axis=0)
+    i = np.arange(n)
+    wrap = offsets[-1] - offsets[0] + (offsets[1] - offsets[0]) >= 360.0 - 1e-9
+    if wrap:
+        km, kp = (k - 1) % K, (k + 1) % K
+    else:
+        km, kp = np.maximum(k - 1, 0), np.minimum(k + 1, K - 1)
+    c0, cm, cp = cost[k, i], cost[km, i], cost[kp, i]
+    den = cm - 2 * c0 + cp
+    shift = np.where(den > 0, 0.5 * (cm - cp) / np.where(den > 0, den, 1.0), 0.0)
+    return centre + offsets[k] + np.clip(shift, -1, 1) * (offsets[1] - offsets[0])
+
+
 def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     """Heading of every sample [deg] that best explains its readings under the fitted model
     (grid over 360 deg, then a parabola through the best node and its neighbours); NaN for a
@@ -318,30 +346,17 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     A unit whose reading holds an earlier conversion (:func:`conversion_rows`) is predicted
     at the decoded heading minus the turn since that conversion (from the fitted headings of
     the two samples): a multiplexed compass knows when each unit converted, and so its
-    decoded heading does not lag while it turns.
+    decoded heading does not lag while it turns. That refinement searches +-10 deg around the
+    heading decoded without it (the turn between a unit's conversions is a few degrees).
     """
-    grid = np.arange(0.0, 360.0, step_deg)
     n = fwd.inst.n
-    cost = np.zeros((grid.size, n))
+    h = _grid_decode(fwd, theta, np.zeros(n), np.arange(0.0, 360.0, step_deg))
     conv = conversion_rows(fwd.inst)
     heading = fwd.headings(theta)
     lag = heading[:, None] - heading[conv]                      # (n, U) [deg]
-    groups = ([(np.ones(fwd.inst.readings.shape[1], bool), np.zeros(n))]
-              if not np.any(lag) else
-              [(fwd.inst.pd_unit == u, lag[:, u]) for u in range(fwd.inst.n_units)])
-    try:
-        for cols, lag_u in groups:
-            for g, h in enumerate(grid):
-                fwd.heading_override = h - lag_u
-                cost[g] += np.sum(fwd.residual(theta)[:, cols] ** 2, axis=1)
-    finally:
-        fwd.heading_override = None
-    k = np.argmin(cost, axis=0)
-    i = np.arange(n)
-    c0, cm, cp = cost[k, i], cost[(k - 1) % grid.size, i], cost[(k + 1) % grid.size, i]
-    den = cm - 2 * c0 + cp
-    shift = np.where(den > 0, 0.5 * (cm - cp) / np.where(den > 0, den, 1.0), 0.0)
-    return np.where(fwd.usable.any(axis=1), grid[k] + np.clip(shift, -1, 1) * step_deg, np.nan)
+    if np.any(lag):
+        h = _grid_decode(fwd, theta, h, np.arange(-10.0, 10.0 + 1e-9, 2.5), lag)
+    return np.where(fwd.usable.any(axis=1), h, np.nan)
 
 
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
