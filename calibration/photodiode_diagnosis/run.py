@@ -221,15 +221,15 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
 
 
 def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
-                      half_step_s: float = 300.0) -> dict:
+                      offset_s: float | None = None, half_step_s: float = 300.0) -> dict:
     """What pins a clock offset in a session: the sun's elevation and azimuth rates at ``t_s``.
 
     A clock offset moves the sun along its daily path. With relative yaw the per-sweep heading
     offsets absorb the sun's azimuth, so the clock is read from the sun's elevation alone and
     ``s_per_deg_of_sun_elevation`` (= 3600 / |elevation rate|) is how far a misfit of one
     degree between the sky model and the real sky in the sun's apparent elevation moves the
-    fitted clock; near the sun's culmination that runs to hours. The diagnosis adds
-    ``sun_elevation_shift_deg``, the change of the sun's elevation that the fitted offset
+    fitted clock; near the sun's culmination that runs to hours. Given a fitted
+    ``offset_s``, ``sun_elevation_shift_deg`` is the change of the sun's elevation that it
     makes: with relative yaw, a clock error and a sky whose sun appears that much higher
     (or lower) than the ephemeris's are the same to the data.
 
@@ -239,6 +239,8 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
     t_s : float
         Time [s since epoch, UTC].
     absolute_yaw : bool
+    offset_s : float, optional
+        A fitted clock offset [s] (true minus recorded time).
     half_step_s : float
         Half-width of the central difference [s] (the rates change by < 1 % over 10 min).
 
@@ -246,19 +248,24 @@ def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
     -------
     dict
         ``sun_elevation_rate_deg_per_h``, ``sun_azimuth_rate_deg_per_h``, ``read_from`` and
-        ``s_per_deg_of_sun_elevation`` (None when the elevation rate is below 1e-6 deg/h).
+        ``s_per_deg_of_sun_elevation`` (None when the elevation rate is below 1e-6 deg/h),
+        and ``sun_elevation_shift_deg`` with ``offset_s``.
     """
     e1, a1 = _sun_el_az(sun, t_s + half_step_s)
     e0, a0 = _sun_el_az(sun, t_s - half_step_s)
     k = 3600.0 / (2.0 * half_step_s)
     rate_el, rate_az = (e1 - e0) * k, float(wrap_deg(a1 - a0)) * k
-    return {"sun_elevation_rate_deg_per_h": rate_el, "sun_azimuth_rate_deg_per_h": rate_az,
-            "absolute_yaw": bool(absolute_yaw),
-            "read_from": ("the sun's elevation and azimuth" if absolute_yaw else
-                          "the sun's elevation only (relative yaw: the per-sweep heading "
-                          "offsets absorb its azimuth)"),
-            "s_per_deg_of_sun_elevation": (3600.0 / abs(rate_el) if abs(rate_el) > 1e-6
-                                           else None)}
+    out = {"sun_elevation_rate_deg_per_h": rate_el, "sun_azimuth_rate_deg_per_h": rate_az,
+           "absolute_yaw": bool(absolute_yaw),
+           "read_from": ("the sun's elevation and azimuth" if absolute_yaw else
+                         "the sun's elevation only (relative yaw: the per-sweep heading "
+                         "offsets absorb its azimuth)"),
+           "s_per_deg_of_sun_elevation": (3600.0 / abs(rate_el) if abs(rate_el) > 1e-6
+                                          else None)}
+    if offset_s is not None:
+        out["sun_elevation_shift_deg"] = (_sun_el_az(sun, t_s + offset_s)[0]
+                                          - _sun_el_az(sun, t_s)[0])
+    return out
 
 
 def conversion_rows(inst: Instrument) -> np.ndarray:
@@ -528,7 +535,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         tho, r = _held_out(fho, btr.theta, ftr.layout, sigma)
         res["base"][ho], w_ho[ho] = r, fho.usable
         heads["base"][ho] = fho.headings(tho)
-        decoders.setdefault("base", []).append((fho, tho, ho))
+        decoders.setdefault("base", []).append((None, tho, ho))
         for e in cand:
             if e.name in unavailable:
                 continue
@@ -541,7 +548,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             res[e.name][ho] = re
             heads[e.name][ho] = feho.headings(teho)
-            decoders.setdefault(e.name, []).append((feho, teho, ho))
+            decoders.setdefault(e.name, []).append((e, teho, ho))
     floor = noise_floor(res["base"], w_ho, work.sweep)
     g0 = _rms(res["base"], w_ho)
     n_ho, n_cal = int(w_ho.sum()), int(w_ho.sum() * (n_folds - 1))
@@ -565,12 +572,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                                     "fold_spread": float(np.std(P[:, j])), "unit": un}
                                 for j, (n, un) in enumerate(zip(e.names, e.units))}})
         if e.name == "clock_offset":
-            t_mean = float(np.mean(work.t_s))
-            sens = clock_sensitivity(sun, t_mean, work.absolute_yaw)
-            dt = rows[-1]["params"]["clock_offset_s"]["value"]
-            sens["sun_elevation_shift_deg"] = (_sun_el_az(sun, t_mean + dt)[0]
-                                               - _sun_el_az(sun, t_mean)[0])
-            rows[-1]["sensitivity"] = sens
+            rows[-1]["sensitivity"] = clock_sensitivity(
+                sun, float(np.mean(work.t_s)), work.absolute_yaw,
+                offset_s=rows[-1]["params"]["clock_offset_s"]["value"])
     rows.sort(key=lambda r: r.get("score", np.inf))
     avail = [r for r in rows if r.get("available", True)]
     if g0 <= floor * (1 + NONE_MARGIN):
@@ -590,8 +594,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         if key is None:
             continue
         errs = []
-        for fwd, t, ho in decoders[key]:
-            fwd = Forward(output.subset(ho), fwd.effect, sun=sun, polarizer_sign=sign)
+        for effect, t, ho in decoders[key]:
+            fwd = Forward(output.subset(ho), effect, sun=sun, polarizer_sign=sign)
             dec = decode_headings(fwd, t)
             ref = fwd.headings(t)
             errs.append(wrap_deg(dec - ref))
