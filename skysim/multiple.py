@@ -333,8 +333,7 @@ def prefetch_modes(skies, sun_elevation_deg) -> None:
 
     if any(shared(s) != shared(first) for s in skies):
         raise ValueError("prefetch_modes needs skies that differ only in tau and albedo")
-    nodes = {e for s in np.unique(np.asarray(sun_elevation_deg, float))
-             for e in first.sun_nodes_deg(s)}
+    nodes = first.sun_node_set(sun_elevation_deg)
     for el in sorted(nodes):
         fourier_modes_cases([s.tau for s in skies], [s.albedo for s in skies], _mu0(el),
                             n_zenith=first.n_zenith,
@@ -380,9 +379,11 @@ class MultipleScatteringSky(Sky):
     sun_step_deg : float, optional
         For many sun positions (time series): compute the modes only at sun elevations that
         are multiples of this step [deg] and interpolate the Stokes vector linearly between
-        the two neighbouring nodes (suns lower than one step are computed exactly). None
-        (default): one engine call per distinct sun elevation, no interpolation. The error of
-        a 1 deg step is stated and tested in ``tests/test_multiple.py``.
+        the two neighbouring nodes; near the horizon the nodes close in geometrically
+        (:attr:`LOW_SUN_STEPS`). The evaluation is vectorised over all samples of a node
+        interval, so a time series costs a few engine calls and passes, not one per sample.
+        None (default): one engine call per distinct sun elevation, no interpolation. The
+        error of a 1 deg step is stated and tested in ``tests/test_multiple.py``.
     settings : EngineSettings
         Numerical set-up of sasktran2 (defaults validated against the tables).
 
@@ -440,37 +441,74 @@ class MultipleScatteringSky(Sky):
                              depolarization_ratio=self.depolarization_ratio,
                              settings=self.settings)
 
+    LOW_SUN_STEPS = 8
+    LOW_SUN_RATIO = 1.125
+    LOWEST_NODE_DEG = 0.01
+    """Below ``LOW_SUN_STEPS`` steps of ``sun_step_deg`` the sun nodes are geometric
+    (``8 step / 1.125^k``, spacing about 1/8 of the elevation), because the field bends
+    faster as the sun nears the horizon: with uniform 1-deg nodes the AoP misses by up to
+    0.8 deg at a 1.5-deg sun, with these by 0.03 deg (measured, tau 0.1; tested). Suns below
+    ``LOWEST_NODE_DEG`` are computed exactly."""
+
     def _stokes(self, vel, vaz, sel, saz):
-        I = np.empty(vel.shape)
-        Q = np.empty(vel.shape)
-        U = np.empty(vel.shape)
-        theta = 90.0 - vel
-        phi = vaz - saz
-        suns, inverse = np.unique(sel, return_inverse=True)
-        inverse = inverse.reshape(sel.shape)
-        for k, s in enumerate(suns):  # one engine call per distinct sun elevation (cached)
-            sel_k = inverse == k
-            I[sel_k], Q[sel_k], U[sel_k] = self._stokes_one_sun(s, theta[sel_k], phi[sel_k])
+        shape = vel.shape
+        theta, phi, sel = (90.0 - vel).ravel(), (vaz - saz).ravel(), sel.ravel()
+        out = np.empty((3, sel.size))
+        lo, hi = self._bracket(sel)
+        # one pass per distinct sun node interval (a session whose sun moves a few degrees
+        # has a few), vectorised over the samples in it; exact suns one by one
+        keys, inverse = np.unique(np.where(np.isnan(lo), sel, lo), return_inverse=True)
+        order = np.argsort(inverse, kind="stable")
+        bounds = np.searchsorted(inverse[order], np.arange(keys.size + 1))
+        for k in range(keys.size):
+            m = order[bounds[k]:bounds[k + 1]]
+            a, b = lo[m[0]], hi[m[0]]
+            if np.isnan(a):   # the modes at this sun itself (one cached engine call)
+                out[:, m] = self.modes(keys[k]).evaluate(theta[m], phi[m])
+                continue
+            f = (sel[m] - a) / (b - a)
+            out[:, m] = ((1.0 - f) * np.stack(self.modes(a).evaluate(theta[m], phi[m]))
+                         + f * np.stack(self.modes(b).evaluate(theta[m], phi[m])))
+        I, Q, U = (c.reshape(shape) for c in out)
         return I, Q, U
+
+    def _bracket(self, sun_elevation_deg):
+        """Sun nodes ``(lower, upper)`` [deg] around every sun elevation (arrays), NaN where
+        the modes are computed at the sun itself (no ``sun_step_deg``, a sun on a node, or
+        one below :attr:`LOWEST_NODE_DEG`): multiples of the step, geometric below
+        :attr:`LOW_SUN_STEPS` steps."""
+        sel = np.asarray(sun_elevation_deg, float)
+        nan = np.full(sel.shape, np.nan)
+        step = self.sun_step_deg
+        if step is None:
+            return nan, nan
+        lo = np.floor(sel / step) * step
+        hi = np.minimum(lo + step, 90.0)
+        top = self.LOW_SUN_STEPS * step
+        low = sel < top
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.floor(np.log(top / np.where(low & (sel > 0), sel, top))
+                         / np.log(self.LOW_SUN_RATIO))
+        lo = np.where(low, top * self.LOW_SUN_RATIO ** -(k + 1), lo)
+        hi = np.where(low, top * self.LOW_SUN_RATIO ** -k, hi)
+        exact = (lo == sel) | (sel < self.LOWEST_NODE_DEG) | (lo < self.LOWEST_NODE_DEG)
+        return np.where(exact, nan, lo), np.where(exact, nan, hi)
 
     def sun_nodes_deg(self, sun_elevation_deg: float) -> tuple:
         """Sun elevations [deg] whose modes give the sky at this one: itself (exact), or the
-        two neighbouring multiples of ``sun_step_deg``."""
-        step = self.sun_step_deg
-        lo = None if step is None else np.floor(sun_elevation_deg / step) * step
-        if lo is None or lo <= 0.0 or lo == sun_elevation_deg:
+        two neighbouring nodes (multiples of ``sun_step_deg``, geometric near the horizon)."""
+        lo, hi = self._bracket(float(sun_elevation_deg))
+        if np.isnan(lo):
             return (float(sun_elevation_deg),)
-        return (float(lo), float(min(lo + step, 90.0)))
+        return (float(lo), float(hi))
 
-    def _stokes_one_sun(self, sun_elevation_deg, theta, phi):
-        nodes = self.sun_nodes_deg(sun_elevation_deg)
-        if len(nodes) == 1:
-            return self.modes(nodes[0]).evaluate(theta, phi)
-        lo, hi = nodes
-        w = (sun_elevation_deg - lo) / (hi - lo)
-        a = self.modes(lo).evaluate(theta, phi)
-        b = self.modes(hi).evaluate(theta, phi)
-        return tuple((1.0 - w) * x + w * y for x, y in zip(a, b))
+    def sun_node_set(self, sun_elevation_deg) -> list:
+        """Every sun elevation [deg] whose modes the sky at these suns needs, sorted."""
+        sel = np.asarray(sun_elevation_deg, float).ravel()
+        lo, hi = self._bracket(sel)
+        exact = np.isnan(lo)
+        return sorted(set(np.unique(sel[exact]).tolist()) | set(np.unique(lo[~exact]).tolist())
+                      | set(np.unique(hi[~exact]).tolist()))
 
     def describe(self) -> dict:
         return {"model": self.name, "tau": self.tau, "tau_check": tau_check(self.tau),

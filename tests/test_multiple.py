@@ -363,3 +363,47 @@ def test_set_up_converged_beyond_the_tables_at_tau_3():
     assert np.max(np.abs(4.0 / 3.0 * (a[:, 0] - b[:, 0]) / b[:, 0])) < 2e-3
     dop_a, dop_b = (np.hypot(x[:, 1], x[:, 2]) / x[:, 0] for x in (a, b))
     assert np.max(np.abs(4.0 / 3.0 * (dop_a - dop_b))) < 4e-4
+
+
+def test_sun_step_many_suns_matches_one_by_one():
+    """A time series of suns (one per sample, as a logger with a per-sample clock gives) is
+    evaluated per node interval at once; the result equals the sky evaluated sun by sun
+    (same nodes, same weights: agreement to rounding, 1e-12), including low suns (geometric
+    nodes) and a sun on a node."""
+    needs_engine()
+    rng = np.random.default_rng(11)
+    n = 60
+    sun = np.concatenate([rng.uniform(8.3, 9.7, n // 2), rng.uniform(1.3, 1.5, n // 2 - 1),
+                          [9.0]])
+    el = rng.uniform(5.0, 85.0, n)
+    az = rng.uniform(0.0, 360.0, n)
+    sky = MultipleScatteringSky(tau=0.1, sun_step_deg=1.0)
+    together = sky.field(el, az, sun, 90.0)
+    one = [sky.field(el[i:i + 1], az[i:i + 1], sun[i], 90.0) for i in range(n)]
+    for name in ("I", "Q", "U"):
+        ref = np.concatenate([getattr(f, name) for f in one])
+        np.testing.assert_allclose(getattr(together, name), ref, rtol=1e-12, atol=1e-15)
+    assert sky.sun_nodes_deg(9.0) == (9.0,)
+    assert sky.sun_nodes_deg(9.4) == (9.0, 10.0)
+    lo, hi = sky.sun_nodes_deg(1.4)      # geometric nodes: spacing ~ 1/8 of the elevation
+    assert lo < 1.4 < hi and hi / lo == pytest.approx(1.125)
+    assert len(sky.sun_node_set(sun)) <= 6
+
+
+def test_sun_step_low_sun_error():
+    """Near the horizon the nodes close in geometrically (spacing ~ 1/8 of the elevation).
+    Reference: exact engine runs, tau 0.1, black ground, at suns between nodes. Measured
+    largest errors over the sky: 1.3e-3 in I/I, 1.4e-4 in DoLP, 0.04 deg in AoP (uniform 1-deg
+    nodes gave 1.8e-2, 2.8e-3 and 0.8 deg at a 1.5-deg sun). Bounds: 3e-3, 5e-4, 0.1 deg,
+    ten times below a real instrument's relative noise (1e-2)."""
+    needs_engine()
+    rng = np.random.default_rng(12)
+    el = np.degrees(np.arcsin(rng.uniform(0.05, 1, 200)))
+    az = rng.uniform(0, 360, 200)
+    for sun in (0.35, 1.5, 3.3):
+        exact = MultipleScatteringSky(tau=0.1).field(el, az, sun, 0.0)
+        stepped = MultipleScatteringSky(tau=0.1, sun_step_deg=1.0).field(el, az, sun, 0.0)
+        assert np.max(np.abs(stepped.I / exact.I - 1)) < 3e-3
+        assert np.max(np.abs(stepped.dop - exact.dop)) < 5e-4
+        d_aop = np.abs((stepped.aop_deg - exact.aop_deg + 90.0) % 180.0 - 90.0)
+        assert np.max(d_aop) < 0.1
