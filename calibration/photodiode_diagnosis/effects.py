@@ -6,6 +6,9 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   :class:`skysim.multiple.MultipleScatteringSky` (plane-parallel Rayleigh atmosphere of optical
   thickness ``tau`` over a Lambertian ground, validated against Natraj et al. 2009) instead of
   single scattering; the DoP scale stays free. Tends to the base sky as ``tau -> 0``.
+- ``neutral_points`` (``separation_deg``): the Berry, Dennis & Lee (2004) sky whose neutral
+  points stand ``separation / 2`` either side of the sun and anti-sun (the real sky's are
+  15-25 deg from the sun): DoP higher near the sun and flatter overall. Base at 0.
 - ``fov`` (``alpha_deg``): each unit integrates the Stokes vector over a cone of half-angle
   ``alpha`` about its axis. The cone is sampled by six directions on the ring at the RMS
   radius ``alpha / sqrt(2)`` of a uniform cap, which reproduces the cone average to second
@@ -67,8 +70,8 @@ __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_rin
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
            "fit_engine_settings"]
 
-RING_EFFECT_NAMES = ("multiple_scattering", "fov", "occlusion", "yaw_scale", "clock_offset",
-                     "tilt", "aureole", "stray_light")
+RING_EFFECT_NAMES = ("multiple_scattering", "neutral_points", "fov", "occlusion", "yaw_scale",
+                     "clock_offset", "tilt", "aureole", "stray_light")
 
 
 class EffectUnavailableError(RuntimeError):
@@ -92,6 +95,11 @@ class RingEffect:
     """True when the parameters act on the readings only (no new sampling of the sky)."""
     per_photodiode: ClassVar[int] = 0
     """Number of leading parameters that are one per photodiode (after :meth:`bind`)."""
+    geometric: ClassVar[bool] = False
+    """True when the effect moves where the units look or where the sun is (clock, tilt, yaw
+    scale): its parameters are fitted, with the units' pointing, on the angle of polarization
+    alone (the DoP profiled out), so that a DoP profile the sky model lacks cannot be traded
+    for a false clock, tilt or pointing; then held."""
 
     def bind(self, inst) -> None:
         """Adapt the parameter list to an instrument (per-photodiode effects)."""
@@ -138,6 +146,7 @@ class RingEffect:
 
 class ClockOffset(RingEffect):
     name = "clock_offset"
+    geometric = True
     names = ("clock_offset_s",)
     units = ("s",)
     null = (0.0,)
@@ -155,6 +164,7 @@ class ClockOffset(RingEffect):
 
 class YawScale(RingEffect):
     name = "yaw_scale"
+    geometric = True
     names = ("factor",)
     units = ("1",)
     null = (1.0,)
@@ -171,6 +181,7 @@ class YawScale(RingEffect):
 
 class Tilt(RingEffect):
     name = "tilt"
+    geometric = True
     names = ("pitch_deg", "roll_deg")
     units = ("deg", "deg")
     null = (0.0, 0.0)
@@ -373,6 +384,36 @@ class MultipleScattering(RingEffect):
         return self._grid.at(float(p[0]), float(p[1]))
 
 
+class NeutralPoints(RingEffect):
+    """The sky of Berry, Dennis & Lee (2004) (:class:`skysim.berry.BerrySky`): the sun's and
+    anti-sun's zero of polarization split into neutral-point pairs ``separation_deg`` apart
+    (Babinet and Brewster about the sun, Arago about the anti-sun), which makes the DoP
+    higher near the sun and flatter overall, as multiple scattering by molecules and aerosols
+    does; the AoP departs from single scattering only near the neutral points. Reduces to the
+    base sky at separation 0 (the DoP mapping ``|w| / (2 - |w|)`` is then the Rayleigh
+    DoP, tested)."""
+
+    name = "neutral_points"
+    names = ("separation_deg",)
+    units = ("deg",)
+    null = (0.0,)
+    lower = (0.0,)
+    upper = (70.0,)
+    prior_sd = (40.0,)
+    fd_step = (0.05,)
+
+    def starts(self, ctx) -> list:
+        return [np.array([d]) for d in (10.0, 25.0, 40.0)]
+
+    def sky(self, p, base_sky, sun_enu):
+        from skysim.berry import BerrySky
+        return BerrySky(delta_deg=float(p[0]), dmax=1.0, dop_mapping=BERRY_DOP_MAPPING)
+
+
+BERRY_DOP_MAPPING = "rayleigh"
+"""The ``|w| / (2 - |w|)`` DoP of :mod:`skysim.berry`, which is Rayleigh at zero separation."""
+
+
 class Aureole(RingEffect):
     name = "aureole"
     names = ("amplitude", "scale_deg")
@@ -437,8 +478,8 @@ class StrayLight(RingEffect):
         return np.asarray(p[:P]) * np.exp(-psi / p[P])
 
 
-_EFFECTS = {c.name: c for c in (MultipleScattering, FieldOfView, Occlusion, YawScale,
-                                ClockOffset, Tilt, Aureole, StrayLight)}
+_EFFECTS = {c.name: c for c in (MultipleScattering, NeutralPoints, FieldOfView, Occlusion,
+                                YawScale, ClockOffset, Tilt, Aureole, StrayLight)}
 
 
 def get_ring_effect(name: str) -> RingEffect:

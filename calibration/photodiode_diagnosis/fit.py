@@ -26,8 +26,8 @@ import scipy.sparse as sp
 
 from .forward import Forward
 
-__all__ = ["FitResult", "Priors", "fit", "fit_headings", "coarse_headings", "ANGLE_SD_DEG",
-           "OFFSET_SD"]
+__all__ = ["FitResult", "Priors", "fit", "fit_pinned", "geometry_mask", "fit_headings",
+           "coarse_headings", "ANGLE_SD_DEG", "OFFSET_SD"]
 
 OFFSET_SD = 0.02
 """Prior SD of each photodiode's dark offset, in units of the session's median reading. A
@@ -88,6 +88,14 @@ class FitResult:
     n_iter: int
     converged: bool
     covariance: np.ndarray | None = None
+    free: np.ndarray | None = None
+
+    def sd(self, index: int) -> float | None:
+        """Posterior SD of parameter ``index`` (None without a covariance or if held)."""
+        if self.covariance is None or self.free is None or not self.free[index]:
+            return None
+        pos = int(np.sum(self.free[:index]))
+        return float(np.sqrt(max(self.covariance[pos, pos], 0.0)))
 
 
 def _groups(fwd: Forward, free: np.ndarray):
@@ -241,7 +249,57 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
         chi2 = float(np.sum(r.ravel()[usable_idx] ** 2) / sigma ** 2) / dof
         cov = np.linalg.pinv(A) * max(chi2, 1.0)
     rms = float(np.sqrt(np.mean(r.ravel()[usable_idx] ** 2))) if usable_idx.size else np.nan
-    return FitResult(theta, cost, rms, it, converged, cov)
+    return FitResult(theta, cost, rms, it, converged, cov, free)
+
+
+def geometry_mask(fwd: Forward) -> np.ndarray:
+    """Parameters the angle of polarization pins: every unit's pointing, and the parameters
+    of a geometric effect (``RingEffect.geometric``: clock, tilt, yaw scale)."""
+    L = fwd.layout
+    m = np.zeros(L.size, bool)
+    m[L.pointing] = True
+    if fwd.effect is not None and fwd.effect.geometric:
+        m[L.effect] = True
+    return m
+
+
+def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: bool = True,
+               covariance: bool = False) -> tuple[FitResult, FitResult | None]:
+    """Fit in two stages so that a DoP profile the sky model lacks cannot move the geometry.
+
+    1. (``geometry``) The angle of polarization alone: :attr:`Forward.dop_free` profiles the
+       polarized radiance out, and the pointing, a geometric effect's parameters, the
+       polarizer angles, gains, offsets and headings are fitted; the DoP scale and a
+       non-geometric effect's parameters (which act on the DoP) are held.
+    2. The full model with the geometry (:func:`geometry_mask`) held at stage 1's values, or
+       at ``theta0``'s without stage 1.
+
+    A free unit elevation or clock in one fit of the full model takes up the difference
+    between the model's and the real sky's DoP profile (on a real ring the unit elevations
+    followed the sun from +7 to -13 deg); the angle of polarization carries the geometry
+    without that bias, because an aerosol or multiple-scattering sky changes the DoP profile
+    far more than the AoP pattern.
+
+    Returns
+    -------
+    (FitResult, FitResult or None)
+        Stage 2, and stage 1 (with its covariance when asked) or None.
+    """
+    L = fwd.layout
+    theta = np.asarray(theta0, float)
+    first = None
+    if geometry:
+        free = np.ones(L.size, bool)
+        free[L.scale] = False
+        if fwd.effect is not None and not fwd.effect.geometric:
+            free[L.effect] = False
+        fwd.dop_free = True
+        try:
+            first = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter, covariance=covariance)
+        finally:
+            fwd.dop_free = False
+        theta = first.theta
+    return fit(fwd, theta, ~geometry_mask(fwd), sigma=sigma, max_iter=max_iter), first
 
 
 def coarse_headings(fwd: Forward, theta, step_deg: float = 15.0) -> np.ndarray:

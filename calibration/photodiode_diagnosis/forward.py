@@ -180,6 +180,7 @@ class Forward:
         self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= 3))[:, units]
         self._scale = np.where(self.usable, mean[:, units], 1.0)
         self._sky = RayleighSky(1.0)
+        self.dop_free = False
 
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
@@ -246,14 +247,11 @@ class Forward:
 
     def predict(self, theta, obs: SkySample):
         """Predicted readings (n, P) in session-median units and the profiled radiance (n, U)."""
+        if self.dop_free:
+            return self._predict_dop_free(theta, obs)
         L = self.layout
         m = self.channel_model(theta, obs)
-        off = theta[L.off]
-        e = self.effect
-        if e is not None:
-            add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
-            if add is not None:
-                off = off + add
+        off = self._offsets(theta, obs)
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)
         mw = np.where(w, m, 0.0)
@@ -261,6 +259,44 @@ class Forward:
         den = (mw * mw) @ self.member.T
         radiance = num / np.maximum(den, 1e-300)
         return radiance[:, self.inst.pd_unit] * m + off, radiance
+
+    def _offsets(self, theta, obs: SkySample):
+        """Dark offsets (P,) plus an effect's additive light (n, P), if any."""
+        L, e = self.layout, self.effect
+        off = theta[L.off]
+        if e is not None:
+            add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+            if add is not None:
+                off = off + add
+        return off
+
+    def _predict_dop_free(self, theta, obs: SkySample):
+        """Predictions with the polarized radiance ``I d`` of every unit and sample profiled
+        out beside ``I`` (the angle of polarization alone informs the fit).
+
+        ``r_p - o_p = I g_p + J g_p cos 2(chi - a_p - beta_p - delta_u)``, linear in
+        ``(I, J = I d)``: a 2 x 2 least-squares solve per unit and sample (variable projection
+        [1]_). The sky model's DoP and the DoP scale drop out; what remains is the angle
+        ``chi`` the model predicts at each unit, which a mispointed unit, a wrong sun or a
+        wrong clock change, but a DoP profile of another shape does not.
+        """
+        L, inst = self.layout, self.inst
+        u = inst.pd_unit
+        g = np.exp(theta[L.lam])
+        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        b0 = np.broadcast_to(g, self.y.shape)
+        b1 = g * np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
+        off = self._offsets(theta, obs)
+        w = self.usable
+        yo = np.where(w, self.y - off, 0.0)
+        b0w, b1w = np.where(w, b0, 0.0), np.where(w, b1, 0.0)
+        M = self.member.T
+        a00, a01, a11 = (b0w * b0w) @ M, (b0w * b1w) @ M, (b1w * b1w) @ M
+        c0, c1 = (yo * b0w) @ M, (yo * b1w) @ M
+        det = np.maximum(a00 * a11 - a01 * a01, 1e-300)
+        radiance = (a11 * c0 - a01 * c1) / det
+        polarized = (a00 * c1 - a01 * c0) / det
+        return radiance[:, u] * b0 + polarized[:, u] * b1 + off, radiance
 
     def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:
         """Relative residuals (n, P): ``(r - r_hat) / unit mean``, 0 where not usable."""

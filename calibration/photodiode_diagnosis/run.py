@@ -14,15 +14,15 @@ from skysim.geometry import angle_between_deg, direction_vector, wrap_deg
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
 from ..diagnosis import DIAGNOSIS_SCHEMA, InsufficientDataError
-from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
+from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
 from .errors import InstrumentDataError, NoUsableChannelsError, SunTooLowError
 from .faults import bright_glare, malus_outliers, screen
-from .fit import Priors, coarse_headings, fit, fit_headings
+from .fit import Priors, coarse_headings, fit, fit_headings, fit_pinned
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
 
 __all__ = ["EXCESS_FRACTION", "diagnose_instrument", "diagnose_photodiodes", "orient",
-           "decode_headings", "held_out_folds"]
+           "decode_headings", "held_out_folds", "clock_mirror", "solar_noon_s"]
 
 EXCESS_FRACTION = 0.05
 """A candidate is named when its complexity-penalised held-out score is negative, it removes
@@ -176,17 +176,24 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
 
 
 def _fit_effect(fe: Forward, starts, sigma):
-    """Fit from each start; the lowest cost wins; for the clock offset, ties
-    (:data:`CLOCK_TIE`) go to the start nearest the effect's null (the smaller offset)."""
-    if not isinstance(starts, list):
-        return fit(fe, starts, sigma=sigma, max_iter=EFFECT_MAX_ITER)
-    fits = [fit(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER) for s in starts]
-    best = min(f.cost for f in fits)
+    """Fit from each start (:func:`fit_pinned`: a geometric effect on the angle of
+    polarization first); the lowest cost wins, judged on the stage that fixes the effect (the
+    AoP fit for a geometric one). For the clock offset, ties (:data:`CLOCK_TIE`) go to the
+    start nearest the effect's null (the smaller offset). Returns ``(fit, aop_fit)``."""
+    geometric = fe.effect.geometric
+    starts = starts if isinstance(starts, list) else [starts]
+    fits = [fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER, geometry=geometric,
+                       covariance=geometric) for s in starts]
+
+    def cost(f):
+        return (f[1] if geometric else f[0]).cost
+
+    best = min(cost(f) for f in fits)
     if fe.effect.name != "clock_offset":
-        return min(fits, key=lambda f: f.cost)
+        return min(fits, key=cost)
     L = fe.layout
-    close = [f for f in fits if f.cost <= best * (1 + CLOCK_TIE)]
-    return min(close, key=lambda f: float(np.sum(np.abs(f.theta[L.effect]
+    close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
+    return min(close, key=lambda f: float(np.sum(np.abs(f[0].theta[L.effect]
                                                         - np.asarray(fe.effect.null)))))
 
 
@@ -197,10 +204,15 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
-        return _clock_starts(fwd, theta_base, fwd_base, effect)
+        fwd.dop_free = True      # a clock is read from the angle of polarization
+        try:
+            return _clock_starts(fwd, theta_base, fwd_base, effect)
+        finally:
+            fwd.dop_free = False
     if len(starts) == 1:
         return _extend(theta_base, fwd_base, fwd, starts[0])
-    obs0 = fwd_base.observe(theta_base) if not effect.observes else None
+    resamples = effect.observes or type(effect).sky is not RingEffect.sky   # a sky of its own
+    obs0 = None if resamples else fwd_base.observe(theta_base)
     sun = fwd.sun(fwd.inst.t_s)
     scored = []
     for p in starts:
@@ -445,7 +457,7 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
     full)`` (the instrument with its exclusions, the thinned and the full forward models)."""
     work = replace(inst, flagged=~scr.reading_ok)
     base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
-    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
+    first, _ = fit_pinned(base, theta, sigma=0.02, max_iter=max_iter)
     return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
 
 
@@ -490,7 +502,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     theta = np.zeros(L.size)
     theta[L.scale] = 0.6
     sign, theta = orient(base, theta)
-    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
+    first, _ = fit_pinned(base, theta, sigma=0.02, max_iter=max_iter)
     full = Forward(work, sun=sun, polarizer_sign=sign)
     scr2 = bright_glare(inst, scr, full.residual(first.theta), full.usable)
     if scr2.bright is not None and scr2.bright.any():
@@ -511,6 +523,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     w_ho = np.zeros(shape, bool)
     fold_params = {e.name: [] for e in cand}
     fold_converged = {e.name: [] for e in cand}
+    fold_sd = {e.name: [] for e in cand}
     unavailable, decoders = {}, {}
     output = instrument_output(work)
     for e in cand:
@@ -530,7 +543,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                 f"parameters of the base fit; sweeps {empty} (0-based, in order of appearance) "
                 "have no usable reading (all missing, zero or saturated): drop them from the file")
         t0 = np.r_[first.theta[:L.n_base], _sweep_headings(first.theta, L, work, tr, ftr)]
-        btr = fit(ftr, t0, sigma=sigma, max_iter=max_iter)
+        btr, _ = fit_pinned(ftr, t0, sigma=sigma, max_iter=max_iter)
         fho = Forward(iho, sun=sun, polarizer_sign=sign)
         tho, r = _held_out(fho, btr.theta, ftr.layout, sigma)
         res["base"][ho], w_ho[ho] = r, fho.usable
@@ -541,7 +554,10 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                 continue
             fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
             start = _start_effect(fe, btr.theta, ftr, e, sigma)
-            fr = _fit_effect(fe, start, sigma)
+            fr, fr_aop = _fit_effect(fe, start, sigma)
+            if fr_aop is not None:
+                fold_sd[e.name].append([fr_aop.sd(i) for i in range(fe.layout.effect.start,
+                                                                     fe.layout.effect.stop)])
             fold_params[e.name].append(fr.theta[fe.layout.effect])
             fold_converged[e.name].append(bool(fr.converged))
             feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
@@ -568,13 +584,15 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                      "explained": bool(frac >= EXCESS_FRACTION and score < 0
                                        and better >= SWEEP_CONSISTENCY),
                      "converged": all(fold_converged[e.name]),
-                     "params": {n: {"value": float(np.mean(P[:, j])),
-                                    "fold_spread": float(np.std(P[:, j])), "unit": un}
-                                for j, (n, un) in enumerate(zip(e.names, e.units))}})
+                     "params": _fold_params(e, P, fold_sd[e.name])})
+        if e.geometric:
+            rows[-1]["fitted_on"] = "angle of polarization (DoP profiled out), then held"
         if e.name == "clock_offset":
+            offset = rows[-1]["params"]["clock_offset_s"]["value"]
             rows[-1]["sensitivity"] = clock_sensitivity(
-                sun, float(np.mean(work.t_s)), work.absolute_yaw,
-                offset_s=rows[-1]["params"]["clock_offset_s"]["value"])
+                sun, float(np.mean(work.t_s)), work.absolute_yaw, offset_s=offset)
+            rows[-1]["mirror"] = clock_mirror(work, e, first.theta, L, sun, sign, sigma,
+                                              offset)
     rows.sort(key=lambda r: r.get("score", np.inf))
     avail = [r for r in rows if r.get("available", True)]
     if g0 <= floor * (1 + NONE_MARGIN):
@@ -631,6 +649,61 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         "split": {"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
                   "held_out_readings": n_ho},
         "seed": seed}
+
+
+def _fold_params(effect, P, sds) -> dict:
+    """Mean over folds of each effect parameter, its spread over folds and, for a geometric
+    effect fitted with a covariance, its uncertainty: the root sum of squares of the mean
+    posterior SD of the folds' AoP fits and the spread between folds."""
+    out = {}
+    for j, (n, un) in enumerate(zip(effect.names, effect.units)):
+        out[n] = {"value": float(np.mean(P[:, j])), "fold_spread": float(np.std(P[:, j])),
+                  "unit": un}
+        sd = [f[j] for f in sds if f[j] is not None]
+        if sd:
+            out[n]["uncertainty"] = float(np.sqrt(np.mean(np.square(sd))
+                                                  + np.var(P[:, j])))
+    return out
+
+
+def solar_noon_s(sun: SunTrack, t_s: float) -> float:
+    """Time [s since epoch, UTC] of the sun's culmination nearest ``t_s`` (highest elevation
+    on a 60-s grid over +-12 h, refined by a parabola through the top three)."""
+    from skysim.geometry import elevation_azimuth
+    t = t_s + np.arange(-12 * 3600.0, 12 * 3600.0 + 60.0, 60.0)
+    el, _ = elevation_azimuth(sun(t))
+    i = int(np.clip(np.argmax(el), 1, t.size - 2))
+    a, b, c = el[i - 1], el[i], el[i + 1]
+    den = a - 2 * b + c
+    return float(t[i] + (0.5 * (a - c) / den * 60.0 if den != 0 else 0.0))
+
+
+def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
+                 offset_s: float) -> dict:
+    """The clock offset that mirrors the fitted one about the sun's culmination, and how well
+    it fits: with relative yaw the per-sweep headings absorb the sun's azimuth, and the sun
+    stands at the same elevation at ``t`` and ``2 t_noon - t``, so near culmination both
+    clocks fit the angle of polarization alike and the data cannot choose. Both are scored
+    by an AoP fit (DoP profiled out) of the headings, on the session thinned as for fits.
+    """
+    t_mid = float(np.mean(inst.t_s))
+    noon = solar_noon_s(sun, t_mid)
+    mirror = 2.0 * (noon - t_mid) - offset_s
+    fe = Forward(_thin(inst), effect, sun=sun, polarizer_sign=sign)
+    costs = []
+    for dt in (offset_s, mirror):
+        t = np.zeros(fe.layout.size)
+        t[:layout.size] = theta_base[:layout.size]
+        t[fe.layout.effect] = dt
+        fe.dop_free = True
+        try:
+            costs.append(fit_headings(fe, t, sigma=sigma).cost)
+        finally:
+            fe.dop_free = False
+    ratio = costs[1] / max(costs[0], 1e-300)
+    return {"solar_noon_utc": str(np.datetime64(int(round(noon)), "s")) + "Z",
+            "mirror_offset_s": float(mirror), "cost_ratio": float(ratio),
+            "fits_as_well": bool(ratio <= 1.0 + CLOCK_TIE)}
 
 
 def _sweep_headings(theta, L, inst, rows, ftr):
