@@ -55,6 +55,11 @@ def session_row(name: str, doc: dict) -> dict:
     best = next((c for c in doc["candidates"] if c.get("effect") == v.get("best_candidate")),
                 {})
     sun = doc.get("data", {}).get("sun_elevation_deg", [np.nan, np.nan])
+    clock = next((c for c in doc["candidates"] if c.get("effect") == "clock_offset"
+                  and c.get("available", True)), {})
+    clock_p = clock.get("params", {}).get("clock_offset_s", {})
+    elev = [x for x in ((doc.get("base_fit") or {}).get("elevation_offset_deg") or {}).values()
+            if x is not None]
     return {"session": name, "sun_elevation_deg": float(np.mean(sun)),
             "faults": len(doc["faults"]),
             "faulty": ", ".join(f"{f['channel']}:{f['kind']}" for f in doc["faults"]),
@@ -65,6 +70,10 @@ def session_row(name: str, doc: dict) -> dict:
             "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
             "unit_elevation_offset_deg": (doc.get("base_fit") or {}).get(
                 "elevation_offset_mean_deg"),
+            "unit_elevation_offset_min_deg": min(elev) if elev else None,
+            "unit_elevation_offset_max_deg": max(elev) if elev else None,
+            "clock_offset_s": clock_p.get("value"),
+            "clock_uncertainty_s": clock_p.get("uncertainty"),
             "top_where": "; ".join(f"{w['dimension']}={w['label']} ({100 * w['share']:.0f}%)"
                                    for w in doc["where"][:3])}
 
@@ -93,6 +102,7 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
     rows = []
     for f in tqdm(files, desc="sessions", unit="session"):
         sub = out / Path(f).stem
+        t0 = time.perf_counter()
         try:
             doc = _diagnose_file(f, effects, folds, seed)
         except DiagnosisError as exc:
@@ -100,7 +110,7 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
             continue
         sub.mkdir(parents=True, exist_ok=True)
         write_json_atomic(sub / "diagnosis.json", doc)
-        rows.append(session_row(Path(f).name, doc))
+        rows.append(dict(session_row(Path(f).name, doc), wall_s=time.perf_counter() - t0))
         if "canopy" in Path(f).name or len(files) == 1:
             plot_residual_over_azimuth(doc, sub / "residual_by_sky_azimuth.png")
     table = pd.DataFrame(rows)
@@ -319,6 +329,7 @@ def _reproduce(args) -> int:
         "seed": args.seed, "elapsed_s": time.perf_counter() - t0,
         "rows": table.to_dict(orient="records")})
     print(_table_md(table))
+    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(table)} sessions")
     print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png "
           "and one diagnosis.json per session")
     return 0
