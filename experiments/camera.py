@@ -61,7 +61,8 @@ def _calibrated_inputs(cam, cal, t_cal, t):
 
 
 def stokes_figure(stokes, lens, attitude, path, title: str = ""):
-    """DoLP, AoP (camera frame) and AoP (local meridian) images of a Stokes image, as PNG."""
+    """DoLP, AoP in the image and AoP (local meridian) images of a Stokes image, as PNG,
+    laid out as the sensor records it (row 0 at the top)."""
     from sensor.camera import local_meridian_aop
 
     from .figures import pyplot, save_png
@@ -69,7 +70,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
     _, _, aop_m = local_meridian_aop(stokes, lens, attitude)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     panels = ((stokes.dolp, "DoLP", "viridis", (0, 1)),
-              (stokes.aop_camera_deg, "AoP, camera frame [deg]", "twilight", (-90, 90)),
+              (stokes.aop_camera_deg, "AoP in the image, ccw from right [deg]", "twilight", (-90, 90)),
               (aop_m, "AoP, local meridian [deg]", "twilight", (-90, 90)))
     for ax, (img, label, cmap, (lo, hi)) in zip(axes, panels):
         im = ax.imshow(np.where(stokes.valid, img, np.nan), cmap=cmap, vmin=lo, vmax=hi,

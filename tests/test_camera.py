@@ -345,27 +345,31 @@ def test_sun_disk_found_in_its_window(model):
 
 
 @pytest.mark.parametrize("model", ["equidistant", "equisolid"])
-def test_image_axes_are_the_meridional_basis_turned_by_the_image_azimuth(model):
-    # (e_x, e_y, d) orthonormal and right-handed; e_x = cos psi e_theta - sin psi e_psi,
-    # e_y = sin psi e_theta + cos psi e_psi with the basis of camera_basis; on the image's x
-    # axis right of the centre (psi = 0) e_x is e_theta: a small step along it moves the image
-    # point along +x only (1e-6 rad: the cross term is second order, < 1e-9 px)
+def test_polarization_axes_are_the_meridional_basis_turned_by_the_image_azimuth(model):
+    # (e_0, e_90, -d) orthonormal and right-handed (angles right-handed about the light's
+    # travel); e_0 = e_x = cos psi e_theta - sin psi e_psi and e_90 = -e_y = -(sin psi e_theta
+    # + cos psi e_psi) with the basis of camera_basis; right of the centre (psi = 0) a small
+    # step along e_0 moves the image point right only, above it (psi = -90 deg) a step along
+    # e_90 moves it up only (1e-6 rad: the cross term is second order, < 1e-9 px)
     from sensor.camera import camera_basis
     lens = FisheyeLens(83.7, 63.2, 61.9, 190.0, model)
     rng = np.random.default_rng(9)
     row, col = rng.uniform(5, 120, 400), rng.uniform(5, 120, 400)
-    e_x, e_y, d = lens.image_axes(row, col)
+    e_0, e_90, d = lens.polarization_axes(row, col)
     ok = np.isfinite(d).all(-1)
     assert ok.sum() > 300
-    e_x, e_y, d = e_x[ok], e_y[ok], d[ok]
-    np.testing.assert_allclose(np.cross(e_x, e_y), d, atol=1e-12)
-    for u, v in ((e_x, e_y), (e_x, d), (e_y, d)):
+    e_0, e_90, d = e_0[ok], e_90[ok], d[ok]
+    np.testing.assert_allclose(np.cross(e_0, e_90), -d, atol=1e-12)
+    for u, v in ((e_0, e_90), (e_0, d), (e_90, d)):
         np.testing.assert_allclose(np.sum(u * v, -1), 0.0, atol=1e-12)
     _, psi, e_th, e_ps = camera_basis(d)
     c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
-    np.testing.assert_allclose(e_x, c * e_th - s * e_ps, atol=1e-12)
-    np.testing.assert_allclose(e_y, s * e_th + c * e_ps, atol=1e-12)
-    cols = lens.cx + np.array([3.0, 20.0, 55.0])
-    ex0, _, d0 = lens.image_axes(np.full(3, lens.cy), cols)
+    np.testing.assert_allclose(e_0, c * e_th - s * e_ps, atol=1e-12)
+    np.testing.assert_allclose(e_90, -(s * e_th + c * e_ps), atol=1e-12)
+    offsets = np.array([3.0, 20.0, 55.0])
+    ex0, _, d0 = lens.polarization_axes(np.full(3, lens.cy), lens.cx + offsets)
     r1, c1 = lens.project(d0 + 1e-6 * ex0)
-    assert (np.abs(r1 - lens.cy) < 1e-9).all() and (c1 > cols).all()
+    assert (np.abs(r1 - lens.cy) < 1e-9).all() and (c1 > lens.cx + offsets).all()
+    _, e90, d0 = lens.polarization_axes(lens.cy - offsets, np.full(3, lens.cx))
+    r1, c1 = lens.project(d0 + 1e-6 * e90)
+    assert (np.abs(c1 - lens.cx) < 1e-9).all() and (r1 < lens.cy - offsets).all()

@@ -9,11 +9,11 @@ skewness-corrected normal limit from :data:`POISSON_EXACT_BELOW_E` on), read noi
 clipping at the full well and an ADC of ``adc_bits`` bits with a black level. The sun disk's
 photoelectrons are raised to the full well before crosstalk.
 
-- ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector rotated into the camera frame
-  (angles from the camera's x axis towards its y axis, see :mod:`sensor.camera.lens`). An ideal
-  rotationally symmetric lens maps the sky's local basis ``(e_theta, e_psi)`` of a ray onto
-  the image's radial and tangential directions, so the E-vector angle from the image radius
-  equals its angle from ``e_theta`` on the sky.
+- ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector in the image's polarization basis
+  (angles counter-clockwise in the displayed image from its right towards its top, see
+  :mod:`sensor.camera.lens`). An ideal rotationally symmetric lens maps the sky's local
+  basis ``(e_theta, e_psi)`` of a ray onto the image's radial and tangential directions, so
+  the E-vector angle from the image radius equals its angle from ``e_theta`` on the sky.
 - ``A = g/2 * (1 + 1/ER, (1 - 1/ER) cos 2a, (1 - 1/ER) sin 2a)``: polarizer at angle
   ``a = a_nominal + error`` [deg] with extinction ratio ``ER`` (transmittance ``g`` along its
   axis, ``g / ER`` across it; ``g`` also carries the pixel's response non-uniformity). An
@@ -83,21 +83,36 @@ Poisson law); the plain Gaussian limit would leave ``1 / (6 sqrt(2 pi lam))``, 0
 e-."""
 
 DEFAULT_LAYOUT_DEG = ((90.0, 45.0), (135.0, 0.0))
-"""Polarizer angles [deg] of the 2x2 super-pixel, rows then columns (the layout of the Sony
-IMX250MZR sensor, also polanalyser's default)."""
+"""Polarizer angles [deg] of the 2x2 super-pixel, rows then columns of the image as the sensor
+records it (row 0 at the top): 90 deg top left, 45 top right, 135 bottom left, 0 bottom right,
+the layout of the Sony IMX250MZR/IMX253MZR sensors. Angles count counter-clockwise in the
+displayed image from its right towards its top (:mod:`sensor.camera.lens`): the 45 deg
+polarizer runs from the pixel's bottom left to its top right, as polanalyser draws the
+IMX250MZR mosaic and computes ``S2 = I45 - I135`` (Sony's and polanalyser's convention)."""
 
 SUN_RADIUS_DEG = 0.2666
 """Mean angular radius of the solar disk [deg]."""
 
 
 def camera_attitude(yaw_deg: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> Rotation:
-    """Camera-to-ENU rotation ``R_nc = Rz(-yaw) Rx(pitch) Ry(roll)`` [deg] of an upward-looking
-    camera whose image top is its heading reference (the body attitude of
-    :func:`sensor.compound_eye.body_attitude`)."""
+    """Camera-to-ENU rotation ``R_nc = R_nb R_bc`` [deg] of an upward-looking camera whose
+    image top is its heading reference.
+
+    ``R_nb = Rz(-yaw) Rx(pitch) Ry(roll)`` is the body attitude of
+    :func:`sensor.compound_eye.body_attitude` (body x right, y forward, z up) and
+    ``R_bc = Rz(180 deg)`` the camera's mount: the optical axis along the body's z, the
+    image's top (camera -y) along the body's forward axis, hence the image's right (camera x)
+    along the body's left. Level at yaw 0 the image's top is north and its right west: the
+    sun due east appears on the image's left.
+    """
     for name, v in (("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)):
         if not np.isfinite(v):
             raise InvalidParameterError(f"{name} must be finite; got {v!r}")
-    return Rotation.from_euler("ZXY", [-yaw_deg, pitch_deg, roll_deg], degrees=True)
+    return Rotation.from_euler("ZXY", [-yaw_deg, pitch_deg, roll_deg], degrees=True) * _MOUNT
+
+
+_MOUNT = Rotation.from_euler("z", 180.0, degrees=True)
+"""Camera-to-body rotation ``R_bc`` of the upward-looking camera (:func:`camera_attitude`)."""
 
 
 def camera_basis(directions):
@@ -130,8 +145,9 @@ class MosaicSensor:
     width, height : int
         Pixels; both even (whole super-pixels).
     layout_deg : 2x2 nested sequence
-        Nominal polarizer angles [deg] of a super-pixel (rows, columns), measured from the
-        camera's x axis towards its y axis.
+        Nominal polarizer angles [deg] of a super-pixel (rows, columns of the image as
+        recorded), counter-clockwise in the displayed image from its right towards its top
+        (:data:`DEFAULT_LAYOUT_DEG`).
     full_well_e : float
         Full-well capacity [e-].
     read_noise_e : float
@@ -415,12 +431,13 @@ class PolarizationCamera:
 
     def _pixel_frame(self, dtype) -> np.ndarray:
         """Camera-fixed vectors of every pixel, (3 vectors, 3 components, H, W) in ``dtype``:
-        the ray ``d`` and the image's x and y axes carried onto the sky
-        (:meth:`FisheyeLens.image_axes`); zero outside the image circle."""
+        the ray ``d`` and the image's polarization directions 0 and 90 deg carried onto the
+        sky (:meth:`FisheyeLens.polarization_axes`); zero outside the image circle."""
         def make():
             inside = self.pixel_directions[1]
-            e_x, e_y, d = self.lens.image_axes(*np.indices(self.sensor.shape, dtype=float))
-            vec = np.stack([d, e_x, e_y])
+            e_0, e_90, d = self.lens.polarization_axes(*np.indices(self.sensor.shape,
+                                                                     dtype=float))
+            vec = np.stack([d, e_0, e_90])
             vec[:, ~inside] = 0.0
             return np.ascontiguousarray(np.moveaxis(vec, -1, 1), dtype=dtype)
         return self._cached(("frame", np.dtype(dtype)), make)
@@ -500,8 +517,8 @@ class PolarizationCamera:
         return sun
 
     def _rayleigh_scene(self, sky, attitude, sun_elevation_deg, sun_azimuth_deg) -> Scene:
-        """:meth:`scene` of a single-scattering sky: camera-frame Stokes from the sun's
-        projections on each pixel's image axes ``(e_x, e_y)`` (:meth:`_pixel_frame`), the
+        """:meth:`scene` of a single-scattering sky: camera Stokes from the sun's projections
+        on each pixel's polarization axes ``(e_0, e_90)`` (:meth:`_pixel_frame`), the
         horizon and the sun disk from dot products with the ray; all in the sky's dtype
         (float32: Stokes within a few 1e-7 of float64, tested)."""
         check_sun_above_horizon(sun_elevation_deg, sky.min_sun_elevation_deg)
@@ -512,6 +529,8 @@ class PolarizationCamera:
         s_c = inv.apply(_enu(sun_elevation_deg, sun_azimuth_deg))
         up_c = inv.apply([0.0, 0.0, 1.0])
         work = np.empty(self.sensor.shape, sky.dtype)
+        # (e_0, e_90) is right-handed about -d: the E-vector d x s has the components
+        # (p2, -p1) instead of (-p2, p1), the same axis, so the Stokes are the same
         i, q, u = rayleigh.stokes_from_sun_projections(_dot(frame[1], s_c, work=work),
                                                        _dot(frame[2], s_c, work=work),
                                                        sky.dmax)
@@ -636,7 +655,8 @@ class PolarizationCamera:
 
 def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azimuth_deg: float,
                       directions, in_view, basis=None):
-    """Camera-frame Stokes ``(n, 3)`` of ``sky`` along camera-frame unit ``directions``
+    """Camera Stokes ``(n, 3)`` (image polarization basis, :mod:`sensor.camera.lens`) of
+    ``sky`` along camera-frame unit ``directions``
     ``(N, 3)`` where ``in_view`` (N,) holds and the ray looks above the horizon.
 
     ``basis``: :func:`camera_basis` of ``directions`` if already known. Returns
@@ -659,14 +679,15 @@ def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azi
     # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y by the
     # camera-plane angle delta = beta + psi of e_el, where beta is the angle of the zenith's
     # component across the ray, (p, q) = (up . e_theta, up . e_psi), from e_theta (both bases
-    # are right-handed about the ray); double angles without trigonometry
+    # are right-handed about the ray); double angles without trigonometry. The image's
+    # polarization angles count from x towards -y (lens module doc): U changes sign.
     p, q = e_th @ up, e_ps @ up
     with np.errstate(invalid="ignore", divide="ignore"):
         r2 = 1.0 / (p * p + q * q)
     c2b, s2b = (p * p - q * q) * r2, 2.0 * p * q * r2
     c2p, s2p = np.cos(2.0 * psi), np.sin(2.0 * psi)
     c2, s2 = c2b * c2p - s2b * s2p, s2b * c2p + c2b * s2p
-    stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
+    stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, -(fld.Q * s2 + fld.U * c2)], axis=-1)
     return idx, stokes, el, az
 
 
