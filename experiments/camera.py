@@ -2,8 +2,8 @@
 and the camera-compass reproduction (heading error vs sun elevation, exposure, extinction
 ratio, calibration and sky model).
 
-Commands: ``skysim camera`` (raw 16-bit TIFF + ``skysim.dofp/1`` sidecar, optional DoLP/AoP
-figure), ``skysim camera-heading`` (heading from a raw image and its sidecar) and
+Commands: ``skysim camera`` (raw 16-bit TIFF or PNG + ``skysim.dofp/1`` sidecar, optional
+DoLP/AoP figure), ``skysim camera-heading`` (heading from a raw image and its sidecar) and
 ``skysim reproduce camera``.
 """
 
@@ -90,15 +90,17 @@ def _make_sky(args):
     from skysim.sky import make_sky
     if args.sky == "multiple":
         return make_sky("multiple", tau=args.tau, albedo=args.albedo)
+    if args.sky == "rayleigh":  # float32 throughout: within 2e-6 of float64 (docs/camera.md)
+        return make_sky("rayleigh", dmax=args.dmax, dtype="float32")
     return make_sky(args.sky, dmax=args.dmax)
 
 
 def _camera_command(args) -> int:
     from sensor.camera import PolarizationCamera, camera_attitude, camera_stokes
-    from sensor.camera.files import require_tifffile, write_raw
+    from sensor.camera.files import require_image_codec, write_raw
     from skysim.sun import sun_position
 
-    require_tifffile()  # before the work, not after it
+    require_image_codec(args.out)  # before the work, not after it
     sun = sun_position([args.time], args.lat, args.lon, args.alt).iloc[0]
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
@@ -141,7 +143,7 @@ def _heading_command(args) -> int:
     from sensor.camera.files import camera_from_sidecar, read_raw
     from skysim.sun import sun_position
 
-    raw, doc = read_raw(args.image)
+    raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
     cam = camera_from_sidecar(doc)
     site, att = doc["site"], doc["attitude"]
     sun = sun_position([aware_time(doc["time"])], site["latitude_deg"], site["longitude_deg"],
@@ -172,7 +174,7 @@ def _heading_command(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
-                       "(16-bit TIFF + sidecar)", formatter_class=DefaultsHelpFormatter,
+                       "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "
                                    "camera (2x2 micro-polarizer mosaic behind a fisheye lens) "
                                    "and write the raw mosaic with a skysim.dofp/1 sidecar.")
@@ -182,8 +184,9 @@ def register(sub) -> None:
     p.add_argument("--alt", type=float, default=0.0, help="altitude [m]")
     p.add_argument("--time", type=aware_time, required=True,
                    help="exposure time, ISO 8601 with UTC offset")
-    p.add_argument("--out", type=output_file(".tif", ".tiff"), required=True,
-                   help="raw image (.tiff); the sidecar is <name>.json")
+    p.add_argument("--out", type=output_file(".tif", ".tiff", ".png"), required=True,
+                   help="raw image, 16-bit TIFF (.tif, .tiff) or PNG (.png); the sidecar is "
+                        "<name>.json")
     p.add_argument("--yaw", type=float, default=0.0, help="heading of the image top [deg]")
     p.add_argument("--pitch", type=float, default=0.0, help="camera pitch [deg]")
     p.add_argument("--roll", type=float, default=0.0, help="camera roll [deg]")
@@ -221,7 +224,15 @@ def register(sub) -> None:
                        description="Estimate the camera's heading from the AoP pattern of one "
                                    "raw image (E-vector perpendicular to the sun), using the "
                                    "site, time and tilt of its skysim.dofp/1 sidecar.")
-    h.add_argument("image", type=existing_file, help="raw image (.tiff) with its sidecar")
+    h.add_argument("image", type=existing_file,
+                   help="raw image (.tif, .tiff, .png) with its sidecar")
+    # literals: sensor.camera.files.FLIPS and ROTATIONS_DEG (tested equal)
+    h.add_argument("--flip", choices=("none", "horizontal", "vertical"), default="none",
+                   help="the camera's readout flips the image (horizontal: left to right, "
+                        "vertical: top to bottom); undone before --rotate is")
+    h.add_argument("--rotate", type=int, choices=(0, 90, 180, 270), default=0,
+                   help="the camera's readout rotates the image by this many degrees "
+                        "counter-clockwise as displayed (after its flip); undone first")
     # literals: the command line does not import the camera (tested equal to
     # sensor.camera.DEMOSAIC_METHODS and calibration.camera_heading.DEFAULT_DEMOSAIC)
     h.add_argument("--method", choices=("bilinear", "centred", "superpixel"), default="centred",
