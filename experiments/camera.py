@@ -34,6 +34,16 @@ FAULTS = {"angle_std_deg": 1.0, "mosaic_rotation_deg": 2.0, "extinction_ratio": 
 
 CAL_ANGLES_DEG = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 
+# Peak memory per pixel [bytes] of the commands, checked before the work (SKYSIM_MEMORY_LIMIT_MB):
+# the numpy peaks traced on 1024x1024 images (rayleigh 123, rayleigh with every error 138,
+# berry 288, multiple 376; heading of a 2448x2048 image: centred 106, bilinear 281,
+# superpixel below 155; a figure adds about 310 to the camera's and 40 to the heading's),
+# rounded up by about 10 % for the interpreter's own share
+CAMERA_BYTES_PER_PIXEL = {"rayleigh": 160, "berry": 320, "multiple": 420}
+CAMERA_FIGURE_BYTES_PER_PIXEL = 340
+HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
+HEADING_FIGURE_BYTES_PER_PIXEL = 50
+
 
 # --- shared helpers ---------------------------------------------------------------------
 
@@ -98,9 +108,17 @@ def _make_sky(args):
 def _camera_command(args) -> int:
     from sensor.camera import PolarizationCamera, camera_attitude, camera_stokes
     from sensor.camera.files import require_image_codec, write_raw
+    from skysim.resources import check_memory
     from skysim.sun import sun_position
 
     require_image_codec(args.out)  # before the work, not after it
+    check_memory(args.width * args.height * (CAMERA_BYTES_PER_PIXEL[args.sky]
+                                             + (CAMERA_FIGURE_BYTES_PER_PIXEL if args.figure
+                                                else 0)),
+                 f"a {args.width}x{args.height} camera image ({args.sky} sky"
+                 f"{', with --figure' if args.figure else ''})",
+                 "use a smaller --width/--height" + (" or leave out --figure" if args.figure
+                                                     else ""))
     sun = sun_position([args.time], args.lat, args.lon, args.alt).iloc[0]
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
@@ -141,9 +159,15 @@ def _heading_command(args) -> int:
     from calibration.camera_heading import heading_from_image
     from sensor.camera import camera_attitude, camera_stokes
     from sensor.camera.files import camera_from_sidecar, read_raw
+    from skysim.resources import check_memory
     from skysim.sun import sun_position
 
     raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
+    check_memory(raw.size * (HEADING_BYTES_PER_PIXEL[args.method]
+                             + (HEADING_FIGURE_BYTES_PER_PIXEL if args.figure else 0)),
+                 f"the heading of a {raw.shape[1]}x{raw.shape[0]} image ({args.method} "
+                 "demosaicing)", "use --method centred or superpixel, or leave out --figure"
+                 if args.method == "bilinear" else "leave out --figure or crop the image")
     cam = camera_from_sidecar(doc)
     site, att = doc["site"], doc["attitude"]
     sun = sun_position([aware_time(doc["time"])], site["latitude_deg"], site["longitude_deg"],
@@ -152,9 +176,7 @@ def _heading_command(args) -> int:
     # pixels that can see the sky: in the image circle and above the horizon for this tilt
     # (the heading does not change the horizon of a camera whose tilt is known)
     pitch, roll = att.get("pitch_deg", 0.0), att.get("roll_deg", 0.0)
-    d, inside = cam.pixel_directions
-    up = camera_attitude(0.0, pitch, roll).apply(np.nan_to_num(d).reshape(-1, 3))[:, 2] >= 0
-    valid = inside & up.reshape(inside.shape)
+    valid = cam.sky_pixels(camera_attitude(0.0, pitch, roll))
     st = camera_stokes(cam, raw, doc["exposure"]["exposure_s"], valid=valid, method=args.method)
     h = heading_from_image(st, cam.lens, sun_el, sun_az, pitch_deg=pitch, roll_deg=roll,
                            min_dolp=args.min_dolp)

@@ -373,3 +373,16 @@ def test_polarization_axes_are_the_meridional_basis_turned_by_the_image_azimuth(
     _, e90, d0 = lens.polarization_axes(lens.cy - offsets, np.full(3, lens.cx))
     r1, c1 = lens.project(d0 + 1e-6 * e90)
     assert (np.abs(c1 - lens.cx) < 1e-9).all() and (r1 < lens.cy - offsets).all()
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_sky_pixels_are_those_above_the_horizon(model):
+    # the blockwise horizon mask equals the one from the camera's per-pixel directions
+    # (exact: the same rays; pixels within 1e-9 of the horizon would be ambiguous, none here)
+    cam = PolarizationCamera.fisheye(150, 120, model=model, fov_deg=200.0)
+    d, inside = cam.pixel_directions
+    for pitch, roll in ((0.0, 0.0), (25.0, -10.0), (-5.0, 40.0)):
+        att = camera_attitude(0.0, pitch, roll)
+        sin_el = att.apply(np.nan_to_num(d).reshape(-1, 3))[:, 2].reshape(inside.shape)
+        assert np.abs(sin_el[inside]).min() > 1e-9
+        np.testing.assert_array_equal(cam.sky_pixels(att), inside & (sin_el >= 0))

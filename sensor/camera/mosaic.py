@@ -441,6 +441,22 @@ class PolarizationCamera:
             r1 = min(r0 + step, h)
             yield slice(r0, r1), x, (np.arange(r0, r1, dtype=float) - self.lens.cy)[:, None]
 
+    def sky_pixels(self, attitude: Rotation) -> np.ndarray:
+        """Pixels (H, W) in the image circle whose ray looks above the horizon for a camera at
+        ``attitude`` (camera-to-ENU; the heading does not move the horizon), computed in
+        blocks of rows without the camera's per-pixel directions."""
+        up = attitude.inv().apply([0.0, 0.0, 1.0])
+        out = np.empty(self.sensor.shape, bool)
+        for rows, x, y in self._row_blocks():
+            rho = np.hypot(x, y)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                theta = self.lens.theta_rad(rho)
+                radial = np.where(rho > 0, (x * up[0] + y * up[1]) / rho, 0.0)
+            np.greater_equal(np.sin(theta) * radial + np.cos(theta) * up[2], 0.0,
+                             out=out[rows])
+            out[rows] &= theta <= self.lens.max_theta_rad
+        return out
+
     @functools.cached_property
     def _rays(self):
         """Flat indices of the pixels in the image circle and their camera basis."""
