@@ -80,7 +80,8 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
     _, _, aop_m = local_meridian_aop(stokes, lens, attitude)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     panels = ((stokes.dolp, "DoLP", "viridis", (0, 1)),
-              (stokes.aop_camera_deg, "AoP in the image, ccw from right [deg]", "twilight", (-90, 90)),
+              (stokes.aop_camera_deg, "AoP in the image, ccw from right [deg]", "twilight",
+               (-90, 90)),
               (aop_m, "AoP, local meridian [deg]", "twilight", (-90, 90)))
     for ax, (img, label, cmap, (lo, hi)) in zip(axes, panels):
         im = ax.imshow(np.where(stokes.valid, img, np.nan), cmap=cmap, vmin=lo, vmax=hi,

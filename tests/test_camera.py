@@ -13,14 +13,21 @@ from skysim.exceptions import InvalidParameterError
 from skysim.sky import RayleighSky
 
 
+def random_rays(n: int, max_theta_deg: float, seed: int) -> np.ndarray:
+    """``n`` unit camera-frame rays (n, 3), uniform in angle from the axis up to
+    ``max_theta_deg`` and in image azimuth."""
+    rng = np.random.default_rng(seed)
+    theta = np.radians(rng.uniform(0.0, max_theta_deg, n))
+    psi = rng.uniform(-np.pi, np.pi, n)
+    return np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)],
+                    -1)
+
+
 @pytest.mark.parametrize("model", ["equidistant", "equisolid"])
 def test_projection_round_trip(model):
     # directions -> pixels -> directions is exact up to float64 rounding: 1e-9 is ~1e6 ulp
     lens = FisheyeLens(focal_px=83.7, cx=63.2, cy=61.9, fov_deg=190.0, model=model)
-    rng = np.random.default_rng(3)
-    theta = np.radians(rng.uniform(0, 95.0, 5000))
-    psi = rng.uniform(-np.pi, np.pi, 5000)
-    d = np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)], -1)
+    d = random_rays(5000, 95.0, seed=3)
     row, col = lens.project(d)
     back, valid = lens.back_project(row, col)
     assert valid.all()

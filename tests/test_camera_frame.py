@@ -8,6 +8,7 @@ import pytest
 from calibration.camera_heading import heading_from_image
 from sensor.camera import FisheyeLens, PolarizationCamera, camera_attitude, camera_stokes
 from skysim.sky import RayleighSky
+from test_camera import random_rays
 
 # Kannala-Brandt polynomial theta_d = theta (1 + k1 theta^2 + ... + k4 theta^8) equal to the
 # equisolid 2 sin(theta / 2) up to theta^9: the Taylor coefficients -1/24, 1/1920,
@@ -25,10 +26,7 @@ def test_projection_equals_opencv_fisheye(model):
     this focal length."""
     cv2 = pytest.importorskip("cv2")
     lens = FisheyeLens(focal_px=83.7, cx=63.2, cy=61.9, fov_deg=180.0, model=model)
-    rng = np.random.default_rng(4)
-    theta = np.radians(rng.uniform(0.0, 88.0, 2000))
-    psi = rng.uniform(-np.pi, np.pi, 2000)
-    d = np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)], -1)
+    d = random_rays(2000, 88.0, seed=4)
     row, col = lens.project(d)
     k = np.array([[lens.focal_px, 0.0, lens.cx], [0.0, lens.focal_px, lens.cy], [0, 0, 1.0]])
     dist = np.zeros(4) if model == "equidistant" else _EQUISOLID_KB

@@ -7,8 +7,8 @@ render (``RayleighSky(dtype="float32")``; float64 reported beside it); the headi
 (demosaicing and fit) in <= 0.5 s on the heading's default demosaicing
 (:data:`calibration.camera_heading.DEFAULT_DEMOSAIC`, ``"centred"``; super-pixel and bilinear
 reported beside it). Floor measured in the same run, in each group: one ``np.cos`` over the
-image's pixels. Camera-fixed caches (pixel frames, analysis planes, the demosaicing operator,
-the grid's image axes) are built before the timed rounds: they are paid once per camera.
+image's pixels. Camera-fixed caches (pixel planes, analysis planes, the demosaicing operator,
+the grid's polarization axes) are built before the timed rounds: they are paid once per camera.
 """
 
 import numpy as np
@@ -34,7 +34,7 @@ def camera():
                                            extinction_ratio_rel_std=0.2, gain_std=0.02)
     cam = PolarizationCamera(cam.lens, replace(sensor, crosstalk=CROSSTALK),
                              cam.photoelectrons_per_s, 1.5 * cam.lens.focal_px)
-    for dtype in ("float32", "float64"):  # camera-fixed caches (pixel frames, analysis)
+    for dtype in ("float32", "float64"):  # camera-fixed caches (pixel planes, analysis)
         cam.expected_electrons(cam.scene(RayleighSky(0.7, dtype=dtype), camera_attitude(0.0),
                                          40.0, 120.0), 0.02)
     return cam
@@ -86,7 +86,7 @@ def test_heading_from_image(benchmark, camera, image, method):
         return heading_from_image(st, camera.lens, 40.0, 120.0)
 
     # a warm-up round builds the camera-fixed caches (the demosaicing operator of the nominal
-    # analysis, the grid's image axes), as the fixture does for the render
+    # analysis, the grid's polarization axes), as the fixture does for the render
     h = benchmark.pedantic(heading, rounds=1 if method == "bilinear" else 5, iterations=1,
                            warmup_rounds=0 if method == "bilinear" else 1)
     assert abs((h.heading_deg - 30.0 + 180) % 360 - 180) < 0.1  # random errors only: no bias
