@@ -2,7 +2,9 @@
 
 In a single-scattering sky the E-vector of every direction is perpendicular to the sun
 (docs/conventions.md). With the camera's tilt from gravity (pitch, roll) known, the E-vector
-of sample ``i`` in the levelled camera frame is ``w_i = R_tilt E_c,i`` and the sun, at
+of sample ``i`` in the levelled body frame (x right, y forward along the image's top, z up;
+:func:`sensor.camera.camera_attitude` at yaw 0, its mount included) is ``w_i = R_tilt E_c,i``
+and the sun, at
 elevation ``e`` and at azimuth ``alpha = sun_azimuth - heading`` relative to the reference
 axis, is ``b(alpha) = (cos e sin alpha, cos e cos alpha, sin e)``. The heading minimises
 

@@ -61,7 +61,8 @@ class DofpCalibration:
 
     @property
     def angle_deg(self) -> np.ndarray:
-        """Per-pixel polarizer angle [deg, in [-90, 90)] from the camera's x axis."""
+        """Per-pixel polarizer angle [deg, in [-90, 90)], counter-clockwise in the displayed
+        image from its right towards its top (:mod:`sensor.camera.lens`)."""
         a = self.analysis_dn
         return np.mod(0.5 * np.degrees(np.arctan2(a[..., 2], a[..., 1])) + 90.0, 180.0) - 90.0
 
@@ -86,7 +87,8 @@ def calibrate_dofp(flat_frames_dn, dark_frame_dn, angles_deg, *, radiance: float
     dark_frame_dn : ndarray (H, W)
         Mean raw frame with the source off [DN], same exposure.
     angles_deg : array (K,)
-        Source polarizer angles [deg] in the camera frame.
+        Source polarizer angles [deg], counter-clockwise in the displayed image from its
+        right towards its top (:mod:`sensor.camera.lens`).
     radiance, dolp : float
         Source radiance (its unit becomes the calibration's) and degree of polarization.
     saturation_dn : float or None

@@ -2,8 +2,8 @@
 and the camera-compass reproduction (heading error vs sun elevation, exposure, extinction
 ratio, calibration and sky model).
 
-Commands: ``skysim camera`` (raw 16-bit TIFF + ``skysim.dofp/1`` sidecar, optional DoLP/AoP
-figure), ``skysim camera-heading`` (heading from a raw image and its sidecar) and
+Commands: ``skysim camera`` (raw 16-bit TIFF or PNG + ``skysim.dofp/1`` sidecar, optional
+DoLP/AoP figure), ``skysim camera-heading`` (heading from a raw image and its sidecar) and
 ``skysim reproduce camera``.
 """
 
@@ -34,6 +34,16 @@ FAULTS = {"angle_std_deg": 1.0, "mosaic_rotation_deg": 2.0, "extinction_ratio": 
 
 CAL_ANGLES_DEG = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 
+# Peak memory per pixel [bytes] of the commands, checked before the work (SKYSIM_MEMORY_LIMIT_MB):
+# the numpy peaks traced on 1024x1024 images (rayleigh 123, rayleigh with every error 138,
+# berry 288, multiple 376; heading of a 2448x2048 image: centred 106, bilinear 281,
+# superpixel below 155; a figure adds about 310 to the camera's and 40 to the heading's),
+# rounded up by about 10 % for the interpreter's own share
+CAMERA_BYTES_PER_PIXEL = {"rayleigh": 160, "berry": 320, "multiple": 420}
+CAMERA_FIGURE_BYTES_PER_PIXEL = 340
+HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
+HEADING_FIGURE_BYTES_PER_PIXEL = 50
+
 
 # --- shared helpers ---------------------------------------------------------------------
 
@@ -61,7 +71,8 @@ def _calibrated_inputs(cam, cal, t_cal, t):
 
 
 def stokes_figure(stokes, lens, attitude, path, title: str = ""):
-    """DoLP, AoP (camera frame) and AoP (local meridian) images of a Stokes image, as PNG."""
+    """DoLP, AoP in the image and AoP (local meridian) images of a Stokes image, as PNG,
+    laid out as the sensor records it (row 0 at the top)."""
     from sensor.camera import local_meridian_aop
 
     from .figures import pyplot, save_png
@@ -69,7 +80,8 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
     _, _, aop_m = local_meridian_aop(stokes, lens, attitude)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
     panels = ((stokes.dolp, "DoLP", "viridis", (0, 1)),
-              (stokes.aop_camera_deg, "AoP, camera frame [deg]", "twilight", (-90, 90)),
+              (stokes.aop_camera_deg, "AoP in the image, ccw from right [deg]", "twilight",
+               (-90, 90)),
               (aop_m, "AoP, local meridian [deg]", "twilight", (-90, 90)))
     for ax, (img, label, cmap, (lo, hi)) in zip(axes, panels):
         im = ax.imshow(np.where(stokes.valid, img, np.nan), cmap=cmap, vmin=lo, vmax=hi,
@@ -89,15 +101,25 @@ def _make_sky(args):
     from skysim.sky import make_sky
     if args.sky == "multiple":
         return make_sky("multiple", tau=args.tau, albedo=args.albedo)
+    if args.sky == "rayleigh":  # float32 throughout: within 2e-6 of float64 (docs/camera.md)
+        return make_sky("rayleigh", dmax=args.dmax, dtype="float32")
     return make_sky(args.sky, dmax=args.dmax)
 
 
 def _camera_command(args) -> int:
     from sensor.camera import PolarizationCamera, camera_attitude, camera_stokes
-    from sensor.camera.files import require_tifffile, write_raw
+    from sensor.camera.files import require_image_codec, write_raw
+    from skysim.resources import check_memory
     from skysim.sun import sun_position
 
-    require_tifffile()  # before the work, not after it
+    require_image_codec(args.out)  # before the work, not after it
+    check_memory(args.width * args.height * (CAMERA_BYTES_PER_PIXEL[args.sky]
+                                             + (CAMERA_FIGURE_BYTES_PER_PIXEL if args.figure
+                                                else 0)),
+                 f"a {args.width}x{args.height} camera image ({args.sky} sky"
+                 f"{', with --figure' if args.figure else ''})",
+                 "use a smaller --width/--height" + (" or leave out --figure" if args.figure
+                                                     else ""))
     sun = sun_position([args.time], args.lat, args.lon, args.alt).iloc[0]
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
@@ -138,9 +160,15 @@ def _heading_command(args) -> int:
     from calibration.camera_heading import heading_from_image
     from sensor.camera import camera_attitude, camera_stokes
     from sensor.camera.files import camera_from_sidecar, read_raw
+    from skysim.resources import check_memory
     from skysim.sun import sun_position
 
-    raw, doc = read_raw(args.image)
+    raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
+    check_memory(raw.size * (HEADING_BYTES_PER_PIXEL[args.method]
+                             + (HEADING_FIGURE_BYTES_PER_PIXEL if args.figure else 0)),
+                 f"the heading of a {raw.shape[1]}x{raw.shape[0]} image ({args.method} "
+                 "demosaicing)", "use --method centred or superpixel, or leave out --figure"
+                 if args.method == "bilinear" else "leave out --figure or crop the image")
     cam = camera_from_sidecar(doc)
     site, att = doc["site"], doc["attitude"]
     sun = sun_position([aware_time(doc["time"])], site["latitude_deg"], site["longitude_deg"],
@@ -149,9 +177,7 @@ def _heading_command(args) -> int:
     # pixels that can see the sky: in the image circle and above the horizon for this tilt
     # (the heading does not change the horizon of a camera whose tilt is known)
     pitch, roll = att.get("pitch_deg", 0.0), att.get("roll_deg", 0.0)
-    d, inside = cam.pixel_directions
-    up = camera_attitude(0.0, pitch, roll).apply(np.nan_to_num(d).reshape(-1, 3))[:, 2] >= 0
-    valid = inside & up.reshape(inside.shape)
+    valid = cam.sky_pixels(camera_attitude(0.0, pitch, roll))
     st = camera_stokes(cam, raw, doc["exposure"]["exposure_s"], valid=valid, method=args.method)
     h = heading_from_image(st, cam.lens, sun_el, sun_az, pitch_deg=pitch, roll_deg=roll,
                            min_dolp=args.min_dolp)
@@ -171,7 +197,7 @@ def _heading_command(args) -> int:
 
 def register(sub) -> None:
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
-                       "(16-bit TIFF + sidecar)", formatter_class=DefaultsHelpFormatter,
+                       "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "
                                    "camera (2x2 micro-polarizer mosaic behind a fisheye lens) "
                                    "and write the raw mosaic with a skysim.dofp/1 sidecar.")
@@ -181,8 +207,9 @@ def register(sub) -> None:
     p.add_argument("--alt", type=float, default=0.0, help="altitude [m]")
     p.add_argument("--time", type=aware_time, required=True,
                    help="exposure time, ISO 8601 with UTC offset")
-    p.add_argument("--out", type=output_file(".tif", ".tiff"), required=True,
-                   help="raw image (.tiff); the sidecar is <name>.json")
+    p.add_argument("--out", type=output_file(".tif", ".tiff", ".png"), required=True,
+                   help="raw image, 16-bit TIFF (.tif, .tiff) or PNG (.png); the sidecar is "
+                        "<name>.json")
     p.add_argument("--yaw", type=float, default=0.0, help="heading of the image top [deg]")
     p.add_argument("--pitch", type=float, default=0.0, help="camera pitch [deg]")
     p.add_argument("--roll", type=float, default=0.0, help="camera roll [deg]")
@@ -220,7 +247,15 @@ def register(sub) -> None:
                        description="Estimate the camera's heading from the AoP pattern of one "
                                    "raw image (E-vector perpendicular to the sun), using the "
                                    "site, time and tilt of its skysim.dofp/1 sidecar.")
-    h.add_argument("image", type=existing_file, help="raw image (.tiff) with its sidecar")
+    h.add_argument("image", type=existing_file,
+                   help="raw image (.tif, .tiff, .png) with its sidecar")
+    # literals: sensor.camera.files.FLIPS and ROTATIONS_DEG (tested equal)
+    h.add_argument("--flip", choices=("none", "horizontal", "vertical"), default="none",
+                   help="the camera's readout flips the image (horizontal: left to right, "
+                        "vertical: top to bottom); undone before --rotate is")
+    h.add_argument("--rotate", type=int, choices=(0, 90, 180, 270), default=0,
+                   help="the camera's readout rotates the image by this many degrees "
+                        "counter-clockwise as displayed (after its flip); undone first")
     # literals: the command line does not import the camera (tested equal to
     # sensor.camera.DEMOSAIC_METHODS and calibration.camera_heading.DEFAULT_DEMOSAIC)
     h.add_argument("--method", choices=("bilinear", "centred", "superpixel"), default="centred",

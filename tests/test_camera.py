@@ -13,14 +13,21 @@ from skysim.exceptions import InvalidParameterError
 from skysim.sky import RayleighSky
 
 
+def random_rays(n: int, max_theta_deg: float, seed: int) -> np.ndarray:
+    """``n`` unit camera-frame rays (n, 3), uniform in angle from the axis up to
+    ``max_theta_deg`` and in image azimuth."""
+    rng = np.random.default_rng(seed)
+    theta = np.radians(rng.uniform(0.0, max_theta_deg, n))
+    psi = rng.uniform(-np.pi, np.pi, n)
+    return np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)],
+                    -1)
+
+
 @pytest.mark.parametrize("model", ["equidistant", "equisolid"])
 def test_projection_round_trip(model):
     # directions -> pixels -> directions is exact up to float64 rounding: 1e-9 is ~1e6 ulp
     lens = FisheyeLens(focal_px=83.7, cx=63.2, cy=61.9, fov_deg=190.0, model=model)
-    rng = np.random.default_rng(3)
-    theta = np.radians(rng.uniform(0, 95.0, 5000))
-    psi = rng.uniform(-np.pi, np.pi, 5000)
-    d = np.stack([np.sin(theta) * np.cos(psi), np.sin(theta) * np.sin(psi), np.cos(theta)], -1)
+    d = random_rays(5000, 95.0, seed=3)
     row, col = lens.project(d)
     back, valid = lens.back_project(row, col)
     assert valid.all()
@@ -345,27 +352,44 @@ def test_sun_disk_found_in_its_window(model):
 
 
 @pytest.mark.parametrize("model", ["equidistant", "equisolid"])
-def test_image_axes_are_the_meridional_basis_turned_by_the_image_azimuth(model):
-    # (e_x, e_y, d) orthonormal and right-handed; e_x = cos psi e_theta - sin psi e_psi,
-    # e_y = sin psi e_theta + cos psi e_psi with the basis of camera_basis; on the image's x
-    # axis right of the centre (psi = 0) e_x is e_theta: a small step along it moves the image
-    # point along +x only (1e-6 rad: the cross term is second order, < 1e-9 px)
+def test_polarization_axes_are_the_meridional_basis_turned_by_the_image_azimuth(model):
+    # (e_0, e_90, -d) orthonormal and right-handed (angles right-handed about the light's
+    # travel); e_0 = e_x = cos psi e_theta - sin psi e_psi and e_90 = -e_y = -(sin psi e_theta
+    # + cos psi e_psi) with the basis of camera_basis; right of the centre (psi = 0) a small
+    # step along e_0 moves the image point right only, above it (psi = -90 deg) a step along
+    # e_90 moves it up only (1e-6 rad: the cross term is second order, < 1e-9 px)
     from sensor.camera import camera_basis
     lens = FisheyeLens(83.7, 63.2, 61.9, 190.0, model)
     rng = np.random.default_rng(9)
     row, col = rng.uniform(5, 120, 400), rng.uniform(5, 120, 400)
-    e_x, e_y, d = lens.image_axes(row, col)
+    e_0, e_90, d = lens.polarization_axes(row, col)
     ok = np.isfinite(d).all(-1)
     assert ok.sum() > 300
-    e_x, e_y, d = e_x[ok], e_y[ok], d[ok]
-    np.testing.assert_allclose(np.cross(e_x, e_y), d, atol=1e-12)
-    for u, v in ((e_x, e_y), (e_x, d), (e_y, d)):
+    e_0, e_90, d = e_0[ok], e_90[ok], d[ok]
+    np.testing.assert_allclose(np.cross(e_0, e_90), -d, atol=1e-12)
+    for u, v in ((e_0, e_90), (e_0, d), (e_90, d)):
         np.testing.assert_allclose(np.sum(u * v, -1), 0.0, atol=1e-12)
     _, psi, e_th, e_ps = camera_basis(d)
     c, s = np.cos(psi)[:, None], np.sin(psi)[:, None]
-    np.testing.assert_allclose(e_x, c * e_th - s * e_ps, atol=1e-12)
-    np.testing.assert_allclose(e_y, s * e_th + c * e_ps, atol=1e-12)
-    cols = lens.cx + np.array([3.0, 20.0, 55.0])
-    ex0, _, d0 = lens.image_axes(np.full(3, lens.cy), cols)
+    np.testing.assert_allclose(e_0, c * e_th - s * e_ps, atol=1e-12)
+    np.testing.assert_allclose(e_90, -(s * e_th + c * e_ps), atol=1e-12)
+    offsets = np.array([3.0, 20.0, 55.0])
+    ex0, _, d0 = lens.polarization_axes(np.full(3, lens.cy), lens.cx + offsets)
     r1, c1 = lens.project(d0 + 1e-6 * ex0)
-    assert (np.abs(r1 - lens.cy) < 1e-9).all() and (c1 > cols).all()
+    assert (np.abs(r1 - lens.cy) < 1e-9).all() and (c1 > lens.cx + offsets).all()
+    _, e90, d0 = lens.polarization_axes(lens.cy - offsets, np.full(3, lens.cx))
+    r1, c1 = lens.project(d0 + 1e-6 * e90)
+    assert (np.abs(c1 - lens.cx) < 1e-9).all() and (r1 < lens.cy - offsets).all()
+
+
+@pytest.mark.parametrize("model", ["equidistant", "equisolid"])
+def test_sky_pixels_are_those_above_the_horizon(model):
+    # the blockwise horizon mask equals the one from the camera's per-pixel directions
+    # (exact: the same rays; pixels within 1e-9 of the horizon would be ambiguous, none here)
+    cam = PolarizationCamera.fisheye(150, 120, model=model, fov_deg=200.0)
+    d, inside = cam.pixel_directions
+    for pitch, roll in ((0.0, 0.0), (25.0, -10.0), (-5.0, 40.0)):
+        att = camera_attitude(0.0, pitch, roll)
+        sin_el = att.apply(np.nan_to_num(d).reshape(-1, 3))[:, 2].reshape(inside.shape)
+        assert np.abs(sin_el[inside]).min() > 1e-9
+        np.testing.assert_array_equal(cam.sky_pixels(att), inside & (sin_el >= 0))

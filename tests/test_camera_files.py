@@ -76,3 +76,81 @@ def test_camera_command_errors(tmp_path, capsys):
     assert main(["camera", "--lat", "34", "--lon", "108", "--time", "2013-05-22T12:00+08:00",
                  "--width", "31", "--out", str(tmp_path / "x.tiff")]) == 2
     assert "even" in capsys.readouterr().err
+
+
+def test_png_round_trip_is_bit_exact(tmp_path):
+    pytest.importorskip("cv2", reason="PNG camera images need the 'camera' extra (OpenCV)")
+    # every 16-bit value, odd sizes and the extremes: the file holds the DN exactly
+    raw = np.random.default_rng(2).integers(0, 2 ** 16, (6, 10), dtype=np.uint16)
+    raw[0, :2] = (0, 65535)
+    doc = {k: {} for k in ("site", "attitude", "lens", "exposure")}
+    doc.update(time="2020-01-01T00:00Z", sensor={"width": 10, "height": 6})
+    write_raw(tmp_path / "a.png", raw, doc)
+    back, side = read_raw(tmp_path / "a.png")
+    assert back.dtype == np.uint16 and np.array_equal(back, raw)
+    assert side["schema"] == "skysim.dofp/1" and (tmp_path / "a.png.json").exists()
+    # and a reader other than OpenCV sees the same 16-bit greyscale image
+    pil = pytest.importorskip("PIL.Image")
+    with pil.open(tmp_path / "a.png") as im:
+        assert np.array_equal(np.asarray(im).astype(np.uint16), raw)
+
+
+def test_camera_command_writes_png_like_tiff(tmp_path, capsys):
+    pytest.importorskip("cv2", reason="PNG camera images need the 'camera' extra (OpenCV)")
+    common = ["camera", "--lat", "34.2", "--lon", "108.9", "--time", "2013-05-22T15:00+08:00",
+              "--yaw", "123", "--width", "64", "--height", "48", "--seed", "3"]
+    assert main(common + ["--out", str(tmp_path / "s.png")]) == 0
+    assert main(common + ["--out", str(tmp_path / "s.tiff")]) == 0
+    png, doc_png = read_raw(tmp_path / "s.png")
+    tif, doc_tif = read_raw(tmp_path / "s.tiff")
+    assert np.array_equal(png, tif) and doc_png == doc_tif
+    capsys.readouterr()
+    assert main(["camera-heading", str(tmp_path / "s.png")]) == 0
+    assert "recorded yaw 123.000 deg" in capsys.readouterr().out
+
+
+@pytest.mark.parametrize("flip", ["none", "horizontal", "vertical"])
+@pytest.mark.parametrize("rotate", [0, 90, 180, 270])
+def test_flipped_or_rotated_readout_is_undone(tmp_path, capsys, flip, rotate):
+    """A frame recorded flipped and then rotated (as a camera's readout or mount would) reads
+    back as the physical image, and its heading is the physical one."""
+    from sensor.camera.files import undo_readout
+    phys = tmp_path / "p.tiff"
+    assert main(["camera", "--lat", "34.2", "--lon", "108.9", "--time",
+                 "2013-05-22T15:00+08:00", "--yaw", "70", "--width", "64", "--height", "48",
+                 "--seed", "4", "--out", str(phys)]) == 0
+    raw, doc = read_raw(phys)
+    rec = {"none": raw, "horizontal": raw[:, ::-1], "vertical": raw[::-1]}[flip]
+    rec = np.rot90(rec, rotate // 90)
+    np.testing.assert_array_equal(undo_readout(rec, flip, rotate), raw)
+    write_raw(tmp_path / "r.tiff", np.ascontiguousarray(rec), doc)
+    back, _ = read_raw(tmp_path / "r.tiff", flip=flip, rotate_deg=rotate)
+    np.testing.assert_array_equal(back, raw)
+    capsys.readouterr()
+    assert main(["camera-heading", str(tmp_path / "r.tiff"), "--flip", flip, "--rotate",
+                 str(rotate)]) == 0
+    out = capsys.readouterr().out
+    assert abs(float(out.split("error ")[1].split()[0])) < 0.5  # 64x48 px, noisy: ~0.05 deg
+
+
+def test_readout_options_are_checked():
+    from sensor.camera.files import FLIPS, ROTATIONS_DEG, undo_readout
+    with pytest.raises(ValueError, match="none, horizontal, vertical; got 'mirror'"):
+        undo_readout(np.zeros((2, 2)), "mirror")
+    with pytest.raises(ValueError, match="0, 90, 180, 270; got 45"):
+        undo_readout(np.zeros((2, 2)), rotate_deg=45)
+    # the command line's literals are the module's
+    from experiments.cli import build_parser
+    sub = next(a for a in build_parser()._actions if a.dest == "command")
+    opts = {a.dest: a.choices for a in sub.choices["camera-heading"]._actions}
+    assert tuple(opts["flip"]) == FLIPS and tuple(opts["rotate"]) == ROTATIONS_DEG
+
+
+def test_large_frames_are_refused_before_the_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
+    out = tmp_path / "big.tiff"
+    assert main(["camera", "--lat", "34", "--lon", "108", "--time", "2013-05-22T15:00+08:00",
+                 "--width", "2448", "--height", "2048", "--out", str(out)]) == 2
+    err = capsys.readouterr().err
+    assert "2448x2048 camera image" in err and "--width/--height" in err
+    assert not out.exists()

@@ -5,7 +5,9 @@ Sizes are cut for the test suite, never the commands themselves: reproductions g
 ``--quick``, and the Sobol example configuration is shrunk in the copy (same file name, same
 parameters, fewer base samples and stops). The two sky-gap lines (about 150 s each with the
 radiative-transfer engine) run only with ``SKYSIM_SLOW_TESTS=1``; the shipped tables they read
-are checked in ``tests/test_reference_data.py``.
+are checked in ``tests/test_reference_data.py``. Lines that need data not shipped (the real
+recordings of ``reproduce real-sky-compass``, found in ``../shared/reference/`` beside the
+checkout) run in their own test, skipped with the reason on a bare clone.
 """
 
 from __future__ import annotations
@@ -25,6 +27,17 @@ README = ROOT / "README.md"
 
 SLOW = {("reproduce", "sky-gap"), ("sky-gap",)}
 """Command prefixes that need minutes (see the module docstring)."""
+
+
+def _needs_data() -> dict:
+    """Command prefixes that need data not shipped -> the folder they read by default."""
+    from experiments.real_compass import DEFAULT_DATA
+    return {("reproduce", "real-sky-compass"): DEFAULT_DATA}
+
+
+def _data_of(argv):
+    """The folder of data ``argv`` needs and does not ship with, or None."""
+    return next((d for k, d in _needs_data().items() if tuple(argv[:len(k)]) == k), None)
 
 
 def readme_commands() -> list[list[str]]:
@@ -70,8 +83,9 @@ def test_readme_commands_run_top_to_bottom(fresh_copy, monkeypatch, capsys):
     monkeypatch.chdir(fresh_copy)
     slow_ok = bool(os.environ.get("SKYSIM_SLOW_TESTS"))
     ran = []
+    needs_data = [c for c in readme_commands() if _data_of(c) is not None]
     for argv in readme_commands():
-        if any(tuple(argv[:k]) in SLOW for k in (1, 2)) and not slow_ok:
+        if any(tuple(argv[:k]) in SLOW for k in (1, 2)) and not slow_ok or argv in needs_data:
             continue
         run = argv + (["--quick"] if argv[0] == "reproduce" and "--quick" not in argv else [])
         rc = main(run)
@@ -80,7 +94,28 @@ def test_readme_commands_run_top_to_bottom(fresh_copy, monkeypatch, capsys):
         assert out.out.strip(), f"{_id(argv)!r} printed nothing"
         assert "Traceback" not in out.err, _id(argv)
         ran.append(argv)
-    assert len(ran) >= len(readme_commands()) - (0 if slow_ok else len(SLOW))
+    assert len(ran) >= len(readme_commands()) - (0 if slow_ok else len(SLOW)) - len(needs_data)
     for name in ("sky.parquet", "sky.parquet.json", "sky.csv", "sky.csv.json", "sweep.csv",
                  "sweeps.csv", "report.json", "truth/manifest.json", "mine/manifest.json"):
         assert (fresh_copy / name).is_file(), name
+
+
+@pytest.mark.parametrize("argv", [c for c in readme_commands() if _data_of(c) is not None],
+                         ids=_id)
+def test_readme_commands_that_need_data_not_shipped(argv, fresh_copy, monkeypatch, capsys):
+    data = _data_of(argv)
+    if not data.is_dir():
+        pytest.skip(f"{_id(argv)!r} needs the recordings in {data}, which a bare clone does "
+                    "not have (README, 'Command line')")
+    monkeypatch.chdir(fresh_copy)
+    rc = main(argv + (["--quick"] if argv[0] == "reproduce" and "--quick" not in argv else []))
+    out = capsys.readouterr()
+    assert rc == 0, f"{_id(argv)!r} exited {rc}: {out.err[-2000:]}"
+    assert out.out.strip() and "Traceback" not in out.err
+
+
+def test_readme_says_where_the_data_not_shipped_come_from():
+    text = README.read_text()
+    for needed in ("--data DIR", "InsectRobotics/CelestialCompassAnalysis",
+                   "doi:10.1038/s44172-023-00132-w", "GPL"):
+        assert needed in text, needed

@@ -28,9 +28,11 @@ squares, ``S = (A^T A)^-1 A^T d``. The methods differ in where the four channels
   pixels see directions half a pixel apart: the error is the field's change across one pixel
   (instantaneous-field-of-view error, [2]_).
 
-AoP in the camera frame is measured from the camera's x axis towards its y axis
-(:mod:`sensor.camera.lens`); :func:`local_meridian_aop` converts it to skysim's local-meridian
-convention (docs/conventions.md).
+Stokes ``S1``, ``S2`` and the AoP are in the image's polarization basis: angles
+counter-clockwise in the displayed image from its right towards its top (Sony's and
+polanalyser's sense, ``S1 = I0 - I90``, ``S2 = I45 - I135`` for ideal polarizers;
+:mod:`sensor.camera.lens`); :func:`local_meridian_aop` converts the AoP to skysim's
+local-meridian convention (docs/conventions.md).
 
 References
 ----------
@@ -63,7 +65,7 @@ DEMOSAIC_METHODS = ("bilinear", "centred", "superpixel")
 
 @dataclass(frozen=True, eq=False)
 class StokesImage:
-    """Linear Stokes images in the camera frame.
+    """Linear Stokes images in the image's polarization basis (module doc).
 
     Attributes
     ----------
@@ -93,7 +95,8 @@ class StokesImage:
 
     @functools.cached_property
     def aop_camera_deg(self) -> np.ndarray:
-        """AoP [deg, in [-90, 90)] from the camera's x axis towards its y axis."""
+        """AoP [deg, in [-90, 90)] in the image: counter-clockwise from its right towards its
+        top (:mod:`sensor.camera.lens`)."""
         return wrap_axial_deg(0.5 * np.degrees(np.arctan2(self.S2, self.S1)))
 
 
@@ -371,12 +374,12 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
 
 def e_vectors_camera(lens, row, col, s1, s2):
     """Camera-frame unit E-vectors (..., 3) and ray directions (..., 3) at pixel coordinates
-    for the linear Stokes ``s1``, ``s2`` there: ``cos chi e_x + sin chi e_y`` with ``chi`` the
-    camera-frame AoP and ``e_x``, ``e_y`` the image axes carried onto the sky
-    (:meth:`FisheyeLens.image_axes`)."""
-    e_x, e_y, d = lens.image_axes(row, col)
+    for the linear Stokes ``s1``, ``s2`` there: ``cos chi e_0 + sin chi e_90`` with ``chi``
+    the AoP in the image and ``e_0``, ``e_90`` its polarization directions carried onto the
+    sky (:meth:`FisheyeLens.polarization_axes`)."""
+    e_0, e_90, d = lens.polarization_axes(row, col)
     c_chi, s_chi = _half_angle(s1, s2)
-    return c_chi[..., None] * e_x + s_chi[..., None] * e_y, d
+    return c_chi[..., None] * e_0 + s_chi[..., None] * e_90, d
 
 
 def _half_angle(s1, s2):
@@ -392,7 +395,7 @@ def _half_angle(s1, s2):
 
 def image_e_vectors(stokes: StokesImage, lens, where) -> np.ndarray:
     """:func:`e_vectors_camera` of the samples ``where`` (mask over ``stokes``) of a Stokes
-    image on a demosaicing grid, shape (n, 3): the grid's image axes come from a small cache
+    image on a demosaicing grid, shape (n, 3): the grid's polarization axes come from a small cache
     (they depend on the lens and the grid only)."""
     rows, cols = stokes.row, stokes.col
     h, w = rows.shape
@@ -409,13 +412,13 @@ def image_e_vectors(stokes: StokesImage, lens, where) -> np.ndarray:
 
 @functools.lru_cache(maxsize=2)
 def _grid_axes(lens, shape, grid):
-    """Image axes ``e_x``, ``e_y`` (h, w, 3) and the pixel coordinates of a regular grid
-    ``(row0, col0, row_step, col_step)`` of ``shape``."""
+    """Polarization axes ``e_0``, ``e_90`` (h, w, 3) and the pixel coordinates of a regular
+    grid ``(row0, col0, row_step, col_step)`` of ``shape``."""
     r0, c0, dr, dc = grid
     rows, cols = np.meshgrid(r0 + dr * np.arange(shape[0]), c0 + dc * np.arange(shape[1]),
                              indexing="ij")
-    e_x, e_y, _ = lens.image_axes(rows, cols)
-    return e_x, e_y, rows, cols
+    e_0, e_90, _ = lens.polarization_axes(rows, cols)
+    return e_0, e_90, rows, cols
 
 
 def local_meridian_aop(stokes: StokesImage, lens, attitude: Rotation):

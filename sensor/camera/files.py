@@ -1,9 +1,14 @@
-"""Raw polarization-camera images on disk: a 16-bit TIFF mosaic with a JSON sidecar.
+"""Raw polarization-camera images on disk: a 16-bit TIFF or PNG mosaic with a JSON sidecar.
 
 The image is the raw mosaic exactly as digitised (uint16 [DN], ``adc_bits`` significant bits,
-not rescaled), written with ``tifffile`` (optional extra ``skysim[camera]``). The sidecar
-``<name>.json`` beside it (e.g. ``sky.tiff.json``) holds, under ``schema`` =
-``"skysim.dofp/1"``:
+not rescaled), row 0 the top of the image as the sensor records it
+(:mod:`sensor.camera.lens`). TIFF (``.tif``, ``.tiff``) goes through ``tifffile``, PNG
+(``.png``, 16-bit greyscale) through OpenCV's PNG codec (``cv2.imencode`` /
+``cv2.imdecode`` with ``IMREAD_UNCHANGED``): OpenCV is already in the optional extra
+``camera`` (polanalyser is built on it) and its libpng path keeps 16 bits exactly, where
+imageio's PNG goes through Pillow's modes and pypng is pure Python (seconds for a 5
+megapixel frame). The sidecar ``<name>.json`` beside it (e.g. ``sky.tiff.json``) holds,
+under ``schema`` = ``"skysim.dofp/1"``:
 
 - ``site``: ``latitude_deg``, ``longitude_deg``, ``altitude_m``;
 - ``time``: ISO 8601 with UTC offset (the exposure's mid-time);
@@ -24,6 +29,7 @@ Readers keep unknown keys.
 
 from __future__ import annotations
 
+import importlib
 import json
 from pathlib import Path
 
@@ -34,37 +40,111 @@ from skysim.io import atomic_write_many, find_sidecar, sidecar_path
 from .lens import FisheyeLens
 from .mosaic import MosaicSensor, PolarizationCamera
 
-__all__ = ["SCHEMA", "DofpFormatError", "camera_from_sidecar", "read_raw", "require_tifffile",
-           "write_raw"]
+__all__ = ["FLIPS", "IMAGE_SUFFIXES", "ROTATIONS_DEG", "SCHEMA", "DofpFormatError",
+           "camera_from_sidecar", "read_raw", "require_image_codec", "require_tifffile",
+           "undo_readout", "write_raw"]
 
 SCHEMA = "skysim.dofp/1"
 _REQUIRED = ("site", "time", "attitude", "lens", "sensor", "exposure")
+IMAGE_SUFFIXES = (".tif", ".tiff", ".png")
+"""Raw image formats by file suffix (lower case)."""
+FLIPS = ("none", "horizontal", "vertical")
+"""Readout flips :func:`undo_readout` undoes."""
+ROTATIONS_DEG = (0, 90, 180, 270)
+"""Readout rotations [deg, counter-clockwise as displayed] :func:`undo_readout` undoes."""
 
 
 class DofpFormatError(ValueError):
     """A raw camera file or its sidecar does not follow ``skysim.dofp/1``."""
 
 
-def require_tifffile():
-    """The ``tifffile`` module; ImportError with the install command if it is missing."""
+def _require(module: str, what: str):
     try:
-        import tifffile
+        return importlib.import_module(module)
     except ImportError as exc:
         from skysim.extras import missing_extra_message
-        raise ImportError(missing_extra_message("tifffile", "reading and writing camera "
-                                                "images")) from exc
-    return tifffile
+        raise ImportError(missing_extra_message(module, what)) from exc
+
+
+def require_tifffile():
+    """The ``tifffile`` module; ImportError with the install command if it is missing."""
+    return _require("tifffile", "reading and writing TIFF camera images")
+
+
+def require_cv2():
+    """The ``cv2`` module (OpenCV); ImportError with the install command if it is missing."""
+    return _require("cv2", "reading and writing PNG camera images")
+
+
+def _suffix(path) -> str:
+    suffix = Path(path).suffix.lower()
+    if suffix not in IMAGE_SUFFIXES:
+        raise DofpFormatError(f"raw image {Path(path).name!r} must end in "
+                              f"{', '.join(IMAGE_SUFFIXES)}")
+    return suffix
+
+
+def require_image_codec(path):
+    """The module that reads and writes ``path``'s format (``tifffile`` or ``cv2``), checked
+    before any work; ImportError with the install command if it is missing, DofpFormatError
+    for another suffix."""
+    return require_cv2() if _suffix(path) == ".png" else require_tifffile()
+
+
+def _encode_png(raw: np.ndarray) -> bytes:
+    cv2 = require_cv2()
+    ok, buf = cv2.imencode(".png", raw)
+    if not ok:
+        raise DofpFormatError("OpenCV could not encode the image as PNG")
+    return buf.tobytes()
+
+
+def _read_image(path: Path) -> np.ndarray:
+    if _suffix(path) != ".png":
+        return require_tifffile().imread(path)
+    cv2 = require_cv2()
+    img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
+    if img is None:
+        raise DofpFormatError(f"{path} is not a readable PNG image")
+    return img
+
+
+def undo_readout(recorded: np.ndarray, flip: str = "none", rotate_deg: int = 0) -> np.ndarray:
+    """The physical image (row 0 at the top, :mod:`sensor.camera.lens`) of a frame whose
+    readout is flipped or rotated.
+
+    The recorded frame is taken as the physical image flipped first (``"horizontal"``: left
+    to right, ``"vertical"``: top to bottom), then rotated by ``rotate_deg`` counter-clockwise
+    as displayed; this rotates back, then flips. A view, no copy.
+
+    Raises
+    ------
+    ValueError
+        For a flip not in :data:`FLIPS` or a rotation not in :data:`ROTATIONS_DEG`.
+    """
+    if flip not in FLIPS:
+        raise ValueError(f"flip must be one of {', '.join(FLIPS)}; got {flip!r}")
+    if rotate_deg not in ROTATIONS_DEG:
+        raise ValueError(f"rotate_deg must be one of {', '.join(map(str, ROTATIONS_DEG))}; got "
+                         f"{rotate_deg!r}")
+    img = np.rot90(recorded, -int(rotate_deg) // 90)
+    if flip == "horizontal":
+        return img[:, ::-1]
+    return img[::-1] if flip == "vertical" else img
 
 
 def write_raw(path, raw: np.ndarray, sidecar: dict) -> Path:
-    """Write a raw mosaic (H, W) uint16 as TIFF and its sidecar, atomically (both or none).
+    """Write a raw mosaic (H, W) uint16 as TIFF or PNG (by the suffix of ``path``) and its
+    sidecar, atomically (both or none).
 
     Raises
     ------
     DofpFormatError
-        If ``raw`` is not a 2-D uint16 array or the sidecar lacks a required key.
+        If ``raw`` is not a 2-D uint16 array, the sidecar lacks a required key or ``path``
+        has another suffix than :data:`IMAGE_SUFFIXES`.
     """
-    tifffile = require_tifffile()
+    suffix = _suffix(path)
+    codec = require_image_codec(path)
     raw = np.asarray(raw)
     if raw.ndim != 2 or raw.dtype != np.uint16:
         raise DofpFormatError(f"raw image must be 2-D uint16; got {raw.dtype} of shape "
@@ -75,15 +155,25 @@ def write_raw(path, raw: np.ndarray, sidecar: dict) -> Path:
     path = Path(path)
     doc = {"schema": SCHEMA, **sidecar}
     text = json.dumps(doc, indent=2) + "\n"
-    atomic_write_many([
-        (path, lambda tmp: tifffile.imwrite(tmp, raw, photometric="minisblack")),
-        (sidecar_path(path), lambda tmp: tmp.write_text(text)),
-    ])
+    if suffix == ".png":
+        data = _encode_png(raw)  # before any file is touched
+
+        def write_image(tmp):
+            tmp.write_bytes(data)
+    else:
+        def write_image(tmp):
+            codec.imwrite(tmp, raw, photometric="minisblack")
+    atomic_write_many([(path, write_image),
+                       (sidecar_path(path), lambda tmp: tmp.write_text(text))])
     return path
 
 
-def read_raw(path) -> tuple[np.ndarray, dict]:
+def read_raw(path, *, flip: str = "none", rotate_deg: int = 0) -> tuple[np.ndarray, dict]:
     """The raw mosaic (H, W) uint16 [DN] and its sidecar.
+
+    ``flip``, ``rotate_deg``: the camera's readout, undone (:func:`undo_readout`) so that the
+    image is the physical one the sidecar describes (its ``width``, ``height``,
+    ``layout_deg``).
 
     Raises
     ------
@@ -91,8 +181,8 @@ def read_raw(path) -> tuple[np.ndarray, dict]:
         No sidecar, another schema, a missing key, or an image that does not match the
         sidecar's sensor size.
     """
-    tifffile = require_tifffile()
     path = Path(path)
+    require_image_codec(path)
     side = find_sidecar(path)
     if side is None:
         raise DofpFormatError(f"no sidecar {sidecar_path(path).name} beside {path}: the lens "
@@ -103,11 +193,13 @@ def read_raw(path) -> tuple[np.ndarray, dict]:
     missing = [k for k in _REQUIRED if k not in doc]
     if missing:
         raise DofpFormatError(f"{side} lacks {', '.join(missing)}")
-    raw = tifffile.imread(path)
+    raw = np.ascontiguousarray(undo_readout(_read_image(path), flip, rotate_deg))
     sensor = doc["sensor"]
     if raw.shape != (sensor["height"], sensor["width"]) or raw.dtype != np.uint16:
-        raise DofpFormatError(f"{path} holds {raw.dtype} {raw.shape}; the sidecar says uint16 "
-                              f"({sensor['height']}, {sensor['width']})")
+        turn = f" after undoing the readout (flip {flip}, rotation {rotate_deg} deg)" \
+            if (flip, rotate_deg) != ("none", 0) else ""
+        raise DofpFormatError(f"{path} holds {raw.dtype} {raw.shape}{turn}; the sidecar says "
+                              f"uint16 ({sensor['height']}, {sensor['width']})")
     return raw, doc
 
 

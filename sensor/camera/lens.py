@@ -1,10 +1,12 @@
 """Fisheye lens projection of a polarization camera.
 
-Camera frame c (right-handed): z along the optical axis, x towards the image's right, y
-towards the image's top. The camera is mounted looking up: at zero attitude the camera frame
-is the body frame of :mod:`sensor.compound_eye` (x right, y forward, z up), so the image's top
-points along the heading reference axis. Pixel ``(row, col)`` has its centre at integer
-indices; the image-plane coordinates are ``x = col - cx``, ``y = cy - row`` [px].
+Camera frame c (right-handed, the frame of OpenCV's and Kannala & Brandt's camera models [1]_
+[2]_): x towards the image's right (increasing column), y towards the image's bottom
+(increasing row), z along the optical axis into the scene. Pixel ``(row, col)`` has its
+centre at integer indices, row 0 the image's top as the sensor records it; the image-plane
+coordinates are ``x = col - cx``, ``y = row - cy`` [px]. A camera looking up with the image's
+top to the north therefore sees the east on the image's **left**, like any photograph of the
+sky taken from below (:func:`sensor.camera.camera_attitude`).
 
 A ray from the camera into direction ``d`` (unit, camera frame) makes the angle
 ``theta = angle(d, z)`` with the optical axis and the azimuth ``psi = atan2(d_y, d_x)`` in the
@@ -13,13 +15,23 @@ image plane; the lens maps it to the radius ``r(theta)`` [px] at the image azimu
 - ``"equidistant"``: ``r = f theta``;
 - ``"equisolid"``: ``r = 2 f sin(theta / 2)``
 
-with the focal length ``f`` [px] (Kannala & Brandt 2006 [1]_, eqs. 1b and 1c).
+with the focal length ``f`` [px] ([1]_, eqs. 1b and 1c). The equidistant model is OpenCV's
+fisheye model without distortion (``cv2.fisheye.projectPoints`` with ``D = 0``); the
+equisolid one is its Kannala-Brandt polynomial with the Taylor coefficients of
+``2 sin(theta / 2)`` (both tested against OpenCV on the same rays).
 
+Polarization angles in the image (the micro-polarizers' angles, the camera's Stokes ``S1``,
+``S2`` and its AoP) count counter-clockwise in the image as displayed (row 0 at the top):
+from the image's right (+x) towards its top (-y), i.e. right-handed about the direction the
+light travels (-z), the sense of an observer looking at the source. :meth:`FisheyeLens.
+polarization_axes` carries the directions of 0 and 90 deg onto the sky.
 References
 ----------
 .. [1] J. Kannala, S. S. Brandt, "A generic camera model and calibration method for
    conventional, wide-angle, and fish-eye lenses", IEEE Trans. Pattern Anal. Mach. Intell.
    28(8):1335-1340 (2006), doi:10.1109/TPAMI.2006.153.
+.. [2] OpenCV, "Fisheye camera model" (``cv::fisheye``), https://docs.opencv.org/4.x/db/d58/
+   group__calib3d__fisheye.html (``u = f_x x' + c_x``, ``v = f_y y' + c_y``).
 """
 
 from __future__ import annotations
@@ -119,7 +131,7 @@ class FisheyeLens:
         theta = np.arctan2(rho, d[..., 2])
         psi = np.arctan2(d[..., 1], d[..., 0])
         r = np.where(theta <= self.max_theta_rad, self.radius_px(theta), np.nan)
-        return self.cy - r * np.sin(psi), self.cx + r * np.cos(psi)
+        return self.cy + r * np.sin(psi), self.cx + r * np.cos(psi)
 
     def back_project(self, row, col):
         """Unit camera-frame directions ``(..., 3)`` of pixel coordinates, and a validity mask.
@@ -131,7 +143,7 @@ class FisheyeLens:
         valid : ndarray of bool
         """
         x = np.asarray(col, dtype=float) - self.cx
-        y = self.cy - np.asarray(row, dtype=float)
+        y = np.asarray(row, dtype=float) - self.cy
         theta = self.theta_rad(np.hypot(x, y))
         valid = np.isfinite(theta) & (theta <= self.max_theta_rad)
         psi = np.arctan2(y, x)
@@ -140,24 +152,25 @@ class FisheyeLens:
         d[~valid] = np.nan
         return d, valid
 
-    def image_axes(self, row, col):
-        """The image's x and y axes carried onto the sky at pixel coordinates, and the ray:
-        camera-frame unit vectors ``(e_x, e_y, d)``, each of shape
-        ``broadcast(row, col).shape + (3,)``.
+    def polarization_axes(self, row, col):
+        """The image's directions of polarization 0 and 90 deg carried onto the sky at pixel
+        coordinates, and the ray: camera-frame unit vectors ``(e_0, e_90, d)``, each of shape
+        ``broadcast(row, col).shape + (3,)``; NaN outside the image circle.
 
-        With ``theta``, ``psi`` the ray's angle from the axis and its image azimuth and
-        ``(e_theta, e_psi)`` the unit vectors of increasing ``theta`` and ``psi`` across the
-        ray, ``e_x = cos psi e_theta - sin psi e_psi`` and ``e_y = sin psi e_theta + cos psi
-        e_psi``. An ideal rotationally symmetric lens keeps a ray's polarization components
-        in its meridional plane (along ``e_theta``) and across it (``e_psi``) as the
-        components along the image radius and tangent, so a polarization at angle ``chi``
-        from the image's x axis is ``cos chi e_x + sin chi e_y`` on the sky (this is the
+        ``e_0`` is the image's x axis (its right), ``e_90`` its top (-y). With ``theta``,
+        ``psi`` the ray's angle from the axis and its image azimuth and ``(e_theta, e_psi)``
+        the unit vectors of increasing ``theta`` and ``psi`` across the ray, the image's
+        axes are ``e_x = cos psi e_theta - sin psi e_psi`` and ``e_y = sin psi e_theta +
+        cos psi e_psi``: an ideal rotationally symmetric lens keeps a ray's polarization
+        components in its meridional plane (along ``e_theta``) and across it (``e_psi``) as
+        the components along the image radius and tangent, so a polarization at the image
+        angle ``chi`` (module doc) is ``cos chi e_0 + sin chi e_90`` on the sky (this is the
         polarization's transport, not the lens's geometric map of tangent vectors, which
-        stretches the tangential direction by ``r / (f sin theta)``). ``(e_x, e_y, d)`` is
-        right-handed. NaN outside the image circle.
+        stretches the tangential direction by ``r / (f sin theta)``). ``(e_0, e_90)`` is
+        right-handed about ``-d``, the direction the light travels.
         """
         x = np.asarray(col, dtype=float) - self.cx
-        y = self.cy - np.asarray(row, dtype=float)
+        y = np.asarray(row, dtype=float) - self.cy
         rho = np.hypot(x, y)
         with np.errstate(invalid="ignore", divide="ignore"):
             c_psi = np.where(rho > 0, x / rho, 1.0)
@@ -168,10 +181,10 @@ class FisheyeLens:
         one_minus = 1.0 - c_th
         e_x = np.stack([c_th * c_psi * c_psi + s_psi * s_psi, -one_minus * c_psi * s_psi,
                         -s_th * c_psi], axis=-1)
-        e_y = np.stack([-one_minus * c_psi * s_psi, c_th * s_psi * s_psi + c_psi * c_psi,
-                        -s_th * s_psi], axis=-1)
+        e_up = np.stack([one_minus * c_psi * s_psi, -(c_th * s_psi * s_psi + c_psi * c_psi),
+                         s_th * s_psi], axis=-1)
         d = np.stack([s_th * c_psi, s_th * s_psi, c_th], axis=-1)
-        return e_x, e_y, d
+        return e_x, e_up, d
 
     def describe(self) -> dict:
         """Lens parameters for sidecars."""

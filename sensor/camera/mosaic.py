@@ -9,11 +9,11 @@ skewness-corrected normal limit from :data:`POISSON_EXACT_BELOW_E` on), read noi
 clipping at the full well and an ADC of ``adc_bits`` bits with a black level. The sun disk's
 photoelectrons are raised to the full well before crosstalk.
 
-- ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector rotated into the camera frame
-  (angles from the camera's x axis towards its y axis, see :mod:`sensor.camera.lens`). An ideal
-  rotationally symmetric lens maps the sky's local basis ``(e_theta, e_psi)`` of a ray onto
-  the image's radial and tangential directions, so the E-vector angle from the image radius
-  equals its angle from ``e_theta`` on the sky.
+- ``S = (I, Q_c, U_c)``: the scene's linear Stokes vector in the image's polarization basis
+  (angles counter-clockwise in the displayed image from its right towards its top, see
+  :mod:`sensor.camera.lens`). An ideal rotationally symmetric lens maps the sky's local
+  basis ``(e_theta, e_psi)`` of a ray onto the image's radial and tangential directions, so
+  the E-vector angle from the image radius equals its angle from ``e_theta`` on the sky.
 - ``A = g/2 * (1 + 1/ER, (1 - 1/ER) cos 2a, (1 - 1/ER) sin 2a)``: polarizer at angle
   ``a = a_nominal + error`` [deg] with extinction ratio ``ER`` (transmittance ``g`` along its
   axis, ``g / ER`` across it; ``g`` also carries the pixel's response non-uniformity). An
@@ -83,21 +83,40 @@ Poisson law); the plain Gaussian limit would leave ``1 / (6 sqrt(2 pi lam))``, 0
 e-."""
 
 DEFAULT_LAYOUT_DEG = ((90.0, 45.0), (135.0, 0.0))
-"""Polarizer angles [deg] of the 2x2 super-pixel, rows then columns (the layout of the Sony
-IMX250MZR sensor, also polanalyser's default)."""
+"""Polarizer angles [deg] of the 2x2 super-pixel, rows then columns of the image as the sensor
+records it (row 0 at the top): 90 deg top left, 45 top right, 135 bottom left, 0 bottom right,
+the layout of the Sony IMX250MZR/IMX253MZR sensors. Angles count counter-clockwise in the
+displayed image from its right towards its top (:mod:`sensor.camera.lens`): the 45 deg
+polarizer runs from the pixel's bottom left to its top right, as polanalyser draws the
+IMX250MZR mosaic and computes ``S2 = I45 - I135`` (Sony's and polanalyser's convention)."""
 
 SUN_RADIUS_DEG = 0.2666
 """Mean angular radius of the solar disk [deg]."""
 
 
 def camera_attitude(yaw_deg: float, pitch_deg: float = 0.0, roll_deg: float = 0.0) -> Rotation:
-    """Camera-to-ENU rotation ``R_nc = Rz(-yaw) Rx(pitch) Ry(roll)`` [deg] of an upward-looking
-    camera whose image top is its heading reference (the body attitude of
-    :func:`sensor.compound_eye.body_attitude`)."""
+    """Camera-to-ENU rotation ``R_nc = R_nb R_bc`` [deg] of an upward-looking camera whose
+    image top is its heading reference.
+
+    ``R_nb = Rz(-yaw) Rx(pitch) Ry(roll)`` is the body attitude of
+    :func:`sensor.compound_eye.body_attitude` (body x right, y forward, z up) and
+    ``R_bc = Rz(180 deg)`` the camera's mount: the optical axis along the body's z, the
+    image's top (camera -y) along the body's forward axis, hence the image's right (camera x)
+    along the body's left. Level at yaw 0 the image's top is north and its right west: the
+    sun due east appears on the image's left.
+    """
     for name, v in (("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)):
         if not np.isfinite(v):
             raise InvalidParameterError(f"{name} must be finite; got {v!r}")
-    return Rotation.from_euler("ZXY", [-yaw_deg, pitch_deg, roll_deg], degrees=True)
+    return Rotation.from_euler("ZXY", [-yaw_deg, pitch_deg, roll_deg], degrees=True) * _MOUNT
+
+
+_FRAME_BLOCK_PX = 1 << 18
+"""Pixels per block of rows when a camera's per-pixel frame is built (float64 temporaries of
+a few tens of MB, whatever the sensor's size)."""
+
+_MOUNT = Rotation.from_euler("z", 180.0, degrees=True)
+"""Camera-to-body rotation ``R_bc`` of the upward-looking camera (:func:`camera_attitude`)."""
 
 
 def camera_basis(directions):
@@ -130,8 +149,9 @@ class MosaicSensor:
     width, height : int
         Pixels; both even (whole super-pixels).
     layout_deg : 2x2 nested sequence
-        Nominal polarizer angles [deg] of a super-pixel (rows, columns), measured from the
-        camera's x axis towards its y axis.
+        Nominal polarizer angles [deg] of a super-pixel (rows, columns of the image as
+        recorded), counter-clockwise in the displayed image from its right towards its top
+        (:data:`DEFAULT_LAYOUT_DEG`).
     full_well_e : float
         Full-well capacity [e-].
     read_noise_e : float
@@ -223,16 +243,31 @@ class MosaicSensor:
         return np.tile(np.asarray(self.layout_deg), (self.height // 2, self.width // 2))
 
     def analysis_vectors(self, ideal: bool = False) -> np.ndarray:
-        """Per-pixel analysis vectors ``A`` (H, W, 3) (module doc); ``ideal``: without errors."""
-        a = self.nominal_angle_deg()
-        if not ideal and self.angle_error_deg is not None:
-            a = a + self.angle_error_deg
-        inv_er = 0.0 if ideal else 1.0 / np.broadcast_to(
-            np.asarray(self.extinction_ratio, float), self.shape)
-        g = np.ones(self.shape) if ideal or self.gain is None else np.asarray(self.gain, float)
-        two_a = np.radians(2.0 * a)
-        d = 0.5 * g * (1.0 - inv_er)
-        return np.stack([0.5 * g * (1.0 + inv_er), d * np.cos(two_a), d * np.sin(two_a)], -1)
+        """Per-pixel analysis vectors ``A`` (H, W, 3) (module doc); ``ideal``: without errors.
+        A view of :meth:`analysis_planes`."""
+        return np.moveaxis(self.analysis_planes(ideal), 0, -1)
+
+    def analysis_planes(self, ideal: bool = False, dtype=np.float64) -> np.ndarray:
+        """:meth:`analysis_vectors` as three contiguous planes (3, H, W) of ``dtype``."""
+        out = np.empty((3,) + self.shape, dtype)
+        two_a = np.radians(2.0 * np.asarray(self.layout_deg))
+        if ideal or self.angle_error_deg is None:  # the 2x2 cell's cosines, tiled
+            _tile_cell(np.cos(two_a), out[1])
+            _tile_cell(np.sin(two_a), out[2])
+        else:
+            a = np.radians(2.0 * np.asarray(self.angle_error_deg))
+            a += _tile_cell(two_a, np.empty(self.shape))
+            np.cos(a, out=out[1], casting="same_kind")
+            np.sin(a, out=out[2], casting="same_kind")
+        if ideal:
+            out[0] = 0.5
+            out[1:] *= 0.5
+            return out
+        inv_er = 1.0 / np.asarray(self.extinction_ratio, float)
+        g = 1.0 if self.gain is None else np.asarray(self.gain, float)
+        out[0] = 0.5 * g * (1.0 + inv_er)
+        out[1:] *= 0.5 * g * (1.0 - inv_er)
+        return out
 
     def apply_crosstalk(self, electrons: np.ndarray) -> np.ndarray:
         """Crosstalk (module doc) on photoelectrons ``(..., H, W)``: ``(1 - 4c) e`` plus ``c``
@@ -386,16 +421,48 @@ class PolarizationCamera:
         return self.lens.back_project(rows, cols)
 
     @functools.cached_property
+    def _in_circle(self) -> np.ndarray:
+        """Image-circle mask (H, W): ``pixel_directions[1]`` without the directions."""
+        out = np.empty(self.sensor.shape, bool)
+        for rows, x, y in self._row_blocks():
+            with np.errstate(invalid="ignore"):
+                np.less_equal(self.lens.theta_rad(np.hypot(x, y)), self.lens.max_theta_rad,
+                              out=out[rows])
+        return out
+
+    def _row_blocks(self):
+        """Blocks of rows of the sensor, ``(rows slice, x (W,), y (h, 1))`` with the
+        image-plane coordinates [px] (:mod:`sensor.camera.lens`), so that per-pixel float64
+        temporaries of a whole image stay a few MB."""
+        h, w = self.sensor.shape
+        x = np.arange(w, dtype=float) - self.lens.cx
+        step = max(1, _FRAME_BLOCK_PX // w)
+        for r0 in range(0, h, step):
+            r1 = min(r0 + step, h)
+            yield slice(r0, r1), x, (np.arange(r0, r1, dtype=float) - self.lens.cy)[:, None]
+
+    def sky_pixels(self, attitude: Rotation) -> np.ndarray:
+        """Pixels (H, W) in the image circle whose ray looks above the horizon for a camera at
+        ``attitude`` (camera-to-ENU; the heading does not move the horizon), computed in
+        blocks of rows without the camera's per-pixel directions."""
+        up = attitude.inv().apply([0.0, 0.0, 1.0])
+        out = np.empty(self.sensor.shape, bool)
+        for rows, x, y in self._row_blocks():
+            rho = np.hypot(x, y)
+            with np.errstate(invalid="ignore", divide="ignore"):
+                theta = self.lens.theta_rad(rho)
+                radial = np.where(rho > 0, (x * up[0] + y * up[1]) / rho, 0.0)
+            np.greater_equal(np.sin(theta) * radial + np.cos(theta) * up[2], 0.0,
+                             out=out[rows])
+            out[rows] &= theta <= self.lens.max_theta_rad
+        return out
+
+    @functools.cached_property
     def _rays(self):
         """Flat indices of the pixels in the image circle and their camera basis."""
         d_c, in_circle = self.pixel_directions
         rays = np.flatnonzero(in_circle)
         return rays, camera_basis(d_c.reshape(-1, 3)[rays])
-
-    @functools.cached_property
-    def _analysis(self) -> dict:
-        v = self.vignetting()[..., None]
-        return {ideal: self.sensor.analysis_vectors(ideal) * v for ideal in (False, True)}
 
     @functools.cached_property
     def _per_dtype(self) -> dict:
@@ -408,22 +475,35 @@ class PolarizationCamera:
         return out
 
     def _analysis_components(self, ideal: bool, dtype) -> np.ndarray:
-        """:attr:`_analysis` as three contiguous (H, W) planes of ``dtype``."""
-        return self._cached(("analysis", bool(ideal), np.dtype(dtype)),
-                            lambda: np.ascontiguousarray(np.moveaxis(
-                                self._analysis[bool(ideal)], -1, 0), dtype=dtype))
-
-    def _pixel_frame(self, dtype) -> np.ndarray:
-        """Camera-fixed vectors of every pixel, (3 vectors, 3 components, H, W) in ``dtype``:
-        the ray ``d`` and the image's x and y axes carried onto the sky
-        (:meth:`FisheyeLens.image_axes`); zero outside the image circle."""
+        """Analysis vectors with vignetting (:meth:`analysis_dn` per unit radiance rate) as
+        three contiguous (H, W) planes of ``dtype``."""
         def make():
-            inside = self.pixel_directions[1]
-            e_x, e_y, d = self.lens.image_axes(*np.indices(self.sensor.shape, dtype=float))
-            vec = np.stack([d, e_x, e_y])
-            vec[:, ~inside] = 0.0
-            return np.ascontiguousarray(np.moveaxis(vec, -1, 1), dtype=dtype)
-        return self._cached(("frame", np.dtype(dtype)), make)
+            planes = self.sensor.analysis_planes(ideal, dtype)
+            if np.isfinite(self.exit_pupil_px):
+                planes *= self.vignetting().astype(dtype)
+            return planes
+        return self._cached(("analysis", bool(ideal), np.dtype(dtype)), make)
+
+    def _pixel_polar(self, dtype) -> np.ndarray:
+        """Camera-fixed planes of every pixel's ray, (5, H, W) in ``dtype``: ``cos psi``,
+        ``sin psi`` of its image azimuth, ``sin theta``, ``cos theta`` and ``1 - cos theta``
+        of its angle from the optical axis (:mod:`sensor.camera.lens`); all zero outside the
+        image circle. The ray is ``d = (sin theta cos psi, sin theta sin psi, cos theta)``
+        and the sun's projections on its polarization axes follow in closed form
+        (:func:`_sun_projections`)."""
+        def make():
+            out = np.zeros((5,) + self.sensor.shape, dtype)
+            for rows, x, y in self._row_blocks():
+                rho = np.hypot(x, y)
+                with np.errstate(invalid="ignore", divide="ignore"):
+                    theta = self.lens.theta_rad(rho)
+                    inside = theta <= self.lens.max_theta_rad
+                    planes = (np.where(rho > 0, x / rho, 1.0), np.where(rho > 0, y / rho, 0.0),
+                              np.sin(theta), np.cos(theta), 2.0 * np.sin(0.5 * theta) ** 2)
+                for k, plane in enumerate(planes):
+                    np.copyto(out[k, rows], plane, casting="same_kind", where=inside)
+            return out
+        return self._cached(("polar", np.dtype(dtype)), make)
 
     def vignetting(self, rows=None, cols=None) -> np.ndarray:
         """Relative illumination ``V`` at pixel coordinates (default: every pixel centre)."""
@@ -439,7 +519,7 @@ class PolarizationCamera:
         included: the expected dark-subtracted pixel value is ``analysis_dn . S``.
         ``ideal``: the nominal polarizers (what a camera without calibration assumes)."""
         scale = self.photoelectrons_per_s * exposure_s / self.sensor.e_per_dn
-        return self._analysis[bool(ideal)] * scale
+        return np.moveaxis(self._analysis_components(ideal, np.float64), 0, -1) * scale
 
     def scene(self, sky, attitude: Rotation, sun_elevation_deg: float,
               sun_azimuth_deg: float) -> Scene:
@@ -478,15 +558,15 @@ class PolarizationCamera:
         return float(np.cos(np.radians(self.sun_radius_deg)
                             + 0.5 * float(self.lens.dtheta_dr(sun_theta))))
 
-    def _sun_disk(self, rays: np.ndarray, s_c, work: np.ndarray) -> np.ndarray:
+    def _sun_disk(self, polar: np.ndarray, s_c, work: np.ndarray) -> np.ndarray:
         """Pixels whose centre is on the sun disk (:meth:`_sun_reach_cos`), from the dot
-        products of their rays ``(3, H, W)`` with the sun ``s_c`` in a box around the sun's
-        image (the whole frame when the sun is outside the field of view)."""
+        products of their rays (:meth:`_pixel_polar`) with the sun ``s_c`` in a box around
+        the sun's image (the whole frame when the sun is outside the field of view)."""
         reach_cos = self._sun_reach_cos(s_c)
         sun = np.zeros(self.sensor.shape, bool)
         row, col = self.lens.project(s_c)
         if not (np.isfinite(row) and np.isfinite(col)):
-            return np.greater_equal(_dot(rays, s_c, out=work), reach_cos)
+            return np.greater_equal(_ray_dot(polar, s_c, out=work), reach_cos)
         # the smallest angle a pixel spans at the sun's place: radially dtheta/dr, tangentially
         # sin(theta) / r (1 / f on the axis)
         theta = float(np.arccos(np.clip(s_c[2], -1.0, 1.0)))
@@ -496,28 +576,29 @@ class PolarizationCamera:
         k = int(np.ceil(np.arccos(reach_cos) / per_px)) + 2
         rows = slice(max(int(row) - k, 0), max(int(row) + k + 2, 0))
         cols = slice(max(int(col) - k, 0), max(int(col) + k + 2, 0))
-        sun[rows, cols] = _dot(rays[:, rows, cols], s_c) >= reach_cos
+        sun[rows, cols] = _ray_dot(polar[:, rows, cols], s_c) >= reach_cos
         return sun
 
     def _rayleigh_scene(self, sky, attitude, sun_elevation_deg, sun_azimuth_deg) -> Scene:
-        """:meth:`scene` of a single-scattering sky: camera-frame Stokes from the sun's
-        projections on each pixel's image axes ``(e_x, e_y)`` (:meth:`_pixel_frame`), the
+        """:meth:`scene` of a single-scattering sky: camera Stokes from the sun's projections
+        on each pixel's polarization axes ``(e_0, e_90)`` (:func:`_sun_projections`), the
         horizon and the sun disk from dot products with the ray; all in the sky's dtype
         (float32: Stokes within a few 1e-7 of float64, tested)."""
         check_sun_above_horizon(sun_elevation_deg, sky.min_sun_elevation_deg)
         check_finite("sun_azimuth_deg", sun_azimuth_deg)
-        frame = self._pixel_frame(sky.dtype)
-        inside = self.pixel_directions[1]
+        polar = self._pixel_polar(sky.dtype)
+        inside = self._in_circle
         inv = attitude.inv()
         s_c = inv.apply(_enu(sun_elevation_deg, sun_azimuth_deg))
         up_c = inv.apply([0.0, 0.0, 1.0])
         work = np.empty(self.sensor.shape, sky.dtype)
-        i, q, u = rayleigh.stokes_from_sun_projections(_dot(frame[1], s_c, work=work),
-                                                       _dot(frame[2], s_c, work=work),
+        # (e_0, e_90) is right-handed about -d: the E-vector d x s has the components
+        # (p2, -p1) instead of (-p2, p1), the same axis, so the Stokes are the same
+        i, q, u = rayleigh.stokes_from_sun_projections(*_sun_projections(polar, s_c, work),
                                                        sky.dmax)
-        valid = np.greater_equal(_dot(frame[0], up_c, out=work, work=None), 0.0)
+        valid = np.greater_equal(_ray_dot(polar, up_c, out=work), 0.0)
         valid &= inside
-        sun = self._sun_disk(frame[0], s_c, work)
+        sun = self._sun_disk(polar, s_c, work)
         sun &= inside
         dark = ~valid
         for a in (i, q, u):
@@ -620,7 +701,7 @@ class PolarizationCamera:
     def uniform_scene(self, stokes) -> Scene:
         """A flat scene of camera-frame Stokes ``(I, Q, U)`` filling the image circle (an
         integrating sphere behind a polarizer in front of the lens)."""
-        _, in_circle = self.pixel_directions
+        in_circle = self._in_circle
         i, q, u = (np.where(in_circle, float(v), 0.0) for v in stokes)
         return Scene(i, q, u, in_circle, np.zeros(self.sensor.shape, bool))
 
@@ -636,7 +717,8 @@ class PolarizationCamera:
 
 def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azimuth_deg: float,
                       directions, in_view, basis=None):
-    """Camera-frame Stokes ``(n, 3)`` of ``sky`` along camera-frame unit ``directions``
+    """Camera Stokes ``(n, 3)`` (image polarization basis, :mod:`sensor.camera.lens`) of
+    ``sky`` along camera-frame unit ``directions``
     ``(N, 3)`` where ``in_view`` (N,) holds and the ray looks above the horizon.
 
     ``basis``: :func:`camera_basis` of ``directions`` if already known. Returns
@@ -659,26 +741,57 @@ def sky_stokes_camera(sky, attitude: Rotation, sun_elevation_deg: float, sun_azi
     # rotation of the Stokes basis from the local meridian (e_el, e_az) to camera x, y by the
     # camera-plane angle delta = beta + psi of e_el, where beta is the angle of the zenith's
     # component across the ray, (p, q) = (up . e_theta, up . e_psi), from e_theta (both bases
-    # are right-handed about the ray); double angles without trigonometry
+    # are right-handed about the ray); double angles without trigonometry. The image's
+    # polarization angles count from x towards -y (lens module doc): U changes sign.
     p, q = e_th @ up, e_ps @ up
     with np.errstate(invalid="ignore", divide="ignore"):
         r2 = 1.0 / (p * p + q * q)
     c2b, s2b = (p * p - q * q) * r2, 2.0 * p * q * r2
     c2p, s2p = np.cos(2.0 * psi), np.sin(2.0 * psi)
     c2, s2 = c2b * c2p - s2b * s2p, s2b * c2p + c2b * s2p
-    stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, fld.Q * s2 + fld.U * c2], axis=-1)
+    stokes = np.stack([fld.I, fld.Q * c2 - fld.U * s2, -(fld.Q * s2 + fld.U * c2)], axis=-1)
     return idx, stokes, el, az
 
 
-def _dot(vectors: np.ndarray, v, out=None, work=None) -> np.ndarray:
-    """``sum_k vectors[k] * v[k]`` for component planes ``vectors`` (3, H, W) and a 3-vector
-    ``v``, in the planes' dtype; ``out`` and ``work``: (H, W) buffers to reuse (``out`` may
-    not be ``work``)."""
-    out = np.multiply(vectors[0], vectors.dtype.type(v[0]), out=out)
-    work = np.empty_like(out) if work is None or work is out else work
-    for k in (1, 2):
-        out += np.multiply(vectors[k], vectors.dtype.type(v[k]), out=work)
+def _tile_cell(cell: np.ndarray, out: np.ndarray) -> np.ndarray:
+    """``out`` (H, W) filled with the 2x2 ``cell`` repeated (a strided copy: ``np.tile``
+    repeats element by element, ten times slower on a sensor)."""
+    h, w = out.shape
+    out.reshape(h // 2, 2, w // 2, 2)[...] = np.asarray(cell)[None, :, None, :]
     return out
+
+
+def _ray_dot(polar: np.ndarray, v, out=None) -> np.ndarray:
+    """``d . v`` of every pixel's ray ``d`` (:meth:`PolarizationCamera._pixel_polar` planes
+    ``(5, ...)``) with a camera-frame 3-vector ``v``: ``sin theta (cos psi v_x + sin psi v_y)
+    + cos theta v_z``, in the planes' dtype; ``out``: a buffer to reuse."""
+    t = polar.dtype.type
+    out = np.multiply(polar[0], t(v[0]), out=out)
+    out += polar[1] * t(v[1])
+    out *= polar[2]
+    out += polar[3] * t(v[2])
+    return out
+
+
+def _sun_projections(polar: np.ndarray, s, work: np.ndarray):
+    """The sun's projections ``(p1, p2) = (s . e_0, s . e_90)`` on every pixel's polarization
+    axes (:meth:`FisheyeLens.polarization_axes`), from the planes of
+    :meth:`PolarizationCamera._pixel_polar`. With ``c, n = cos psi, sin psi``,
+    ``u = 1 - cos theta``, ``m = s_x c + s_y n`` (the sun along the image radius) and
+    ``k = u m + s_z sin theta``, the closed forms of ``e_0`` and ``e_90`` give
+    ``p1 = s_x - c k`` and ``p2 = -s_y + n k`` (eight operations per pixel, no frame of
+    nine planes). ``work``: an (H, W) buffer of the planes' dtype."""
+    t = polar.dtype.type
+    c, n, s_th, _, u = polar
+    k = np.multiply(c, t(s[0]))
+    k += np.multiply(n, t(s[1]), out=work)
+    k *= u
+    k += np.multiply(s_th, t(s[2]), out=work)
+    p1 = np.multiply(c, k)
+    np.subtract(t(s[0]), p1, out=p1)
+    k *= n
+    k -= t(s[1])
+    return p1, k
 
 
 def _enu(elevation_deg, azimuth_deg) -> np.ndarray:

@@ -55,6 +55,8 @@ def main(path: str) -> int:
                 line += "  (floor)"
             if measured["import_s"] is not None:
                 line += f"  imports {measured['import_s']:.3f} s"
+            if b.get("extra_info", {}).get("peak_mb") is not None:
+                line += f"  peak memory {b['extra_info']['peak_mb']:,.0f} MB"
             print(line)
             for goal in _goals(b, measured):
                 print(f"    goal {goal}")

@@ -12,16 +12,14 @@ What is compared (see docs/camera.md, "Peer comparison: pyskylumos"):
 1. Lens: pyskylumos's ``equi_angle`` / ``equi_solid_angle`` pixel directions against skysim's
    equidistant / equisolid lens of the same focal length in pixels. pyskylumos's upward chart
    puts north at the image's right and east at its top (azimuth counter-clockwise in the
-   image), the mirror image of a camera looking up with its top towards east (skysim's camera
-   frame is right-handed with the optical axis up: its right then points south). So its
-   image is skysim's image at yaw 90 deg flipped left to right, and its angles are skysim's
-   camera-frame angles with the sign reversed.
+   image): a camera looking up with its top towards east, i.e. skysim's camera at yaw 90 deg,
+   pixel for pixel, with the same sense of angles (counter-clockwise in the displayed image).
 2. Sky: pyskylumos's ``RAYLEIGH`` DoP and AoP at those directions against skysim's
    ``RayleighSky(1.0)`` for the same sun (given explicitly to both). Radiance: pyskylumos
    scales by a CIE standard-sky luminance distribution, skysim's single-scattering sky by the
    Rayleigh phase function; compared as a ratio only.
 3. Camera chain, noise free: both mosaics fed the same per-pixel radiance, DoP and AoP (the
-   pyskylumos sky, mapped into skysim's camera frame), ideal polarizers and polarizers of
+   pyskylumos sky, pixel for pixel), ideal polarizers and polarizers of
    the same diattenuation (pyskylumos's ``extinction_ratio`` eps multiplies the DoP;
    skysim's extinction ratio ER gives eps = (ER - 1) / (ER + 1)), 12-bit ADC at the same
    counts per radiance; super-pixel DoLP and AoP compared.
@@ -63,11 +61,6 @@ def _mosaic():
             135: SlicingPattern(1, 0, 2), 0: SlicingPattern(1, 1, 2)}
 
 
-MIRRORED_LAYOUT_DEG = ((135.0, 90.0), (0.0, 45.0))
-"""The pyskylumos mosaic above seen in skysim's frame: columns swapped (an even-width image
-flipped left to right swaps column parity) and angles negated (mod 180)."""
-
-
 def compare(lens_model: str = "equidistant") -> dict:
     """Run the comparison; returns the differences (see the module doc) as a flat dict."""
     from astropy.coordinates import EarthLocation
@@ -85,11 +78,10 @@ def compare(lens_model: str = "equidistant") -> dict:
     engine = _engine(lens_name, f_px)
     az_p, alt_p = engine.get_initial_azimuth_altitude()
 
-    # 1. lens: pyskylumos pixel (r, c) sees what skysim's camera at yaw 90 sees at (r, N-1-c)
+    # 1. lens: pyskylumos pixel (r, c) sees what skysim's camera at yaw 90 sees at (r, c)
     att = camera_attitude(90.0)
     d_c, inside = cam.pixel_directions
-    d_n = att.apply(np.nan_to_num(d_c).reshape(-1, 3)).reshape(N, N, 3)[:, ::-1]
-    inside = inside[:, ::-1]
+    d_n = att.apply(np.nan_to_num(d_c).reshape(-1, 3)).reshape(N, N, 3)
     d_p = direction_vector(alt_p, az_p)
     out["lens_max_angle_deg"] = float(np.degrees(np.arccos(np.clip(
         np.sum(d_p * d_n, -1)[inside], -1, 1))).max())
@@ -102,10 +94,10 @@ def compare(lens_model: str = "equidistant") -> dict:
         "RAYLEIGH", loc, time, 12, alt_p, az_p, sun_position=sun)
     dop_p, aop_p, rad_p = dop_p[0], aop_p[0], rad_p[0]
     sc = cam.scene(RayleighSky(1.0), att, *SUN)
-    I_s, Q_s, U_s = (a[:, ::-1] for a in (sc.I, sc.Q, sc.U))
-    up = sc.valid[:, ::-1] & np.isfinite(dop_p)
+    I_s, Q_s, U_s = sc.I, sc.Q, sc.U
+    up = sc.valid & np.isfinite(dop_p)
     dop_s = np.hypot(Q_s, U_s) / np.where(up, I_s, 1.0)
-    chi_s = -0.5 * np.arctan2(U_s, Q_s)  # mirrored: angles change sign
+    chi_s = 0.5 * np.arctan2(U_s, Q_s)
     polarized = up & (dop_s > 0.05)
     out["sky_dop_max_diff"] = float(np.abs(dop_p - dop_s)[up].max())
     dchi = (np.degrees(aop_p - chi_s) + 90.0) % 180.0 - 90.0
@@ -124,15 +116,14 @@ def compare(lens_model: str = "equidistant") -> dict:
         res = eng.simulate_measurement(dop_in[None], aop_in[None], rad_in[None])
         dolp_p, aop_m = res["dop"][0], res["aop"][0]
         er = np.inf if eps == 1.0 else (1 + eps) / (1 - eps)
-        sensor = MosaicSensor(N, N, layout_deg=MIRRORED_LAYOUT_DEG, full_well_e=2 ** BITS - 1,
+        sensor = MosaicSensor(N, N, full_well_e=2 ** BITS - 1,
                               read_noise_e=0.0, dark_current_e_s=0.0, adc_bits=BITS,
                               black_level_dn=0, extinction_ratio=er)
         ours = PolarizationCamera(cam.lens, sensor)
-        # skysim's frame: flip back, and angles negated
-        m_s = mask[:, ::-1]
-        i_s = np.where(m_s, rad_in[:, ::-1], 0.0)
-        p_s = np.where(m_s, dop_in[:, ::-1], 0.0)
-        chi = np.where(m_s, -aop_in[:, ::-1], 0.0)
+        m_s = mask
+        i_s = np.where(m_s, rad_in, 0.0)
+        p_s = np.where(m_s, dop_in, 0.0)
+        chi = np.where(m_s, aop_in, 0.0)
         scene = Scene(i_s, i_s * p_s * np.cos(2 * chi), i_s * p_s * np.sin(2 * chi), m_s,
                       np.zeros_like(m_s))
         # the same counts per radiance as pyskylumos's auto exposure (brightest pixel at full
@@ -150,9 +141,9 @@ def compare(lens_model: str = "equidistant") -> dict:
         counts = SensorChip(auto_exposure_saturation_fraction=1.0, adc_resolution_bits=BITS,
                             multiplicative_noise_snr=1e12).get_bits_intensity(iop)[0]
         st = demosaic(raw, ours.analysis_dn(t, ideal=True), valid=m_s, method="superpixel")
-        dolp_s = st.dolp[:, ::-1]
-        aop_s = -np.radians(st.aop_camera_deg[:, ::-1])
-        both = st.valid[:, ::-1] & np.isfinite(dolp_p)
+        dolp_s = st.dolp
+        aop_s = np.radians(st.aop_camera_deg)
+        both = st.valid & np.isfinite(dolp_p)
         tag = "ideal" if eps == 1.0 else f"eps{eps:g}"
         # skysim demosaics with the nominal (ideal) analysis: its DoLP is eps times the scene's
         out[f"chain_{tag}_dolp_max_diff"] = float(np.abs(dolp_p - dolp_s)[both].max())
@@ -160,7 +151,7 @@ def compare(lens_model: str = "equidistant") -> dict:
         da = (np.degrees(aop_m - aop_s) + 90.0) % 180.0 - 90.0
         out[f"chain_{tag}_aop_max_diff_deg"] = float(np.abs(da[strong]).max())
         out[f"chain_{tag}_samples"] = int(both.sum())
-        out[f"chain_{tag}_raw_max_diff_counts"] = float(np.abs(counts - raw[:, ::-1])[mask].max())
+        out[f"chain_{tag}_raw_max_diff_counts"] = float(np.abs(counts - raw)[mask].max())
 
     # 4. noise: flat unpolarized fields at two levels, standard deviation in counts
     from pyskylumos.sensor.SensorChip import SensorChip
