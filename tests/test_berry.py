@@ -160,3 +160,18 @@ def test_berry_in_twilight_keeps_the_zenith_e_vector():
     from skysim.geometry import direction_vector
     f = BerrySky().field(90.0, 0.0, -5.0, 120.0)
     assert abs(float(f.e_vector.reshape(-1, 3)[0] @ direction_vector(0.0, 120.0))) < 1e-9
+
+
+def test_e_vector_turns_at_the_neutral_points_on_the_solar_vertical():
+    """On the solar vertical the pattern is mirror-symmetric, so the E-vector is parallel or
+    perpendicular to it; each index-1/2 point on it swaps the two [1]: parallel (AoP 0)
+    between Brewster and Babinet around the sun, perpendicular (AoP -90) above Babinet,
+    below Brewster and all along the anti-solar half above Arago, as in the Rayleigh sky
+    (delta = 0) everywhere. Sun at 30 deg, delta 40: Babinet at 50, Brewster at 10, Arago at
+    -10 deg on the anti-solar side. Exact by symmetry (1e-9 deg)."""
+    el = np.array([70.0, 45.0, 30.0, 15.0, 0.0, 0.0, 30.0, 60.0])
+    az = np.array([100.0] * 5 + [280.0] * 3)
+    _, aop = berry_polarization(el, az, 30.0, 100.0, 40.0)
+    np.testing.assert_allclose(aop, [-90, 0, 0, 0, -90, -90, -90, -90], atol=1e-9)
+    _, aop0 = berry_polarization(el, az, 30.0, 100.0, 0.0)
+    np.testing.assert_allclose(np.delete(aop0, 2), -90.0, atol=1e-9)   # the sun itself: undefined
