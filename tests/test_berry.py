@@ -175,3 +175,24 @@ def test_e_vector_turns_at_the_neutral_points_on_the_solar_vertical():
     np.testing.assert_allclose(aop, [-90, 0, 0, 0, -90, -90, -90, -90], atol=1e-9)
     _, aop0 = berry_polarization(el, az, 30.0, 100.0, 0.0)
     np.testing.assert_allclose(np.delete(aop0, 2), -90.0, atol=1e-9)   # the sun itself: undefined
+
+
+@settings(max_examples=40, deadline=None)
+@given(sel=st.floats(-10.0, 60.0), saz=st.floats(0, 360), delta=st.floats(0.5, 59.0))
+def test_w_equals_the_published_product_form(sel, saz, delta):
+    """berry_w writes the antipodal factors in a form that stays finite at the nadir; where
+    Babinet is below the zenith (sun under 90 - delta/2, as drawn here) it must equal the
+    published product, -4 prod(zeta - zeta_k) / ((1 + |zeta|^2)^2 |zeta_Bab - zeta_4|
+    |zeta_Bre - zeta_Ara|) with zeta_Ara = -1/conj(zeta_Bre), zeta_4 = -1/conj(zeta_Bab)
+    (the form of the public implementations, e.g. OpenSky's Simu_Berry). Tolerance 1e-12
+    (|w| <= 1; rounding of the two algebraically equal forms, measured 1e-15)."""
+    from skysim.berry import berry_w
+    el, az = np.meshgrid(np.linspace(-30.0, 90.0, 25), np.linspace(0.0, 350.0, 36))
+    zeta = stereographic(el, az)
+    u = np.exp(1j * np.radians(90.0 - saz))
+    bab = np.tan(np.radians(90.0 - sel - delta / 2) / 2) * u
+    bre = np.tan(np.radians(90.0 - sel + delta / 2) / 2) * u
+    ara, fourth = -1 / np.conj(bre), -1 / np.conj(bab)
+    published = (-4 * (zeta - bab) * (zeta - bre) * (zeta - ara) * (zeta - fourth)
+                 / ((1 + np.abs(zeta) ** 2) ** 2 * np.abs(bab - fourth) * np.abs(bre - ara)))
+    np.testing.assert_allclose(berry_w(zeta, sel, saz, delta), published, rtol=0, atol=1e-12)
