@@ -323,7 +323,9 @@ def register(sub) -> None:
     p.add_argument("--grid-step", type=float_in(0, 90, low_open=True, unit="deg"), default=2.0,
                    help="spacing of the elevation-azimuth grid [deg]")
     p.add_argument("--model", default="rayleigh", choices=sorted(MODEL_OPTIONS),
-                   help="sky model")
+                   help="sky model; berry: Berry-Dennis-Lee singularity sky, DoP "
+                        "dmax |w|/(2 - |w|) (Rayleigh for delta 0), without horizon "
+                        "depolarization (too high near the horizon)")
     p.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True),
                    help="rayleigh, berry: maximum degree of polarization (model default 1)")
     p.add_argument("--tau", type=positive_float,

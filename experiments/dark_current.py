@@ -25,7 +25,14 @@ extinction ratios, log-amplifier gain and offset errors; channel noise U(0.25, 0
   illuminance falls from the surface value to ~1 lx, in the water types of
   :data:`sensor.illuminance.WATER_TYPES` (:func:`sensor.illuminance.underwater_light`:
   Fresnel transmission, ``K_d`` of Jerlov's Table XXVII at 480 nm, the transmitted sky's
-  polarization mixed with the in-water single scattering of the refracted sun).
+  polarization mixed with the in-water single scattering of the refracted sun). That DoP
+  model is validated only down to
+  :attr:`sensor.illuminance.WaterType.polarization_validated_depth_m` (5 m in clear water,
+  the surface in coastal and turbid water; Lerner et al. 2011); deeper it keeps the in-water
+  single-scattering DoP although the zenith DoP of the asymptotic light field tends to zero
+  (Mobley 1994, sect. 9.3). Those depths are kept, for the light level, but marked
+  (``dop_validated`` false in ``underwater.csv`` and ``by_depth.csv``, shaded in the figure):
+  their DoP is an upper bound and their heading errors are lower bounds.
 
 Reported: heading-error 3 sigma (3 x RMS about zero) and DoP RMS error vs illuminance for (a)
 (pair 1-2 and the best pair per trial and level), (b), (b0), (c), (cw); per level the median
@@ -47,6 +54,7 @@ from __future__ import annotations
 
 import contextlib
 import time
+import warnings
 from dataclasses import asdict, dataclass
 from pathlib import Path
 
@@ -58,7 +66,7 @@ from calibration.dark_current import (ChannelModel, calibrate_dark_current, solv
 from calibration.lsq import fit_pair
 from calibration.solve import PAIRS, heading_error_deg
 from sensor.daq import Daq
-from sensor.illuminance import WATER_TYPES, underwater_light
+from sensor.illuminance import WATER_TYPES, DepthBeyondValidationWarning, underwater_light
 from sensor.photodiode import PhotodiodeChannels
 from skysim.sky import RayleighSky
 from skysim import __version__
@@ -85,9 +93,9 @@ class Config:
     cal_levels_lx : integrating-sphere levels spanning the dark level (~1 lx) up to daylight
         laboratory levels.
     cal_dops : two reference DoPs, so polarization efficiency and dark level separate.
-    sweep_lx : evaluation illuminances, 1e4 lx (overcast daylight) down to 1 lx (deep dusk,
-        or a few tens of metres of water).
-    dop : zenith DoP of the evaluated sky (a clear dusk sky; 0.3-0.5 under water).
+    sweep_lx : evaluation illuminances, 1e4 lx (overcast daylight) down to 1 lx (deep dusk;
+        in the underwater scenario 8-470 m of water, depending on the water type).
+    dop : zenith DoP of the evaluated sky (a clear dusk sky).
     noise_range_V : channel output noise, as in experiments.yang2014.ERROR_MODEL.
     bandwidth_Hz : readout bandwidth for the shot noise.
     sun_elevation_deg, sky_dmax : the underwater scenario's clear sky (Rayleigh, d_max 0.8:
@@ -132,7 +140,15 @@ def _calibration_grid(cfg: Config):
 
 def underwater_conditions(cfg: Config) -> pd.DataFrame:
     """Depth, zenith lux equivalent and DoP of the underwater scenario (one row per water type
-    and depth; :func:`sensor.illuminance.underwater_light`)."""
+    and depth; :func:`sensor.illuminance.underwater_light`); ``dop_validated`` is false deeper
+    than the water type's validated depth of the DoP model, where the DoP is an upper bound
+    (the model's warning is replaced by that column)."""
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", DepthBeyondValidationWarning)
+        return _underwater_conditions(cfg)
+
+
+def _underwater_conditions(cfg: Config) -> pd.DataFrame:
     sky = RayleighSky(cfg.sky_dmax)
     rows = []
     for name in cfg.water_types:
@@ -143,11 +159,12 @@ def underwater_conditions(cfg: Config) -> pd.DataFrame:
         target = np.asarray(cfg.depth_illuminance_lx)
         z_e = np.log(e0.illuminance_lx / target[target < e0.illuminance_lx]) / kd
         z_f = -np.log(np.asarray(cfg.depth_transmitted_fractions)) / w.polarization_decay_per_m
-        z = np.unique(np.concatenate([[0.0], z_e, z_f]))
+        z = np.unique(np.concatenate([[0.0, w.polarization_validated_depth_m], z_e, z_f]))
         z = z[z <= z_e.max() * (1 + 1e-9)]
         light = underwater_light(sky, 0.0, 0.0, cfg.sun_elevation_deg, 0.0, z, name,
                                  wavelength_nm=cfg.wavelength_nm)
-        rows += [{"water": name, "depth_m": zi, "illuminance_lx": ei, "dop": di}
+        rows += [{"water": name, "depth_m": zi, "illuminance_lx": ei, "dop": di,
+                  "dop_validated": bool(zi <= w.polarization_validated_depth_m)}
                  for zi, ei, di in zip(z, light.illuminance_lx, light.dop)]
     return pd.DataFrame(rows)
 
@@ -214,6 +231,7 @@ def _trial(k: int, seed_seq, cfg: Config, daq: Daq, water: pd.DataFrame):
     res_w, _, _ = _solve_all(U_w, phi_w, d_w, cal_a, cal_b, noise_total)
     water_rows = [{"trial": k, "water": water.water.iloc[i], "depth_m": water.depth_m.iloc[i],
                    "illuminance_lx": water.illuminance_lx.iloc[i], "dop": water.dop.iloc[i],
+                   "dop_validated": bool(water.dop_validated.iloc[i]),
                    **{c: float(res_w[c][i]) for c in res_w if c.startswith("heading")}}
                   for i in range(len(water))]
     truth = ChannelModel.from_photodiodes(params).to_vector()
@@ -263,8 +281,10 @@ def _run(trials, seed, cfg, progress, t0) -> dict:
     params = pd.DataFrame(params)
     under = pd.DataFrame(under)
     by_level = _by_level(sweep, np.random.default_rng(seeds[0].spawn(1)[0]))
-    by_depth = (under.groupby(["water", "depth_m"], sort=False).median(numeric_only=True)
-                .drop(columns="trial").reset_index())
+    by_depth = (under.drop(columns="dop_validated")
+                .groupby(["water", "depth_m"], sort=False).median(numeric_only=True)
+                .drop(columns="trial").reset_index()
+                .merge(water[["water", "depth_m", "dop_validated"]], on=["water", "depth_m"]))
     param_table = _parameter_table(params)
     summary = _summary(by_level, param_table, params, trials, seed, cfg,
                        time.perf_counter() - t0)
@@ -399,13 +419,17 @@ def format_summary(result: dict) -> str:
                           for k, v in s["combined_vs_arms"].items())]
     if "by_depth" in result:
         lines += ["", "Under water (zenith view, sun elevation "
-                  f"{s['config']['sun_elevation_deg']:g} deg; medians over trials):", "",
+                  f"{s['config']['sun_elevation_deg']:g} deg; medians over trials). DoP "
+                  "marked * : deeper than the DoP model is validated (5 m in clear water, "
+                  "the surface in coastal and turbid water; Lerner et al. 2011), an upper "
+                  "bound, so the heading errors of that row are lower bounds:", "",
                   "| water | depth [m] | lux equivalent [lx] | DoP | (a) best pair 3σ [deg] "
                   "| (b) 3σ [deg] | (c) 3σ [deg] | (cw) 3σ [deg] |",
                   "|---|---|---|---|---|---|---|---|"]
         for r in result["by_depth"].itertuples():
+            mark = "" if r.dop_validated else " *"
             lines.append(f"| {r.water} | {r.depth_m:.1f} | {r.illuminance_lx:.3g} "
-                         f"| {r.dop:.3g} | {r.heading_3sigma_a_best_deg:.3g} "
+                         f"| {r.dop:.3g}{mark} | {r.heading_3sigma_a_best_deg:.3g} "
                          f"| {r.heading_3sigma_b_deg:.3g} | {r.heading_3sigma_c_deg:.3g} "
                          f"| {r.heading_3sigma_cw_deg:.3g} |")
     return "\n".join(lines)
@@ -482,15 +506,23 @@ def _plot(result: dict, out: Path):
     fig, axes = plt.subplots(1, len(w.water.unique()), figsize=(12, 4), constrained_layout=True,
                              squeeze=False)
     for ax, (name, g) in zip(axes[0], w.groupby("water", sort=False)):
+        bound = WATER_TYPES[name].polarization_validated_depth_m
+        ax.axvspan(bound, g.depth_m.max(), color="0.88", zorder=0,
+                   label="DoP model not validated (clear water below 5 m, other water below "
+                         "the surface): heading errors there are lower bounds")
+        ax.set_xscale("symlog", linthresh=1.0)
         for col, style, label in (("a_best", "o-", f"{LABELS['a']}, best pair"),
                                   ("b", "^-", LABELS["b"]), ("cw", "D-", LABELS["cw"])):
             ax.semilogy(g.depth_m, g[f"heading_3sigma_{col}_deg"], style, label=label)
         ax2 = ax.twinx()
         ax2.semilogy(g.depth_m, g.illuminance_lx, "k:", lw=0.8)
         ax2.set_ylabel("lux equivalent [lx] (dotted)")
-        ax.set(title=name, xlabel="depth [m]", ylabel="heading error 3σ [deg]")
+        valid = f"to {bound:g} m" if bound > 0 else "at the surface only"
+        ax.set(title=f"{name}: DoP validated {valid}", xlabel="depth [m] (linear below 1)",
+               ylabel="heading error 3σ [deg]")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=8)
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=2, fontsize=8)
     atomic_write(out / "underwater_heading_vs_depth.png", lambda q: fig.savefig(q, dpi=120,
                                                                                 format="png"))
     plt.close(fig)

@@ -11,6 +11,7 @@ _EXPORTS = {
     "Daq": ".daq",
     "OpponentErrors": ".errors",
     "WATER_TYPES": ".illuminance",
+    "DepthBeyondValidationWarning": ".illuminance",
     "IncidentLight": ".illuminance",
     "OutsideSnellWindowError": ".illuminance",
     "WaterType": ".illuminance",
@@ -47,7 +48,8 @@ __all__ = ["Daq", "OpponentErrors", "Measurement", "MeasurementFormatError",
            "with_random_installation_errors", "PhotodiodeData", "PhotodiodeFormatError",
            "read_photodiodes", "write_photodiodes", "PhotodiodeChannels", "photodiode_signal",
            "opponent_log_ratio", "three_pair_outputs", "WATER_TYPES", "IncidentLight",
-           "OutsideSnellWindowError", "WaterType", "sky_light", "underwater_light",
+           "DepthBeyondValidationWarning", "OutsideSnellWindowError", "WaterType", "sky_light",
+           "underwater_light",
            "AccelSpec", "GyroSpec", "ImuSpec", "InvalidRateError", "TrajectoryTooShortError",
            "dynamic_trajectory", "sample_run", "static_trajectory"]
 

@@ -64,13 +64,33 @@ The polarized parts add as Stokes vectors (per unit radiance)::
 
     (q + i u)(z) = f(z) (q + i u)_sky + (1 - f(z)) d_w exp(2 i chi_w)
 
-so at the surface the DoP is that of the transmitted sky and at depth it tends to the
-in-water single-scattering value, which does not fall with depth (the in-water light field
-re-polarizes itself): Ivanoff & Waterman [4]_ and Cronin & Shashar [5]_ report DoP of
-~0.1-0.3 at several metres and more; the coastal measurements of Tonizzo et al. [9]_ peak near
-100 deg scattering angle and never exceed 0.4 (tested against both). For a zenith view both
-parts have the E-vector normal to the solar meridian, so the heading information survives
-depth.
+so at the surface the DoP is that of the transmitted sky and within metres it tends to the
+in-water single-scattering value, which the model then keeps (the in-water light field
+re-polarizes itself over the few metres where the model is validated, below): Ivanoff &
+Waterman [4]_ and Cronin & Shashar [5]_ report DoP of ~0.1-0.3 below the surface; the coastal
+measurements of Tonizzo et al. [9]_ peak near 100 deg scattering angle and never exceed 0.4
+(tested against both). For a zenith view both parts have the E-vector normal to the solar
+meridian.
+
+**Where the polarization model holds** (:attr:`WaterType.polarization_validated_depth_m`,
+:class:`DepthBeyondValidationWarning`). Lerner et al. [8]_ compared the refraction + single
+scattering model with measurements at 2 m and 5 m depth in clear and semi-turbid coastal
+water: the DoP followed the sun's elevation only in clear water, and the E-vector pattern
+matched mainly near the horizontal viewing direction; they conclude that the model, and
+navigation by it, hold under restricted conditions: clear water, near-horizontal views, little
+influence of the sea floor. The transmitted share ``kappa_p`` comes from paths of 1.25-3 m
+[7]_, and Shashar et al. [12]_ find sky-pattern navigation limited to shallow water even in
+clear ocean. The model is therefore supported from the surface down to 5 m in clear water
+(``clear_ocean``) and at the surface only in coastal and turbid water; deeper,
+:func:`underwater_polarization` and :func:`underwater_light` still return the model's values
+but warn with :class:`DepthBeyondValidationWarning`. What the model misses there is known:
+it keeps the in-water single-scattering DoP at every depth, whereas with depth the radiance
+distribution tends to the asymptotic one, independent of the sun's position and symmetric
+about the vertical (Mobley [3]_, sect. 9.3), so that by symmetry the DoP of the zenith view
+tends to zero. Beyond the validated depth the model's zenith DoP is an upper bound on what
+the sources support, not an estimate. For upward views inside Snell's window (the views of
+:func:`underwater_light`) the AoP at the zenith is normal to the solar meridian by symmetry
+in both parts; their DoP is the model's less tested output.
 
 The first-order model ``d(z) = d(0-) exp(-(c - K_d) z)`` (polarized part attenuated with the
 beam attenuation ``c``, scattered light unpolarized) is the transmitted part alone; it holds
@@ -105,8 +125,9 @@ References
    doi:10.1242/jeb.01187 (partial polarization halves over 1.25-3 m in clear reef water).
 .. [8] A. Lerner, S. Sabbah, C. Erlick, N. Shashar, "Navigation by light polarization in
    clear and turbid waters", Phil. Trans. R. Soc. B 366:671-679 (2011),
-   doi:10.1098/rstb.2010.0189 (refraction + Rayleigh single-scattering model, measured at
-   2 m and 5 m).
+   doi:10.1098/rstb.2010.0189 (refraction + Rayleigh single-scattering model compared with
+   measurements at 2 m and 5 m depth over sea floors of 6 m and 28 m; the DoP follows the
+   sun only in clear water, the E-vector mainly near the horizontal viewing direction).
 .. [9] A. Tonizzo, J. Zhou, A. Gilerson et al., "Polarized light in coastal waters:
    hyperspectral and multiangular analysis", Opt. Express 17(7):5666-5683 (2009),
    doi:10.1364/OE.17.005666 (maximum DoP <= 0.4, near 100 deg scattering angle).
@@ -116,10 +137,15 @@ References
 .. [11] Y. You, A. Tonizzo, A. A. Gilerson et al., "Measurements and simulations of
    polarization states of underwater light in clear oceanic waters", Appl. Opt.
    50(24):4873-4893 (2011), doi:10.1364/AO.50.004873.
+.. [12] N. Shashar, S. Johnsen, A. Lerner et al., "Underwater linear polarization: physical
+   limitations to biological functions", Phil. Trans. R. Soc. B 366:649-654 (2011),
+   doi:10.1098/rstb.2010.0190 (in clear oceanic water, navigation by the sky's polarization
+   pattern appears limited to shallow water).
 """
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -129,13 +155,15 @@ from skysim.geometry import wrap_axial_deg
 from skysim.sky import RayleighSky, Sky
 from skysim.validation import check_dop, check_in_range, check_sun_above_horizon
 
-__all__ = ["OutsideSnellWindowError", "SOLAR_ILLUMINANCE_CONSTANT_LX",
-           "CLEAR_SKY_EXTINCTION", "CLEAR_SKY_DIFFUSE_LX", "REFRACTIVE_INDEX_SEAWATER",
+__all__ = ["DepthBeyondValidationWarning", "OutsideSnellWindowError",
+           "SOLAR_ILLUMINANCE_CONSTANT_LX", "CLEAR_SKY_EXTINCTION", "CLEAR_SKY_DIFFUSE_LX",
+           "REFRACTIVE_INDEX_SEAWATER",
            "WaterType", "WATER_TYPES", "ClearSkyIlluminance", "IncidentLight",
            "clear_sky_illuminance_lx", "hemispheric_integral", "sky_light", "air_zenith_deg",
            "snell_window_half_angle_deg", "fresnel_transmittance", "fresnel_transmit_stokes",
            "beer_lambert", "JERLOV_WAVELENGTHS_NM", "JERLOV_KD_PER_M", "jerlov_kd",
            "refracted_sun_elevation_deg", "transmitted_fraction", "in_water_polarization",
+           "check_validated_depth", "CLEAR_WATER_VALIDATED_DEPTH_M",
            "underwater_polarization", "water_type", "underwater_light",
            "DEFAULT_WAVELENGTH_NM"]
 
@@ -155,6 +183,14 @@ class OutsideSnellWindowError(InvalidParameterError):
     """An underwater view direction lies outside Snell's window: no skylight reaches it
     through a flat surface (total internal reflection), it sees upwelling light reflected from
     below. Keep the underwater view zenith angle below ``asin(1/n)`` (48.3 deg for n = 1.34)."""
+
+
+class DepthBeyondValidationWarning(UserWarning):
+    """Underwater polarization asked for deeper than its sources compared the model with
+    measurements (:attr:`WaterType.polarization_validated_depth_m`; module docstring): the
+    model keeps the in-water single-scattering DoP, while the zenith DoP of the asymptotic
+    light field tends to zero. Stay within the validated depth, or treat the DoP there as an
+    upper bound."""
 
 
 DEFAULT_WAVELENGTH_NM = 480.0
@@ -237,6 +273,11 @@ class WaterType:
         ``kappa_p`` [1/m] > 0: decay rate of the transmitted skylight's share of the light
         (:func:`transmitted_fraction`).
     reference : str
+    polarization_validated_depth_m : float
+        Deepest depth [m], >= 0, at which the polarization model was found to agree with
+        measurements in this kind of water; deeper, :func:`underwater_polarization` warns
+        (:class:`DepthBeyondValidationWarning`). 0 (the default) where no such comparison is
+        known: only the transmitted sky at the surface is then supported.
     """
 
     name: str
@@ -244,6 +285,7 @@ class WaterType:
     max_dop: float
     polarization_decay_per_m: float
     reference: str = ""
+    polarization_validated_depth_m: float = 0.0
 
     def __post_init__(self):
         jerlov_kd(self.jerlov_type)  # validates the type
@@ -251,6 +293,9 @@ class WaterType:
         object.__setattr__(self, "polarization_decay_per_m", float(check_in_range(
             "polarization_decay_per_m", self.polarization_decay_per_m, 0.0, np.inf,
             low_open=True, hint="decay rate [1/m] of the transmitted skylight's share")))
+        object.__setattr__(self, "polarization_validated_depth_m", float(check_in_range(
+            "polarization_validated_depth_m", self.polarization_validated_depth_m, 0.0,
+            np.inf, hint="depth [m] down to which measurements support the model")))
 
     def diffuse_attenuation_per_m(self, wavelength_nm=DEFAULT_WAVELENGTH_NM) -> np.ndarray:
         """``K_d`` [1/m] at ``wavelength_nm`` [nm] (:func:`jerlov_kd`)."""
@@ -269,22 +314,31 @@ def _kappa_scaled(jerlov_type: str) -> float:
     return _KAPPA_CLEAR * float(jerlov_kd(jerlov_type) / jerlov_kd("I"))
 
 
+CLEAR_WATER_VALIDATED_DEPTH_M = 5.0
+"""Deepest depth [m] at which Lerner et al. [8]_ compared the model with measurements (2 m and
+5 m) and found it to hold in clear water."""
+
 WATER_TYPES = {
     "clear_ocean": WaterType(
         "clear_ocean", "I", 0.45, _KAPPA_CLEAR,
-        "Jerlov oceanic type I [6]_; kappa_p from clear reef water [7]_"),
+        "Jerlov oceanic type I [6]_; kappa_p from clear reef water [7]_; validated to 5 m [8]_",
+        CLEAR_WATER_VALIDATED_DEPTH_M),
     "coastal": WaterType(
         "coastal", "3", 0.35, _kappa_scaled("3"),
-        "Jerlov coastal type 3 [6]_; P_max below the coastal maximum 0.4 of [9]_"),
+        "Jerlov coastal type 3 [6]_; P_max below the coastal maximum 0.4 of [9]_; the model "
+        "did not follow the sun in semi-turbid water [8]_"),
     "turbid": WaterType(
         "turbid", "9", 0.25, _kappa_scaled("9"),
-        "Jerlov coastal type 9 [6]_"),
+        "Jerlov coastal type 9 [6]_; the model did not follow the sun in semi-turbid "
+        "water [8]_"),
 }
 """The three water types of the experiments. ``K_d``: Jerlov's table [6]_. ``P_max``: coastal
 0.35, inside the measured maxima of coastal water (<= 0.4 [9]_); clear ocean 0.45 and turbid
 0.25 follow the ordering of [10]_ (DoP falls as scattering grows against absorption).
 ``kappa_p``: clear ocean from [7]_; coastal and turbid scaled by their ``K_d`` at 480 nm
-(0.276/0.0198 and 1.18/0.0198 of type I), an assumption."""
+(0.276/0.0198 and 1.18/0.0198 of type I), an assumption. Validated depth of the polarization
+model: 5 m in clear water, none in coastal and turbid water (Lerner et al. [8]_; module
+docstring)."""
 
 
 @dataclass(frozen=True)
@@ -518,6 +572,26 @@ def in_water_polarization(water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
     return f.dop, f.aop_deg
 
 
+def check_validated_depth(depth_m, water, stacklevel: int = 2) -> np.ndarray:
+    """Warn with :class:`DepthBeyondValidationWarning` where ``depth_m`` [m] lies deeper than
+    the water type's :attr:`WaterType.polarization_validated_depth_m`; returns the mask of
+    those depths (``depth_m`` validated as >= 0)."""
+    w = water_type(water)
+    z = check_in_range("depth_m", depth_m, 0.0, np.inf, hint="depth below the surface [m]")
+    beyond = np.asarray(z > w.polarization_validated_depth_m)
+    if beyond.any():
+        bound = w.polarization_validated_depth_m
+        where = (f"is validated down to {bound:g} m" if bound > 0 else
+                 "is validated at the surface only")
+        warnings.warn(
+            f"depth_m {float(np.max(z))!r} m: the underwater polarization model of {w.name!r} "
+            f"water {where} (Lerner et al. 2011: clear water, 2 and 5 m); it keeps the "
+            "in-water single-scattering DoP, whereas the zenith DoP of the asymptotic light "
+            "field tends to zero (Mobley 1994, sect. 9.3): treat the DoP there as an upper "
+            "bound", DepthBeyondValidationWarning, stacklevel=stacklevel + 1)
+    return beyond
+
+
 def underwater_polarization(transmitted_dop, transmitted_aop_deg, depth_m, water_zenith_deg,
                             view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,
                             water="clear_ocean", *, n=REFRACTIVE_INDEX_SEAWATER):
@@ -527,7 +601,20 @@ def underwater_polarization(transmitted_dop, transmitted_aop_deg, depth_m, water
     Returns
     -------
     dop, aop_deg : ndarray
+
+    Warns
+    -----
+    DepthBeyondValidationWarning
+        Deeper than the water type's validated depth (5 m in clear water, the surface in
+        coastal and turbid water; module docstring).
     """
+    check_validated_depth(depth_m, water)
+    return _mixed_polarization(transmitted_dop, transmitted_aop_deg, depth_m, water_zenith_deg,
+                               view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg, water, n)
+
+
+def _mixed_polarization(transmitted_dop, transmitted_aop_deg, depth_m, water_zenith_deg,
+                        view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg, water, n):
     f = transmitted_fraction(depth_m, water)
     d_w, chi_w = in_water_polarization(water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
                                        sun_azimuth_deg, water, n=n)
@@ -577,8 +664,15 @@ def underwater_light(sky: Sky, water_zenith_deg, view_azimuth_deg, sun_elevation
     Raises
     ------
     OutsideSnellWindowError, SunBelowHorizonError, InvalidParameterError
+
+    Warns
+    -----
+    DepthBeyondValidationWarning
+        Deeper than the water type's validated depth: the DoP there is an upper bound
+        (module docstring); the lux equivalent is unaffected.
     """
     w = water_type(water)
+    check_validated_depth(depth_m, w)
     kd = w.diffuse_attenuation_per_m(wavelength_nm)
     theta_a = air_zenith_deg(water_zenith_deg, n)
     air = sky_light(sky, 90.0 - theta_a, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg,
@@ -588,8 +682,7 @@ def underwater_light(sky: Sky, water_zenith_deg, view_azimuth_deg, sun_elevation
                                       * np.cos(two), air.illuminance_lx * air.dop * np.sin(two),
                                       theta_a, n)
     I_z = beer_lambert(I, depth_m, kd)
-    dop, aop = underwater_polarization(np.hypot(Q, U) / I,
-                                       0.5 * np.degrees(np.arctan2(U, Q)), depth_m,
-                                       water_zenith_deg, view_azimuth_deg, sun_elevation_deg,
-                                       sun_azimuth_deg, w, n=n)
+    dop, aop = _mixed_polarization(np.hypot(Q, U) / I, 0.5 * np.degrees(np.arctan2(U, Q)),
+                                   depth_m, water_zenith_deg, view_azimuth_deg,
+                                   sun_elevation_deg, sun_azimuth_deg, w, n)
     return IncidentLight(*np.broadcast_arrays(I_z, aop, dop))

@@ -19,23 +19,37 @@ the anti-sun pair antipodal to them (``zeta_Ara = -1 / conj(zeta_Bre)``,
 ``zeta_4 = -1 / conj(zeta_Bab)``). The polarization direction makes the plane angle
 ``alpha = arg(w exp(-2 i beta_sun)) / 2`` (the factor makes the pattern turn with the sun).
 
-Degree of polarization (:data:`DOP_MAPPINGS`, ``dop_mapping=``):
+Degree of polarization: ``d_max |w| / (2 - |w|)``. Berry et al. call ``|w|`` the *intensity
+of polarization (unnormalized degree)* [1]_ (abstract): it plays the part of the polarized
+radiance, not of the degree. For ``delta = 0`` the four singularities merge into the sun and
+the anti-sun and ``|w| = sin^2 g`` (``g`` the angle from the sun), the Rayleigh polarized
+radiance; ``2 - |w| = 1 + cos^2 g`` is then the Rayleigh radiance, so the ratio is exactly the
+Rayleigh degree ``sin^2 g / (1 + cos^2 g)``. The public implementations of the model use
+the same mapping: pyskylumos [2]_ (``absolute(omega) / (2 - absolute(omega))``) and OpenSky
+[3]_ (``DoLP_Max * abs(W) / (2 - abs(W))``, Python and Matlab). It is zero at the four
+singularities, ``d_max`` where ``|w| = 1`` and acts on ``|w|`` only, so the AoP is that of
+``arg w``. ``d_max |w|`` alone is not offered: no source uses ``|w|`` as a degree (the paper
+calls it unnormalized), and for ``delta = 0`` it gives ``sin^2 g``, not the Rayleigh degree.
 
-- ``"paper"`` (default): ``d_max |w|``, the paper's reading of ``|w|`` as the (unnormalised)
-  degree of polarization [1]_, sect. 3; for ``delta = 0`` it is ``d_max sin^2 g``;
-- ``"rayleigh"``: ``d_max |w| / (2 - |w|)``, which for ``delta = 0`` is exactly the Rayleigh
-  ``d_max sin^2 g / (1 + cos^2 g)`` since then ``|w| = sin^2 g`` (the form of some public
-  implementations of the model). Both have the same zeros (the neutral points), the same
-  maximum ``d_max`` (at ``|w| = 1``) and the same AoP.
-
-Left out: the horizon depolarization of the later work on the model (no primary formula was
-available to this project); the radiance ``I`` is the single-scattering relative radiance
-``(3/4)(1 + cos^2 g)`` of :mod:`skysim.rayleigh` (the model describes polarization only).
+Not modelled: the depolarization near the horizon. Berry et al. state that the intensity of
+polarization needs "the strong depolarizing effect of multiple scattering near the horizon"
+[1]_ (abstract) and compare the corrected intensity of polarization with sky images. That
+correction is not reproduced here: its functional form and fitted parameters were not
+available to be verified against the paper's equations, and neither public implementation
+[2]_ [3]_ carries one, so none is invented. The DoP of this model is
+therefore too high near the horizon; :class:`skysim.multiple.MultipleScatteringSky` (``model=
+"multiple"``) gives a horizon-aware DoP. The radiance ``I`` is the single-scattering relative
+radiance ``(3/4)(1 + cos^2 g)`` of :mod:`skysim.rayleigh` (the model describes polarization
+only).
 
 References
 ----------
 .. [1] M. V. Berry, M. R. Dennis, R. L. Lee Jr, "Polarization singularities in the clear sky",
    New J. Phys. 6:162 (2004), doi:10.1088/1367-2630/6/1/162.
+.. [2] pyskylumos, ``src/pyskylumos/sky_models/Berry.py`` (``Berry.__get_dop``),
+   https://github.com/taciochi/pyskylumos.
+.. [3] OpenSky, ``Python/Simu_Berry.py`` and ``Matlab_version/Simu_Berry.m``,
+   https://github.com/ALGSS/OpenSky.
 """
 
 from __future__ import annotations
@@ -47,18 +61,7 @@ from .geometry import wrap_axial_deg
 from .sky import Sky
 from .validation import TWILIGHT_LIMIT_DEG, check_dop, check_in_range
 
-__all__ = ["BerrySky", "DOP_MAPPINGS", "berry_polarization", "berry_w", "singularities",
-           "stereographic"]
-
-DOP_MAPPINGS = ("paper", "rayleigh")
-"""Maps from ``|w|`` to DoP: ``paper`` ``d_max |w|`` ([1]_, sect. 3), ``rayleigh``
-``d_max |w| / (2 - |w|)`` (exactly Rayleigh for coincident singularities)."""
-
-
-def _check_mapping(dop_mapping: str) -> str:
-    if dop_mapping not in DOP_MAPPINGS:
-        raise ValueError(f"unknown dop_mapping {dop_mapping!r}; valid: {', '.join(DOP_MAPPINGS)}")
-    return dop_mapping
+__all__ = ["BerrySky", "berry_polarization", "berry_w", "singularities", "stereographic"]
 
 
 def stereographic(elevation_deg, azimuth_deg) -> np.ndarray:
@@ -107,8 +110,7 @@ def berry_w(zeta, sun_elevation_deg, sun_azimuth_deg, delta_deg) -> np.ndarray:
 
 
 def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
-                       sun_azimuth_deg, delta_deg, dmax=1.0,
-                       dop_mapping: str = "paper") -> tuple[np.ndarray, np.ndarray]:
+                       sun_azimuth_deg, delta_deg, dmax=1.0) -> tuple[np.ndarray, np.ndarray]:
     """Degree of polarization and AoP [deg] of the Berry-Dennis-Lee sky.
 
     Parameters
@@ -120,12 +122,12 @@ def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
         the anti-sun); 0 gives the Rayleigh sky.
     dmax : float
         Maximum degree of polarization.
-    dop_mapping : {"paper", "rayleigh"}
-        ``d_max |w|`` (the paper) or ``d_max |w| / (2 - |w|)`` (module docstring).
 
     Returns
     -------
     dop : ndarray, in [0, dmax]
+        ``dmax |w| / (2 - |w|)`` (module docstring); for ``delta_deg = 0`` the Rayleigh
+        ``dmax sin^2 g / (1 + cos^2 g)``.
     aop_deg : ndarray, in [-90, 90)
         From the local meridian (towards the zenith) positive towards increasing azimuth
         (``docs/conventions.md``). The meridian is at plane angle ``270 deg - azimuth`` in the
@@ -140,9 +142,7 @@ def berry_polarization(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     # at the zenith the "meridian" is that of the stated view azimuth, as everywhere in skysim
     aop = wrap_axial_deg(alpha - meridian)
     m = np.clip(np.abs(w), 0.0, 1.0)
-    if _check_mapping(dop_mapping) == "rayleigh":
-        m = m / (2.0 - m)
-    return dmax * m, aop
+    return dmax * m / (2.0 - m), aop
 
 
 class BerrySky(Sky):
@@ -159,33 +159,30 @@ class BerrySky(Sky):
         albedo (``experiments.physical_sky.berry_delta_from`` turns them into delta).
     dmax : float
         Maximum degree of polarization, in (0, 1].
-    dop_mapping : {"paper", "rayleigh"}
-        ``|w|`` to DoP (module docstring); default the paper's ``d_max |w|``.
 
     Notes
     -----
-    ``I`` is the relative single-scattering radiance ``(3/4)(1 + cos^2 g)``.
+    DoP ``dmax |w| / (2 - |w|)``, no horizon depolarization (module docstring). ``I`` is the
+    relative single-scattering radiance ``(3/4)(1 + cos^2 g)``.
     """
 
     name = "berry"
     min_sun_elevation_deg = TWILIGHT_LIMIT_DEG   # a single-scattering pattern: holds in twilight
 
-    def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0, dop_mapping: str = "paper"):
+    def __init__(self, delta_deg: float = 40.0, dmax: float = 1.0):
         self.delta_deg = float(check_in_range("delta_deg", delta_deg, 0.0, 90.0, high_open=True,
                                               hint="neutral points lie 0-45 deg from the sun"))
         if dmax != 1.0:
             check_dop("dmax", dmax)
         self.dmax = float(dmax)
-        self.dop_mapping = _check_mapping(dop_mapping)
 
     def _stokes(self, vel, vaz, sel, saz):
-        dop, aop = berry_polarization(vel, vaz, sel, saz, self.delta_deg, self.dmax,
-                                       self.dop_mapping)
+        dop, aop = berry_polarization(vel, vaz, sel, saz, self.delta_deg, self.dmax)
         intensity = rayleigh.relative_radiance(rayleigh.scattering_angle_deg(vel, vaz, sel, saz))
         chi = np.radians(aop)
         return intensity, intensity * dop * np.cos(2 * chi), intensity * dop * np.sin(2 * chi)
 
     def describe(self) -> dict:
         return {"model": self.name, "delta_deg": self.delta_deg, "dmax": self.dmax,
-                "dop_mapping": self.dop_mapping,
+                "dop": "dmax |w| / (2 - |w|)",
                 "I": "relative single-scattering radiance (3/4)(1 + cos^2 g)"}

@@ -222,9 +222,14 @@ def test_combined_bad_input():
 
 
 def test_cli_quick(tmp_path):
+    import warnings
+
     from experiments.dark_current import DEFAULT_SEED, run
+    from sensor.illuminance import WATER_TYPES, DepthBeyondValidationWarning
     assert DEFAULT_SEED == 20210401
-    r = run(trials=2, out=tmp_path, progress=False, figures=True)
+    with warnings.catch_warnings():  # the run marks those depths itself (dop_validated)
+        warnings.simplefilter("error", DepthBeyondValidationWarning)
+        r = run(trials=2, out=tmp_path, progress=False, figures=True)
     for name in ("by_level.csv", "summary.json", "error_vs_illuminance.png", "by_depth.csv",
                  "underwater.csv", "underwater_heading_vs_depth.png"):
         assert (tmp_path / name).exists(), name
@@ -237,6 +242,12 @@ def test_cli_quick(tmp_path):
         assert g.heading_3sigma_cw_deg.iloc[0] < 1.0
         assert g.heading_3sigma_cw_deg.iloc[-1] > 5 * g.heading_3sigma_cw_deg.iloc[0]
         assert g.dop.min() > 0.05
+    # rows deeper than the DoP model's validated depth (Lerner et al. 2011: 5 m in clear
+    # water, none in coastal and turbid water) are marked, the rest not, in both tables
+    for t in (w, r["underwater"]):
+        bound = t.water.map(lambda n: WATER_TYPES[n].polarization_validated_depth_m)
+        assert (t.dop_validated == (t.depth_m <= bound)).all()
+    assert w[w.water == "clear_ocean"].dop_validated.sum() >= 2   # the surface and 5 m
     t = r["by_level"]
     low = t[t.illuminance_lx <= 2.2]
     # at ~1-2 lx the dark current dominates: the 2014 model's heading error is many times

@@ -1,18 +1,21 @@
 """Incident light in lux and under water (sensor/illuminance.py) against closed forms and pvlib."""
 
+import warnings
+
 import numpy as np
 import pandas as pd
 import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from sensor.illuminance import (WATER_TYPES, OutsideSnellWindowError, WaterType,
-                                air_zenith_deg, beer_lambert, clear_sky_illuminance_lx,
+from sensor.illuminance import (WATER_TYPES, DepthBeyondValidationWarning,
+                                OutsideSnellWindowError, WaterType, air_zenith_deg,
+                                beer_lambert, clear_sky_illuminance_lx,
                                 fresnel_transmit_stokes, fresnel_transmittance,
                                 hemispheric_integral, in_water_polarization, jerlov_kd,
                                 refracted_sun_elevation_deg, sky_light,
                                 snell_window_half_angle_deg, transmitted_fraction,
-                                underwater_light)
+                                underwater_light, underwater_polarization)
 from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
 from skysim.sky import RayleighSky, Sky
 
@@ -193,15 +196,18 @@ def test_in_water_polarization_matches_coastal_measurements():
 
 
 def test_underwater_zenith_view_repolarizes_at_depth():
-    """Zenith view: I = T0 E_air exp(-K_d z) (K_d of Jerlov type I at 480 nm); at z = 0 the
-    DoP is that of the transmitted sky; at depth it tends to the in-water single-scattering
-    value P_max sin^2 T / (1 + cos^2 T), T the refracted solar zenith angle (closed form), in
-    the 0.1-0.3 band of field measurements (Ivanoff & Waterman 1958) for a sun at 35 deg in
-    clear ocean; the E-vector stays normal to the solar meridian at every depth."""
-    z = np.array([0.0, 5.0, 40.0])
+    """Zenith view at the surface and at Lerner et al.'s (2011) depths 2 and 5 m, inside the
+    validated range (no warning): I = T0 E_air exp(-K_d z) (K_d of Jerlov type I at 480 nm);
+    at z = 0 the DoP is that of the transmitted sky; with depth it tends to the in-water
+    single-scattering value P_max sin^2 T / (1 + cos^2 T), T the refracted solar zenith angle
+    (closed form), in the 0.1-0.3 band of field measurements (Ivanoff & Waterman 1958) at 5 m
+    for a sun at 35 deg in clear ocean; the E-vector stays normal to the solar meridian."""
+    z = np.array([0.0, 2.0, 5.0])
     air = sky_light(RayleighSky(0.7), 90.0, 100.0, 35.0, 100.0)
     w = WATER_TYPES["clear_ocean"]
-    uw = underwater_light(RayleighSky(0.7), 0.0, 100.0, 35.0, 100.0, z, "clear_ocean")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DepthBeyondValidationWarning)
+        uw = underwater_light(RayleighSky(0.7), 0.0, 100.0, 35.0, 100.0, z, "clear_ocean")
     t0 = 4 * N / (N + 1) ** 2
     np.testing.assert_allclose(uw.illuminance_lx, t0 * air.illuminance_lx
                                * np.exp(-0.0198 * z), rtol=1e-12)
@@ -231,3 +237,32 @@ def test_underwater_oblique_view_uses_refracted_sky():
     uw = underwater_light(sky, tw, 70.0, 50.0, 10.0, 0.0, "turbid")
     np.testing.assert_allclose(uw.illuminance_lx, I, rtol=1e-12)
     np.testing.assert_allclose(uw.dop, np.hypot(Q, U) / I, rtol=1e-12)
+
+
+def test_polarization_beyond_the_validated_depth_warns():
+    """Lerner et al. (2011) found the model to hold in clear water at 2 and 5 m and not in
+    semi-turbid water: clear ocean is silent down to 5 m and warns deeper, coastal and turbid
+    water warn below the surface; the warning names the depth and the bound and points at
+    the caller's line, and the values are still the model's (upper bounds, continuous
+    across the bound: same closed form as inside it)."""
+    sky = RayleighSky(0.7)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", DepthBeyondValidationWarning)
+        underwater_light(sky, 0.0, 0.0, 35.0, 0.0, [0.0, 5.0], "clear_ocean")
+        underwater_light(sky, 0.0, 0.0, 35.0, 0.0, 0.0, "turbid")
+    with pytest.warns(DepthBeyondValidationWarning, match=r"depth_m 470\.0 m.*down to 5 m") as rec:
+        deep = underwater_light(sky, 0.0, 0.0, 35.0, 0.0, [5.0, 470.0], "clear_ocean")
+    assert rec[0].filename == __file__
+    w = WATER_TYPES["clear_ocean"]
+    T = np.arcsin(np.cos(np.radians(35.0)) / N)
+    d_w = w.max_dop * np.sin(T) ** 2 / (1 + np.cos(T) ** 2)
+    np.testing.assert_allclose(deep.dop[1], d_w, rtol=1e-9)   # exp(-0.357 * 470) ~ 1e-73
+    with pytest.warns(DepthBeyondValidationWarning, match="'coastal' water is validated at "
+                                                          "the surface only"):
+        underwater_light(sky, 0.0, 0.0, 35.0, 0.0, 0.1, "coastal")
+    with pytest.warns(DepthBeyondValidationWarning, match=r"depth_m 6\.0 m") as rec:
+        underwater_polarization(0.3, 0.0, 6.0, 0.0, 0.0, 35.0, 0.0, "clear_ocean")
+    assert rec[0].filename == __file__
+    assert WaterType("t", "IB", 0.3, 0.4).polarization_validated_depth_m == 0.0
+    with pytest.raises(InvalidParameterError, match="polarization_validated_depth_m"):
+        WaterType("bad", "I", 0.3, 0.1, "", -1.0)
