@@ -24,10 +24,14 @@ def test_reproduce_one_real_session(reference_dir, tmp_path, capsys):
     t = pd.read_csv(out / "sessions.csv")
     assert len(t) == 1
     row = t.iloc[0]
-    # the morning session is an open sky with the sun at 31.6 deg (SPA, sessions.csv of the
-    # reference folder); its held-out gap is a few percent of the unit mean at most (the
-    # previous model versions measured 0.015-0.04), far below an unfitted ring (> 0.3)
-    assert abs(row.sun_elevation_deg - 31.6) < 0.3
+    # the morning session is an open sky; its sun elevation at mid-session is the reference
+    # folder's (NREL SPA, sessions.csv; the reported value is the mean of the session's
+    # lowest and highest sun, within 0.3 deg of the mid-session one over a 12-min session);
+    # its held-out gap is a few percent of the unit mean at most (the previous model
+    # versions measured 0.015-0.04), far below an unfitted ring (> 0.3)
+    listed = pd.read_csv(reference_dir / "gkanias2023" / "sessions.csv").set_index("file")
+    mid = listed.loc[SESSION + ".csv", "sun_elevation_mid_deg"]
+    assert abs(row.sun_elevation_deg - mid) < 0.3
     assert 0.0 < row.gap_base < 0.05
     assert np.isfinite(row.unit_elevation_offset_deg)
     assert (out / "gap_and_heading_over_day.png").read_bytes()[:4] == b"\x89PNG"

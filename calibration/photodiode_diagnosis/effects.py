@@ -407,11 +407,7 @@ class NeutralPoints(RingEffect):
 
     def sky(self, p, base_sky, sun_enu):
         from skysim.berry import BerrySky
-        return BerrySky(delta_deg=float(p[0]), dmax=1.0, dop_mapping=BERRY_DOP_MAPPING)
-
-
-BERRY_DOP_MAPPING = "rayleigh"
-"""The ``|w| / (2 - |w|)`` DoP of :mod:`skysim.berry`, which is Rayleigh at zero separation."""
+        return BerrySky(delta_deg=float(p[0]), dmax=1.0)
 
 
 class Aureole(RingEffect):

@@ -24,6 +24,8 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
+from skysim.exceptions import InvalidParameterError
+
 from .forward import Forward
 
 __all__ = ["FitResult", "Priors", "fit", "fit_pinned", "geometry_mask", "fit_headings",
@@ -228,7 +230,13 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
             t_new = theta.copy()
             t_new[fidx] += delta
             t_new = np.clip(t_new, pri.lower, pri.upper)
-            obs_new = fwd.observe(t_new)
+            try:
+                obs_new = fwd.observe(t_new)
+            except InvalidParameterError:
+                # the step left the model's valid range (a clock that puts the sun below the
+                # horizon, a unit that looks below it): a failed step, damp and retry
+                lam *= 4.0
+                continue
             r_new = fwd.residual(t_new, obs_new)
             c_new = cost_of(t_new, r_new)
             if c_new < cost:
@@ -268,11 +276,15 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     """Fit in two stages so that a DoP profile the sky model lacks cannot move the geometry.
 
     1. (``geometry``) The angle of polarization alone: :attr:`Forward.dop_free` profiles the
-       polarized radiance out, and the pointing, a geometric effect's parameters, the
-       polarizer angles, gains, offsets and headings are fitted; the DoP scale and a
-       non-geometric effect's parameters (which act on the DoP) are held.
+       polarized radiance out, and the pointing (base model) or a geometric effect's
+       parameters (with the pointing held at ``theta0``'s: the two are nearly degenerate in
+       the AoP), the polarizer angles, gains, offsets and headings are fitted; the DoP scale
+       and a non-geometric effect's parameters (which act on the DoP) are held.
     2. The full model with the geometry (:func:`geometry_mask`) held at stage 1's values, or
        at ``theta0``'s without stage 1.
+
+    A geometric effect started away from its null (a clock hours off, found by a coarse
+    search) first has the pointing re-read from the AoP with the effect held at its start.
 
     A free unit elevation or clock in one fit of the full model takes up the difference
     between the model's and the real sky's DoP profile (on a real ring the unit elevations
@@ -288,11 +300,29 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     L = fwd.layout
     theta = np.asarray(theta0, float)
     first = None
+    e = fwd.effect
+    if geometry and e is not None and e.geometric and np.any(theta[L.effect] != e.null):
+        # a start away from the effect's null (a clock hours off): the pointing is re-read
+        # from the AoP there first, since the base's pointing was fitted without it
+        free = np.zeros(L.size, bool)
+        free[:L.n_base] = True
+        free[L.scale] = False
+        free[L.heading] = True
+        fwd.dop_free = True
+        try:
+            theta = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter).theta
+        finally:
+            fwd.dop_free = False
     if geometry:
         free = np.ones(L.size, bool)
         free[L.scale] = False
         if fwd.effect is not None and not fwd.effect.geometric:
             free[L.effect] = False
+        if fwd.effect is not None and fwd.effect.geometric:
+            # the pointing stays where the base model's AoP fit put it: a common shift of
+            # the units' elevations and a shift of the sun's (a clock) are nearly the same
+            # to the AoP, and freed together they trade one for the other
+            free[L.pointing] = False
         fwd.dop_free = True
         try:
             first = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter, covariance=covariance)

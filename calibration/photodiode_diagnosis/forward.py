@@ -181,6 +181,9 @@ class Forward:
         self._scale = np.where(self.usable, mean[:, units], 1.0)
         self._sky = RayleighSky(1.0)
         self.dop_free = False
+        self.aop_sky = None
+        """A sky (:class:`skysim.sky.Sky`) whose angle of polarization the DoP-free stage
+        uses instead of single scattering's (None: the base sky)."""
 
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
@@ -204,7 +207,8 @@ class Forward:
             pitch, roll = e.attitude(pitch, roll, pe)
         att = self._attitude(self.headings(theta), pitch, roll)
         sun = self.sun(t)
-        sky = self._sky if e is None else e.sky(pe, self._sky, sun)
+        base_sky = self.aop_sky if self.dop_free and self.aop_sky is not None else self._sky
+        sky = base_sky if e is None else e.sky(pe, base_sky, sun)
         sensor = self.pointed_sensor(theta)
         if e is not None and e.observes:
             return e.observe(sensor, sky, att, sun, pe)

@@ -11,6 +11,8 @@ import numpy as np
 
 from sensor.photodiodes_io import PhotodiodeData
 from skysim.geometry import angle_between_deg, direction_vector, wrap_deg
+from skysim.exceptions import InvalidParameterError
+from skysim.sky import RayleighSky
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
 from ..diagnosis import DIAGNOSIS_SCHEMA, InsufficientDataError
@@ -156,6 +158,16 @@ the same elevation before and after noon (the mirror time), so the data cannot t
 apart; a clock that is minutes off is likelier than one many hours off."""
 
 
+NOMINAL_DOP_SCALE = 0.6
+"""DoP scale of the nominal instrument that scores coarse clock starts (a clear sky's maximum
+DoP is 0.6-0.8 in the visible; the refinement fits the scale)."""
+
+CLOCK_START_MARGIN_DEG = 3.0
+"""A coarse clock start keeps the sun this far [deg] above the lowest elevation the sky model
+holds for at the session's mean time: a session spans 12-13 minutes, over which the sun's
+elevation changes by up to 2.5 deg."""
+
+
 def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
     """Starts of the clock offset: no offset, and the two best of the whole and half hours
     (each with the per-sweep headings carried by the sun's azimuth change)."""
@@ -164,13 +176,23 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
     t0 = float(np.mean(fwd.inst.t_s))
     _, az0 = _sun_el_az(sun, t0)
     scored = []
+    sky = fwd.aop_sky if fwd.aop_sky is not None else fwd._sky
+    lowest = sky.min_sun_elevation_deg + CLOCK_START_MARGIN_DEG
     for dt in effect.COARSE_S:
         el, az = _sun_el_az(sun, t0 + dt)
-        if el <= TWILIGHT_LIMIT_DEG + 0.5 or dt == 0.0:
+        if el <= lowest or dt == 0.0:
             continue
         t = _extend(theta_base, fwd_base, fwd, [dt])
         t[L.heading] = theta_base[fwd_base.layout.heading] + (az - az0)
-        scored.append((float(np.sum(fwd.residual(t) ** 2)), t))
+        # scored on the nominal instrument (unit gains, no offsets or angle deviations,
+        # nominal pointing, a typical DoP scale): a clock hours off corrupts every parameter
+        # the base fitted under it (on a simulated ring 2.5 h off, pointing at its -20 deg
+        # bound and a DoP scale of 0.99), and the scores with them
+        nominal = t.copy()
+        for sl in (L.lam, L.off, L.angle, L.pointing):
+            nominal[sl] = 0.0
+        nominal[L.scale] = NOMINAL_DOP_SCALE
+        scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
     scored.sort(key=lambda x: x[0])
     return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
 
@@ -204,11 +226,9 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
-        fwd.dop_free = True      # a clock is read from the angle of polarization
-        try:
-            return _clock_starts(fwd, theta_base, fwd_base, effect)
-        finally:
-            fwd.dop_free = False
+        # whole hours apart, skies differ in DoP as much as in AoP, so the coarse search
+        # scores the full model; the refinement reads the AoP alone (fit_pinned)
+        return _clock_starts(fwd, theta_base, fwd_base, effect)
     if len(starts) == 1:
         return _extend(theta_base, fwd_base, fwd, starts[0])
     resamples = effect.observes or type(effect).sky is not RingEffect.sky   # a sky of its own
@@ -457,7 +477,7 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
     full)`` (the instrument with its exclusions, the thinned and the full forward models)."""
     work = replace(inst, flagged=~scr.reading_ok)
     base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
-    first, _ = fit_pinned(base, theta, sigma=0.02, max_iter=max_iter)
+    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
     return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
 
 
@@ -502,7 +522,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     theta = np.zeros(L.size)
     theta[L.scale] = 0.6
     sign, theta = orient(base, theta)
-    first, _ = fit_pinned(base, theta, sigma=0.02, max_iter=max_iter)
+    # the screen (glare, Malus outliers) reads residuals of the plain fit, as it was tuned;
+    # the base model proper is the pinned fit after it
+    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
     full = Forward(work, sun=sun, polarizer_sign=sign)
     scr2 = bright_glare(inst, scr, full.residual(first.theta), full.usable)
     if scr2.bright is not None and scr2.bright.any():
@@ -514,6 +536,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         if scr.unit_ok.sum() < 2:
             return _no_signal_report(inst, scr, "fewer than two units follow Malus's law")
         work, base, first, full = _refit(inst, scr, first.theta, sun, sign, max_iter)
+    start = first.theta.copy()
+    start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
+    first, _ = fit_pinned(base, start, sigma=0.02, max_iter=max_iter)
     sigma = max(noise_floor(full.residual(first.theta), full.usable, work.sweep), 1e-4)
 
     shape = work.readings.shape
@@ -524,6 +549,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     fold_params = {e.name: [] for e in cand}
     fold_converged = {e.name: [] for e in cand}
     fold_sd = {e.name: [] for e in cand}
+    fold_aop_sky = {e.name: [] for e in cand}
     unavailable, decoders = {}, {}
     output = instrument_output(work)
     for e in cand:
@@ -549,12 +575,26 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         res["base"][ho], w_ho[ho] = r, fho.usable
         heads["base"][ho] = fho.headings(tho)
         decoders.setdefault("base", []).append((None, tho, ho))
-        for e in cand:
+        best_sky = None     # (training cost, sky) of the best-fitting sky candidate
+        for e in sorted(cand, key=lambda c: c.geometric):   # sky candidates first
             if e.name in unavailable:
                 continue
             fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
-            start = _start_effect(fe, btr.theta, ftr, e, sigma)
-            fr, fr_aop = _fit_effect(fe, start, sigma)
+            if e.geometric and best_sky is not None:
+                fe.aop_sky = best_sky[1]
+                fold_aop_sky[e.name].append(best_sky[2])
+            try:
+                start = _start_effect(fe, btr.theta, ftr, e, sigma)
+                fr, fr_aop = _fit_effect(fe, start, sigma)
+            except InvalidParameterError as exc:
+                # a fit that leaves the model's valid range makes the candidate not
+                # applicable to this session; it never ends the diagnosis
+                unavailable[e.name] = f"not applicable here: its fit left the valid range ({exc})"
+                continue
+            if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
+                p = fr.theta[fe.layout.effect]
+                best_sky = (fr.cost, e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s)),
+                            {"effect": e.name, **dict(zip(e.names, map(float, p)))})
             if fr_aop is not None:
                 fold_sd[e.name].append([fr_aop.sd(i) for i in range(fe.layout.effect.start,
                                                                      fe.layout.effect.stop)])
@@ -586,13 +626,14 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                      "converged": all(fold_converged[e.name]),
                      "params": _fold_params(e, P, fold_sd[e.name])})
         if e.geometric:
-            rows[-1]["fitted_on"] = "angle of polarization (DoP profiled out), then held"
+            rows[-1]["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
+                                     "best-fitting sky candidate of each fold, then held")
+            rows[-1]["aop_sky_by_fold"] = fold_aop_sky[e.name]
         if e.name == "clock_offset":
-            offset = rows[-1]["params"]["clock_offset_s"]["value"]
-            rows[-1]["sensitivity"] = clock_sensitivity(
-                sun, float(np.mean(work.t_s)), work.absolute_yaw, offset_s=offset)
-            rows[-1]["mirror"] = clock_mirror(work, e, first.theta, L, sun, sign, sigma,
-                                              offset)
+            rows[-1].update(clock_report(work, e, first.theta, L, sun, sign, sigma,
+                                         rows[-1]["params"]["clock_offset_s"], rows, cand))
+            # a clock offset within twice its uncertainty is no finding, however it fits
+            rows[-1]["explained"] = rows[-1]["explained"] and rows[-1]["significant"]
     rows.sort(key=lambda r: r.get("score", np.inf))
     avail = [r for r in rows if r.get("available", True)]
     if g0 <= floor * (1 + NONE_MARGIN):
@@ -666,6 +707,61 @@ def _fold_params(effect, P, sds) -> dict:
     return out
 
 
+def _has_sky(effect) -> bool:
+    """True for an effect that replaces the sky model (its own DoP and AoP)."""
+    return type(effect).sky is not RingEffect.sky
+
+
+def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict, rows,
+                 cand) -> dict:
+    """What the clock candidate reports beside its fit: what pins it (``sensitivity``), how
+    far it moves when the angle of polarization is read under each sky model fitted here
+    (``by_sky``: single scattering and every sky candidate at its fold-mean parameters, on the
+    whole session; half their range is ``sky_model_spread_s``, a systematic the noise does
+    not show), the resulting ``uncertainty_s`` (root sum of squares of the statistical
+    uncertainty and that spread) and the mirror time about the sun's culmination
+    (:func:`clock_mirror`). The parameter's ``uncertainty`` is updated to ``uncertainty_s``."""
+    offset = param["value"]
+    fe = Forward(_thin(inst), effect, sun=sun, polarizer_sign=sign)
+    skies = {"single_scattering": None}
+    for e in cand:
+        row = next((r for r in rows if r["effect"] == e.name), None)
+        if _has_sky(e) and row is not None and row.get("available", True):
+            p = np.array([row["params"][n]["value"] for n in e.names])
+            skies[e.name] = e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s))
+    by_sky, errors = {}, {}
+    for name, sky in skies.items():
+        fe.aop_sky = sky
+        try:
+            by_sky[name] = _aop_clock_fit(fe, theta_base, layout, offset, sigma)
+        except InvalidParameterError as exc:   # this sky does not hold at the fitted time
+            by_sky[name], errors[name] = None, str(exc)
+    fe.aop_sky = None
+    values = np.array([v for v in by_sky.values() if v is not None] or [offset])
+    spread = 0.5 * float(np.ptp(values))
+    stat = float(param.get("uncertainty", param["fold_spread"]))
+    param["uncertainty"] = float(np.hypot(stat, spread))
+    out = {"sensitivity": clock_sensitivity(sun, float(np.mean(inst.t_s)), inst.absolute_yaw,
+                                            offset_s=offset),
+           "by_sky": {k: None if v is None else float(v) for k, v in by_sky.items()},
+           "by_sky_errors": errors, "sky_model_spread_s": spread, "statistical_uncertainty_s": stat,
+           "uncertainty_s": param["uncertainty"],
+           "significant": bool(abs(offset) > 2.0 * param["uncertainty"])}
+    out["mirror"] = clock_mirror(inst, effect, theta_base, layout, sun, sign, sigma, offset)
+    return out
+
+
+def _aop_clock_fit(fe: Forward, theta_base, layout, start_s, sigma) -> float:
+    """Clock offset [s] from the clock candidate's AoP fit (:func:`fit_pinned`: the
+    instrument re-read from the AoP at ``start_s``, then the clock) started at ``start_s``,
+    on the sky ``fe.aop_sky``."""
+    t = np.zeros(fe.layout.size)
+    t[:layout.size] = theta_base[:layout.size]
+    t[fe.layout.effect] = start_s
+    _, aop = fit_pinned(fe, t, sigma=sigma, max_iter=EFFECT_MAX_ITER)
+    return float(aop.theta[fe.layout.effect][0])
+
+
 def solar_noon_s(sun: SunTrack, t_s: float) -> float:
     """Time [s since epoch, UTC] of the sun's culmination nearest ``t_s`` (highest elevation
     on a 60-s grid over +-12 h, refined by a parabola through the top three)."""
@@ -684,7 +780,8 @@ def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
     it fits: with relative yaw the per-sweep headings absorb the sun's azimuth, and the sun
     stands at the same elevation at ``t`` and ``2 t_noon - t``, so near culmination both
     clocks fit the angle of polarization alike and the data cannot choose. Both are scored
-    by an AoP fit (DoP profiled out) of the headings, on the session thinned as for fits.
+    by an AoP fit (DoP profiled out) of the instrument and headings at that clock, on the
+    session thinned as for fits.
     """
     t_mid = float(np.mean(inst.t_s))
     noon = solar_noon_s(sun, t_mid)
@@ -695,9 +792,12 @@ def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
         t = np.zeros(fe.layout.size)
         t[:layout.size] = theta_base[:layout.size]
         t[fe.layout.effect] = dt
+        free = np.ones(fe.layout.size, bool)     # the instrument re-read at each clock
+        free[fe.layout.scale] = False
+        free[fe.layout.effect] = False
         fe.dop_free = True
         try:
-            costs.append(fit_headings(fe, t, sigma=sigma).cost)
+            costs.append(fit(fe, t, free, sigma=sigma, max_iter=EFFECT_MAX_ITER).cost)
         finally:
             fe.dop_free = False
     ratio = costs[1] / max(costs[0], 1e-300)
