@@ -54,8 +54,8 @@ REQUIRED_COLUMNS = ("FIELD", "RA", "DEC", "MED OBS", "Q", "error Q", "U", "error
 
 PARANAL_LATITUDE_DEG, PARANAL_LONGITUDE_DEG, PARANAL_ALTITUDE_M = -24.6272, -70.4042, 2635.0
 PARANAL_PRESSURE_HPA = 743.0
-"""Mean surface pressure at Paranal [hPa] (Noll et al. 2012, A&A 543:A92, sect. 3.1),
-for the Rayleigh optical thickness of the multiple-scattering sky."""
+"""Typical surface pressure at Paranal (2635 m) [hPa], for the Rayleigh optical thickness of
+the multiple-scattering sky (the standard atmosphere gives 740 hPa at that height)."""
 OFFSET_ARCMIN = 1.0
 
 

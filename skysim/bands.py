@@ -8,8 +8,9 @@ irradiance in a band follows from its apparent magnitude in that band (Willmer 2
 Table 3: absolute magnitude minus the distance modulus of 1 AU, -31.57), with the same zero
 point, so the Moon (sunlight reflected) and the night sky are on one scale.
 
-Site values (Cerro Paranal, the site of the FORS2 data): extinction coefficients of
-Patat (2003) [3]_, Table A.1 (photometric nights 2000-2001), and the zenith-corrected
+Site values (Cerro Paranal, the site of the FORS2 data): extinction coefficients rounded
+from the bi-monthly means of Patat (2003) [3]_, Table A.1 (photometric nights 2000-2001;
+they vary by about 0.02 mag per airmass), and the zenith-corrected
 dark-sky brightness averaged over the same period [3]_ (airglow, zodiacal light and
 integrated starlight together).
 
