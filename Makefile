@@ -18,11 +18,11 @@ $(BIN)/python:
 # commands need: rt (multiple-scattering sky), sweep (sensitivity sweeps), series (netCDF sky
 # series) and camera (16-bit TIFF images).
 $(VENV)/.installed-run: pyproject.toml Makefile | $(BIN)/python
-	$(PIP) install --quiet -e '.[rt,sweep,series,camera]'
+	$(PIP) install --quiet -e '.[rt,sweep,series,camera,moon]'
 	@touch $@
 
 $(VENV)/.installed-test: pyproject.toml Makefile | $(BIN)/python
-	$(PIP) install --quiet -e '.[test,rt,sweep,series,camera]'
+	$(PIP) install --quiet -e '.[test,rt,sweep,series,camera,moon]'
 	@touch $@ $(VENV)/.installed-run
 
 venv: $(VENV)/.installed-run

@@ -108,8 +108,9 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     rep.add_argument("--out", type=output_dir, default=None,
                      help="output folder (default: results/<target>)")
     rep.add_argument("--data", default=None, metavar="DIR",
-                     help="real-sky-compass: folder of recorded photodiode sessions (default: "
-                          "the reference recordings beside the checkout)")
+                     help="real-sky-compass: folder of recorded photodiode sessions; "
+                          "moonlit-sky: folder of the FORS2 moonlit-sky table (default: the "
+                          "reference data beside the checkout)")
     rep.add_argument("--reference", default=None,
                      help="physical-sky, sky-gap: another copy of the Natraj et al. (2009) "
                           "tables, the file or a folder holding it (default: the tables "

@@ -134,7 +134,11 @@ def _sky(args) -> int:
     from skysim.sky import make_sky
 
     params = _sky_params(args)
-    if args.sun_elevation is not None:
+    sky = None
+    if args.source == "moon":  # the night sky: the Moon as the source (experiments.moonlit_sky)
+        from .moonlit_sky import moon_sky
+        sky, sun_el, sun_az, sun_info = moon_sky(args, params)
+    elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
             raise ValueError("--sun-elevation needs --sun-azimuth")
         sun_el, sun_az, sun_info = args.sun_elevation, args.sun_azimuth, {
@@ -149,7 +153,7 @@ def _sky(args) -> int:
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
         sun_info = {"site": site.to_dict(), "time": args.time.isoformat(),
                     "elevation_deg": sun_el, "azimuth_deg": sun_az}
-    sky = make_sky(args.model, **params)
+    sky = make_sky(args.model, **params) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
     chunk = 100_000
     starts = range(0, el.size, chunk)
@@ -177,12 +181,13 @@ def _sky(args) -> int:
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
-        if args.model == "multiple":  # radiance (flux pi) and the neutral points
+        if args.model == "multiple" and args.source == "sun":  # radiance (flux pi), neutral points
             from skysim.neutral_points import neutral_points_from_modes
             maps["I (flux pi)"] = (table["I"], "magma", None)
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
-                        title=sky_title(sky.describe(), sun_el, sun_az))
+                        title=sky_title(sky.describe(), sun_el, sun_az) if args.source == "sun"
+                        else sky.title(sun_el, sun_az))
         print(f"wrote {args.plot}")
     if not args.out and not args.plot:
         print(_frame(table).describe().to_string())
@@ -318,6 +323,12 @@ def register(sub) -> None:
                    help="sun elevation [deg] (instead of site and time)")
     p.add_argument("--sun-azimuth", type=float_in(unit="deg"),
                    help="sun azimuth [deg, clockwise from north]")
+    p.add_argument("--source", default="sun", choices=("sun", "moon"),
+                   help="light source: the Sun, or the Moon (night sky: moonlit Stokes "
+                        "radiance [W m-2 nm-1 sr-1] over the night-sky background, the Sun "
+                        "added when up; needs --lat --lon --time)")
+    p.add_argument("--band", default="V", choices=("B", "V", "R", "I"),
+                   help="--source moon: photometric band of the radiances")
     p.add_argument("--directions", type=existing_file,
                    help="CSV with columns elevation_deg, azimuth_deg [deg] (instead of a grid)")
     p.add_argument("--grid-step", type=float_in(0, 90, low_open=True, unit="deg"), default=2.0,

@@ -1,0 +1,102 @@
+"""Johnson-Cousins photometric bands: zero points, the Sun's magnitudes, Paranal's sky.
+
+A night sky is measured in magnitudes per square arcsecond; skysim's radiances are spectral
+radiances in a band [W m^-2 nm^-1 sr^-1]. One zero point per band converts between them:
+``L = F0 10^(-0.4 m) / (1 arcsec^2 in sr)`` with ``F0`` the band's flux density of a
+zero-magnitude star (Vega system, Bessell, Castelli & Plez 1998 [1]_, Table A2). The Sun's
+irradiance in a band follows from its apparent magnitude in that band (Willmer 2018 [2]_,
+Table 3: absolute magnitude minus the distance modulus of 1 AU, -31.57), with the same zero
+point, so the Moon (sunlight reflected) and the night sky are on one scale.
+
+Site values (Cerro Paranal, the site of the FORS2 data): extinction coefficients rounded
+from the bi-monthly means of Patat (2003) [3]_, Table A.1 (photometric nights 2000-2001;
+they vary by about 0.02 mag per airmass), and the zenith-corrected
+dark-sky brightness averaged over the same period [3]_ (airglow, zodiacal light and
+integrated starlight together).
+
+References
+----------
+.. [1] M. S. Bessell, F. Castelli and B. Plez, "Model atmospheres broad-band colors,
+   bolometric corrections and temperature calibrations for O-M stars", A&A 333:231-250
+   (1998), Table A2.
+.. [2] C. N. A. Willmer, "The absolute magnitude of the Sun in several filters", ApJS
+   236:47 (2018), doi:10.3847/1538-4365/aabfdf, Table 3.
+.. [3] F. Patat, "UBVRI night sky brightness during sunspot maximum at ESO-Paranal", A&A
+   400:1183-1198 (2003), doi:10.1051/0004-6361:20030030, abstract and Table A.1.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["ARCSEC2_SR", "BANDS", "Band", "get_band", "magnitude_to_radiance",
+           "radiance_to_magnitude", "solar_irradiance"]
+
+ARCSEC2_SR = (np.pi / 648000.0) ** 2
+"""One square arcsecond [sr]."""
+
+
+@dataclass(frozen=True)
+class Band:
+    """A photometric band.
+
+    Attributes
+    ----------
+    name : str
+    wavelength_nm : float
+        Effective wavelength [nm] ([1]_, Table A2).
+    zero_point_W_m2_nm : float
+        Flux density of magnitude 0 [W m^-2 nm^-1] ([1]_, Table A2).
+    sun_magnitude : float
+        Apparent magnitude of the Sun at 1 AU ([2]_).
+    extinction_mag_per_airmass : float
+        Atmospheric extinction at Paranal [mag per airmass] ([3]_, Table A.1).
+    dark_sky_mag_arcsec2 : float
+        Dark-sky zenith brightness at Paranal [mag arcsec^-2] ([3]_).
+    """
+
+    name: str
+    wavelength_nm: float
+    zero_point_W_m2_nm: float
+    sun_magnitude: float
+    extinction_mag_per_airmass: float
+    dark_sky_mag_arcsec2: float
+
+
+BANDS = {
+    "B": Band("B", 438.0, 6.32e-11, -26.13, 0.22, 22.6),
+    "V": Band("V", 545.0, 3.631e-11, -26.76, 0.11, 21.6),
+    "R": Band("R", 641.0, 2.177e-11, -27.14, 0.07, 20.9),
+    "I": Band("I", 798.0, 1.126e-11, -27.47, 0.05, 19.7),
+}
+"""Bands by name (Bessell B, V; Cousins R, I). The Sun's magnitudes are Willmer's absolute
+magnitudes (B 5.44, V 4.81, R 4.43, I 4.10) minus 31.57."""
+
+
+def get_band(name: str) -> Band:
+    """The :class:`Band` called ``name``; raises ``ValueError`` listing the valid names."""
+    try:
+        return BANDS[name]
+    except (KeyError, TypeError):
+        raise ValueError(f"unknown band {name!r}; valid: {', '.join(BANDS)}") from None
+
+
+def magnitude_to_radiance(mag_arcsec2, band: str) -> np.ndarray:
+    """Surface brightness [mag arcsec^-2] -> spectral radiance [W m^-2 nm^-1 sr^-1] in ``band``."""
+    b = get_band(band)
+    return b.zero_point_W_m2_nm * 10.0 ** (-0.4 * np.asarray(mag_arcsec2, float)) / ARCSEC2_SR
+
+
+def radiance_to_magnitude(radiance, band: str) -> np.ndarray:
+    """Spectral radiance [W m^-2 nm^-1 sr^-1] -> surface brightness [mag arcsec^-2]."""
+    b = get_band(band)
+    with np.errstate(divide="ignore"):
+        return -2.5 * np.log10(np.asarray(radiance, float) * ARCSEC2_SR / b.zero_point_W_m2_nm)
+
+
+def solar_irradiance(band: str) -> float:
+    """The Sun's spectral irradiance at 1 AU in ``band`` [W m^-2 nm^-1]."""
+    b = get_band(band)
+    return b.zero_point_W_m2_nm * 10.0 ** (-0.4 * b.sun_magnitude)

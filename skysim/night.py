@@ -1,0 +1,288 @@
+"""The polarized night sky: moonlight (and sunlight) scattered in the air over an
+unpolarized night-sky background.
+
+Radiance of the scattered light: the moonlit-sky model of Krisciunas & Schaefer [1]_ with
+the Moon's magnitude replaced by its irradiance from the ROLO model (:mod:`skysim.moon`).
+For a source of irradiance ``E`` at zenith distance ``Z_s`` and a view direction at zenith
+distance ``Z`` and scattering angle ``rho`` from the source ([1]_, eqs. 15, 16, 17, 21)::
+
+    L = K E f(rho) 10^(-0.4 k X(Z_s)) (1 - 10^(-0.4 k X(Z)))
+    f(rho) = 10^5.36 (1.06 + cos^2 rho) + 10^(6.15 - rho / 40 deg)
+    X(Z) = (1 - 0.96 sin^2 Z)^(-1/2)
+
+``k`` is the band's extinction coefficient [mag per airmass] and ``K`` converts the model's
+units (nanolamberts per ``10^(-0.4 (m + 16.57))``, eqs. 1 and 20) into radiance per
+irradiance [sr^-1]: ``K = 10^(-0.4 * 16.57) / (34.08 e^20.7233 arcsec^2)``. The first term of
+``f`` is the Rayleigh scattering by the molecules, ``10^5.36 (1 + cos^2 rho)`` of it
+scattered as by an ideal dipole and ``10^5.36 * 0.06`` unpolarized; the second is the
+aerosol (Mie) scattering, taken as unpolarized.
+
+Polarization: the dipole part carries the degree and angle of polarization of a skysim sky
+model (:mod:`skysim.sky`) with the source in place of the Sun: the single-scattering
+Rayleigh sky (DoP ``sin^2 rho / (1 + cos^2 rho)``, so that the Rayleigh term as a whole has
+``sin^2 rho / (1.06 + cos^2 rho)``) or the multiple-scattering sky of
+:mod:`skysim.multiple`. Sources add as Stokes vectors (incoherent light); the night-sky
+background adds to ``I`` only:
+
+    DoP = |polarized radiance| / (moonlit + sunlit + background radiance).
+
+Background: airglow, zodiacal light and integrated starlight, with the dark-sky zenith
+brightness of the band [mag arcsec^-2] (:mod:`skysim.bands`, Paranal) brightened towards the
+horizon as airglow ([1]_, eq. 2: ``B_zen 10^(-0.4 k (X - 1)) X``). The split into its three
+parts (Leinert et al. 1998 [2]_ give each; Noll et al. 2012 [3]_ model them at Paranal) is
+not made: their sum is measured at the zenith, and the zodiacal light's and the Milky Way's
+patterns across the sky are left out.
+
+Units: radiance in the band [W m^-2 nm^-1 sr^-1] throughout (:func:`skysim.bands.
+magnitude_to_radiance` for surface brightness).
+
+Validity: sources above the horizon (K&S's model). A Moon below the horizon adds nothing
+(the faint glow of a Moon just set is left out). A Sun between -18 deg and the horizon
+(twilight) raises :class:`TwilightError`: the twilight sky's brightness is not modelled.
+
+References
+----------
+.. [1] K. Krisciunas and B. E. Schaefer, "A model of the brightness of moonlight", PASP
+   103:1033-1039 (1991), doi:10.1086/132921, eqs. 1-3, 15-21.
+.. [2] Ch. Leinert et al., "The 1997 reference of diffuse night sky brightness", A&AS
+   127:1-99 (1998), doi:10.1051/aas:1998105.
+.. [3] S. Noll et al., "An atmospheric radiation model for Cerro Paranal", A&A 543:A92
+   (2012), doi:10.1051/0004-6361/201219040.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .bands import ARCSEC2_SR, get_band, magnitude_to_radiance, solar_irradiance
+from .exceptions import InvalidParameterError
+from .geometry import angle_between_deg, direction_vector
+from .sky import Sky, SkyField
+from .validation import check_finite, check_in_range
+
+__all__ = [
+    "ASTRONOMICAL_NIGHT_DEG",
+    "KS_RADIANCE_PER_IRRADIANCE_SR",
+    "NightSky",
+    "TwilightError",
+    "dark_sky_radiance",
+    "ks_airmass",
+    "night_sky",
+    "scattered_radiance",
+]
+
+ASTRONOMICAL_NIGHT_DEG = -18.0
+"""Sun elevation [deg] below which the Sun adds nothing to the night sky."""
+
+KS_RADIANCE_PER_IRRADIANCE_SR = 10.0 ** (-0.4 * 16.57) / (34.08 * np.exp(20.7233) * ARCSEC2_SR)
+"""``K`` of the module docstring [sr^-1]: radiance per unit source irradiance and unit of
+K&S's ``f(rho) 10^(-0.4 k X) (1 - 10^(-0.4 k X))``."""
+
+_RAYLEIGH = 10.0 ** 5.36   # K&S eq. 17
+_DEPOLARIZED = 0.06        # K&S eq. 17: the 1.06 of (1.06 + cos^2 rho)
+
+
+class TwilightError(InvalidParameterError):
+    """The Sun is in twilight (between -18 deg and the horizon), whose sky brightness skysim
+    does not model. Fix: choose a time when the Sun is above the horizon or below -18 deg."""
+
+
+def ks_airmass(zenith_deg) -> np.ndarray:
+    """Airmass of a scattering layer, ``X = (1 - 0.96 sin^2 Z)^(-1/2)`` ([1]_, eq. 3)."""
+    z = np.radians(np.asarray(zenith_deg, float))
+    return 1.0 / np.sqrt(1.0 - 0.96 * np.sin(z) ** 2)
+
+
+def dark_sky_radiance(view_elevation_deg, band: str = "V", zenith_mag_arcsec2=None,
+                      extinction=None) -> np.ndarray:
+    """Night-sky background (airglow, zodiacal light, starlight) [W m^-2 nm^-1 sr^-1].
+
+    ``B_zen 10^(-0.4 k (X - 1)) X`` ([1]_, eq. 2) with ``X`` of :func:`ks_airmass`.
+
+    Parameters
+    ----------
+    view_elevation_deg : array
+        [deg], in [0, 90].
+    band : str
+        Photometric band (:data:`skysim.bands.BANDS`).
+    zenith_mag_arcsec2 : float, optional
+        Dark-sky zenith brightness [mag arcsec^-2]; default the band's Paranal value.
+    extinction : float, optional
+        [mag per airmass]; default the band's Paranal value.
+    """
+    b = get_band(band)
+    zen = b.dark_sky_mag_arcsec2 if zenith_mag_arcsec2 is None else zenith_mag_arcsec2
+    k = b.extinction_mag_per_airmass if extinction is None else extinction
+    x = ks_airmass(90.0 - np.asarray(view_elevation_deg, float))
+    return magnitude_to_radiance(zen, band) * 10.0 ** (-0.4 * k * (x - 1.0)) * x
+
+
+def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_deg,
+                       source_azimuth_deg, irradiance, extinction) -> dict:
+    """Radiance of a point source's light scattered in the air ([1]_, eqs. 15-21).
+
+    Parameters
+    ----------
+    view_elevation_deg, view_azimuth_deg : array
+        View directions [deg].
+    source_elevation_deg, source_azimuth_deg : array
+        Source directions [deg]; a source at or below the horizon gives 0.
+    irradiance : array
+        Source irradiance above the atmosphere, normal to its direction (any spectral unit,
+        e.g. [W m^-2 nm^-1]).
+    extinction : float
+        Extinction coefficient [mag per airmass].
+
+    Returns
+    -------
+    dict of arrays (broadcast shape, unit of ``irradiance`` per sr):
+        ``dipole`` (``10^5.36 (1 + cos^2 rho)`` part), ``depolarized`` (``10^5.36 * 0.06``
+        part), ``mie`` (``10^(6.15 - rho/40)`` part) and ``scattering_angle_deg`` [deg].
+    """
+    rho = angle_between_deg(direction_vector(view_elevation_deg, view_azimuth_deg),
+                            direction_vector(source_elevation_deg, source_azimuth_deg))
+    src_el = np.asarray(source_elevation_deg, float)
+    x_src = ks_airmass(90.0 - src_el)
+    x_view = ks_airmass(90.0 - np.asarray(view_elevation_deg, float))
+    scale = (KS_RADIANCE_PER_IRRADIANCE_SR * np.asarray(irradiance, float)
+             * 10.0 ** (-0.4 * extinction * x_src) * (1.0 - 10.0 ** (-0.4 * extinction * x_view))
+             * (src_el > 0.0))
+    cos2 = np.cos(np.radians(rho)) ** 2
+    return {"dipole": scale * _RAYLEIGH * (1.0 + cos2),
+            "depolarized": scale * _RAYLEIGH * _DEPOLARIZED * np.ones_like(cos2),
+            "mie": scale * 10.0 ** (6.15 - rho / 40.0),
+            "scattering_angle_deg": rho}
+
+
+def _source_stokes(sky: Sky, vel, vaz, src_el, src_az, irradiance, extinction):
+    """(I, Q, U) of one source: K&S radiance, the dipole part polarized as ``sky``."""
+    parts = scattered_radiance(vel, vaz, src_el, src_az, irradiance, extinction)
+    intensity = parts["dipole"] + parts["depolarized"] + parts["mie"]
+    q = np.zeros_like(intensity)
+    u = np.zeros_like(intensity)
+    up = np.broadcast_to(src_el > 0.0, intensity.shape)
+    if up.any():
+        v_el, v_az, s_el, s_az = (np.broadcast_to(a, intensity.shape)[up]
+                                  for a in (vel, vaz, src_el, src_az))
+        f = sky.field(v_el, v_az, s_el, s_az)
+        polarized = parts["dipole"][up] * f.dop
+        two_chi = np.radians(2.0 * f.aop_deg)
+        q[up] = polarized * np.cos(two_chi)
+        u[up] = polarized * np.sin(two_chi)
+    return intensity, q, u
+
+
+@dataclass(frozen=True)
+class NightSky:
+    """The night sky of a band at given times and site.
+
+    Attributes
+    ----------
+    field : SkyField
+        Total Stokes ``I, Q, U`` [W m^-2 nm^-1 sr^-1], local-meridian basis
+        (``docs/conventions.md``).
+    components : dict
+        ``moon_I``, ``sun_I``, ``background_I`` [W m^-2 nm^-1 sr^-1] and
+        ``moon_scattering_angle_deg`` [deg].
+    sources : dict
+        The Moon's position, phase and irradiance, the Sun's elevation and azimuth, per time.
+    """
+
+    field: SkyField
+    components: dict = field(default_factory=dict)
+    sources: dict = field(default_factory=dict)
+
+
+def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V",
+              sky: Sky | None = None, *, include_sun: bool = True, extinction=None,
+              dark_sky_mag_arcsec2=None) -> NightSky:
+    """Stokes field of the night sky lit by the Moon (and the Sun when it is up).
+
+    Parameters
+    ----------
+    view_elevation_deg, view_azimuth_deg : array
+        View directions [deg], elevation in [0, 90]; broadcast against the times.
+    times : timezone-aware time(s)
+        One time, or one per view direction.
+    site : skysim.sun.Site
+    band : str
+        Photometric band (:data:`skysim.bands.BANDS`).
+    sky : Sky, optional
+        The polarization pattern of the dipole-scattered light (default
+        :class:`skysim.sky.RayleighSky` with d_max = 1).
+    include_sun : bool
+        Add the Sun's scattered light (False: the Moon and the background only, e.g. to
+        compare with twilight data without modelling twilight).
+    extinction : float, optional
+        [mag per airmass]; default the band's Paranal value (:mod:`skysim.bands`).
+    dark_sky_mag_arcsec2 : float, optional
+        Dark-sky zenith brightness [mag arcsec^-2]; default the band's Paranal value.
+
+    Returns
+    -------
+    NightSky
+
+    Raises
+    ------
+    TwilightError
+        If ``include_sun`` and the Sun is between -18 deg and the horizon at any time.
+    InvalidParameterError
+        For a view direction below the horizon, an unknown band (``ValueError``), bad
+        times or site (as :func:`skysim.sun.sun_position`).
+    """
+    from .moon import lunar_disk_reflectance, lunar_irradiance, moon_position
+    from .sky import RayleighSky
+    from .sun import sun_position
+
+    b = get_band(band)
+    sky = RayleighSky() if sky is None else sky
+    vel = check_in_range("view_elevation_deg", view_elevation_deg, 0.0, 90.0,
+                         hint="ground-based sky models only look up")
+    vaz = check_finite("view_azimuth_deg", view_azimuth_deg)
+    k = b.extinction_mag_per_airmass if extinction is None else float(
+        check_in_range("extinction", extinction, 0.0, 5.0))
+    moon = moon_position(times, site.latitude_deg, site.longitude_deg, site.altitude_m)
+    reflectance = lunar_disk_reflectance(
+        b.wavelength_nm, moon.phase_angle_deg.to_numpy(),
+        moon.sun_selenographic_longitude_deg.to_numpy(),
+        moon.observer_selenographic_latitude_deg.to_numpy(),
+        moon.observer_selenographic_longitude_deg.to_numpy())
+    e_moon = lunar_irradiance(reflectance, solar_irradiance(band), moon.distance_km.to_numpy(),
+                              moon.sun_distance_au.to_numpy())
+    m_el, m_az = moon.elevation_deg.to_numpy(), moon.azimuth_deg.to_numpy()
+    if len(moon) > 1 and np.ndim(vel) == 0:
+        vel, vaz = np.broadcast_to(vel, m_el.shape), np.broadcast_to(vaz, m_el.shape)
+    if len(moon) == 1:
+        m_el, m_az, e_moon = m_el[0], m_az[0], e_moon[0]
+    I, Q, U = _source_stokes(sky, vel, vaz, m_el, m_az, e_moon, k)
+    moon_I = I.copy()
+    sun = sun_position(moon.index, site.latitude_deg, site.longitude_deg, site.altitude_m)
+    s_el, s_az = sun.elevation_deg.to_numpy(), sun.azimuth_deg.to_numpy()
+    sun_I = np.zeros_like(I)
+    if include_sun:
+        twilight = (s_el > ASTRONOMICAL_NIGHT_DEG) & (s_el <= 0.0)
+        if twilight.any():
+            j = int(np.flatnonzero(twilight)[0])
+            raise TwilightError(
+                f"the Sun is at {s_el[j]:.1f} deg at {moon.index[j].isoformat()}: twilight "
+                f"(between {ASTRONOMICAL_NIGHT_DEG:g} deg and the horizon), whose sky "
+                "brightness is not modelled; choose a time when the Sun is above the horizon "
+                f"or below {ASTRONOMICAL_NIGHT_DEG:g} deg")
+        if np.any(s_el > 0.0):
+            e_sun = solar_irradiance(band) / moon.sun_distance_au.to_numpy() ** 2
+            se, sa, es = (a[0] if len(moon) == 1 else a for a in (s_el, s_az, e_sun))
+            sun_I, sun_Q, sun_U = _source_stokes(sky, vel, vaz, se, sa, es, k)
+            I, Q, U = I + sun_I, Q + sun_Q, U + sun_U
+    background = np.broadcast_to(dark_sky_radiance(vel, band, dark_sky_mag_arcsec2, k), I.shape)
+    I = I + background
+    vel_b, vaz_b = (np.broadcast_to(a, I.shape) for a in (vel, vaz))
+    rho = angle_between_deg(direction_vector(vel_b, vaz_b),
+                            direction_vector(m_el, m_az))
+    sources = {"band": band, "moon": moon.assign(irradiance_W_m2_nm=e_moon,
+                                                  disk_reflectance=reflectance),
+               "sun_elevation_deg": s_el, "sun_azimuth_deg": s_az}
+    return NightSky(SkyField(vel_b, vaz_b, I, Q, U),
+                    {"moon_I": moon_I, "sun_I": sun_I, "background_I": background.copy(),
+                     "moon_scattering_angle_deg": rho}, sources)

@@ -1,0 +1,125 @@
+"""The moonlit-sky check against FORS2 polarimetry at Paranal (``skysim reproduce
+moonlit-sky``), the frame of the measured Q/U, and ``skysim sky --source moon``."""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+pytest.importorskip("astropy", reason="the Moon's position needs astropy (extra 'moon')")
+
+from experiments.cli import main  # noqa: E402
+from experiments.moonlit_sky import compare, measured_polarization, read_fors2  # noqa: E402
+
+DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "moonskypol"
+TABLE = DATA / "fors2_moonlit_sky_BV.csv"
+needs_data = pytest.mark.skipif(not TABLE.is_file(),
+                                reason="FORS2 moonlit-sky table not found beside the checkout "
+                                       "(../shared/reference/moonskypol)")
+
+
+@pytest.fixture(scope="module")
+def result():
+    return compare(read_fors2(TABLE), with_multiple=False)
+
+
+@needs_data
+def test_measured_frame_is_equatorial_north_through_east(result):
+    # On clear rows (ok) with a defined angle (DoP >= 0.05, AoP error < 3 deg), the
+    # measured E-vector in the stated frame lies close to the perpendicular to the
+    # scattering plane through the Moon (single-scattering AoP): tolerance 10 deg, the
+    # departure of the multiple-scattering E-vector from it off the principal plane at
+    # these optical thicknesses (several degrees, Coulson 1988 ch. 5) plus 3 sigma of the
+    # measurement. The mirrored sense (north through west) must fail by far.
+    ok = result[(result.condition == "ok") & (result.dop >= 0.05)]
+    assert len(ok) >= 10
+    assert np.max(np.abs(ok.aop_resid_rayleigh_deg)) < 10.0
+    assert np.median(np.abs(ok.aop_resid_rayleigh_deg)) < 5.0
+    mirrored = measured_polarization(ok.assign(U=-ok.U))
+    wrong = (mirrored.aop_deg - ok.aop_rayleigh_deg + 90.0) % 180.0 - 90.0
+    assert np.median(np.abs(wrong)) > 20.0
+
+
+@needs_data
+def test_measured_dop_below_single_scattering_bound(result):
+    # Single scattering is the upper bound of the clear sky's DoP (multiple scattering,
+    # aerosols and the background only depolarize): on ok rows at least 30 deg from the
+    # Moon (DoP >= 0.1), measured <= model + 3 sigma + 0.02 (the dark-sky brightness of the
+    # night, not measured here, varies by ~0.2 mag: ~0.02 of DoP at these background
+    # fractions), and no lower than 0.6 x model (Coulson's tables: multiple scattering at
+    # tau ~0.1-0.25 lowers the maximum DoP by less than a third).
+    ok = result[(result.condition == "ok") & (result.scattering_angle_deg >= 30.0)]
+    assert np.all(ok.dop <= ok.dop_rayleigh + 3 * ok.dop_err + 0.02)
+    assert np.all(ok.dop >= 0.6 * ok.dop_rayleigh)
+
+
+@needs_data
+def test_any_band_any_rows_are_read_by_schema(tmp_path):
+    # Held-back rows (other bands, more rows, other column order) go through the same code.
+    raw = pd.read_csv(TABLE, sep=";", dtype=str)
+    more = raw.iloc[:6].copy()
+    more["BAND"] = ["R", "I", "R", "I", "R", "I"]
+    shuffled = pd.concat([raw, more])[list(reversed(raw.columns))]
+    path = tmp_path / "more.csv"
+    shuffled.to_csv(path, sep=";", index=False)
+    r = compare(read_fors2(path), with_multiple=False)
+    assert len(r) == len(raw) + 6 and set(r.band) == {"B", "V", "R", "I"}
+    assert r.loc[r.band.isin(["R", "I"]), "dop_rayleigh"].notna().all()
+
+
+def test_schema_errors_name_the_problem(tmp_path):
+    p = tmp_path / "t.csv"
+    p.write_text("FIELD;RA;DEC\nF1;1;2\n")
+    with pytest.raises(ValueError, match=r"missing column\(s\) \['MED OBS'"):
+        read_fors2(p)
+    header = "FIELD;RA;DEC;MED OBS;Q;error Q;U;error U ;BAND;CONDITION\n"
+    p.write_text(header + "F1;x1;2;2021-01-27T01:00:00;0.1;0.01;0.1;0.01;B;ok\n")
+    with pytest.raises(ValueError, match="RA in data row 1 is 'x1'"):
+        read_fors2(p)
+    p.write_text(header + "F1;1;2;yesterday;0.1;0.01;0.1;0.01;B;ok\n")
+    with pytest.raises(ValueError, match="MED OBS in data row 1"):
+        read_fors2(p)
+
+
+@needs_data
+def test_reproduce_writes_table_figure_summary(tmp_path):
+    rc = main(["reproduce", "moonlit-sky", "--quick", "--data", str(DATA), "--out",
+               str(tmp_path)])
+    assert rc == 0
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["rows"] == len(read_fors2(TABLE)) and set(s["bands"]) == {"B", "V"}
+    assert s["residuals"]["rayleigh"]["V"]["ok"]["n"] >= 10
+    table = pd.read_csv(tmp_path / "moonlit_sky.csv")
+    assert {"aop_resid_rayleigh_deg", "dop_resid_rayleigh"} <= set(table.columns)
+    assert (tmp_path / "moonlit_sky.png").stat().st_size > 10_000
+
+
+def test_reproduce_without_data_names_the_folder(tmp_path, capsys):
+    rc = main(["reproduce", "moonlit-sky", "--data", str(tmp_path / "nowhere"), "--out",
+               str(tmp_path / "o")])
+    assert rc == 2 and "nowhere" in capsys.readouterr().err
+
+
+def test_cli_sky_source_moon(tmp_path):
+    out = tmp_path / "moon.csv"
+    rc = main(["sky", "--source", "moon", "--lat", "-24.6272", "--lon", "-70.4042", "--alt",
+               "2635", "--time", "2021-01-27T05:00:00Z", "--grid-step", "15", "--band", "B",
+               "--out", str(out)])
+    assert rc == 0
+    t = pd.read_csv(out)
+    assert list(t.columns) == ["elevation_deg", "azimuth_deg", "dop", "aop_deg", "I", "Q", "U"]
+    assert t.dop.between(0, 1).all() and (t.I > 0).all()
+    side = json.loads(Path(str(out) + ".json").read_text())
+    assert side["sky"]["source"] == "moon" and side["sky"]["band"] == "B"
+    assert side["sun"]["source"] == "moon" and 30 < side["sun"]["elevation_deg"] < 40
+
+
+def test_cli_sky_source_moon_errors(capsys):
+    rc = main(["sky", "--source", "moon", "--sun-elevation", "30", "--sun-azimuth", "0",
+               "--lat", "0", "--lon", "0", "--time", "2021-01-27T05:00:00Z"])
+    assert rc == 2 and "--source moon" in capsys.readouterr().err
+    rc = main(["sky", "--source", "moon", "--lat", "-24.6", "--lon", "-70.4", "--time",
+               "2021-01-27T00:48:59Z", "--grid-step", "30"])
+    assert rc == 2 and "twilight" in capsys.readouterr().err
