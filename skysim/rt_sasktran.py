@@ -66,6 +66,8 @@ __all__ = [
     "TauOutsideVerifiedRangeError",
     "VERIFIED_TAU_RANGE",
     "check_verified_tau",
+    "layered_stokes_cases",
+    "rayleigh_greek_coefficients",
     "tau_check",
     "rayleigh_depolarization_factor",
     "require_sasktran2",
@@ -207,20 +209,6 @@ def rayleigh_depolarization_factor(depolarization_ratio) -> float:
     return (1.0 - rho) / (1.0 + rho / 2.0)
 
 
-def _set_rayleigh_phase_matrix(sk, atmosphere, delta: float) -> None:
-    """Generalised-spherical-function expansion of the Rayleigh phase matrix ([4]_).
-
-    Non-zero coefficients: ``alpha1_0 = 1``, ``alpha1_2 = Delta/2``, ``alpha2_2 = 3 Delta``,
-    ``beta1_2 = sqrt(6) Delta / 2`` (``alpha3 = 0``; ``alpha4`` only acts on V).
-    """
-    atmosphere.storage.leg_coeff[:] = 0.0
-    view = sk.polarization.LegendreStorageView(atmosphere.storage.leg_coeff, 3)
-    view.a1[0] = 1.0
-    view.a1[2] = delta / 2.0
-    view.a2[2] = 3.0 * delta
-    view.b1[2] = np.sqrt(6.0) * delta / 2.0
-
-
 def transmitted_stokes(tau: float, albedo: float, mu0: float, mu, phi_deg, *,
                        depolarization_ratio: float = 0.0,
                        settings: EngineSettings = DEFAULT_SETTINGS):
@@ -304,25 +292,112 @@ def transmitted_stokes_cases(taus, albedos, mu0: float, mu, phi_deg, *,
     mu, phi = np.broadcast_arrays(np.atleast_1d(check_in_range("mu", mu, 0.0, 1.0)),
                                   np.atleast_1d(np.asarray(phi_deg, dtype=float)))
     delta = rayleigh_depolarization_factor(depolarization_ratio)
+    greek = rayleigh_greek_coefficients(delta, max(16, settings.n_streams))
+    return layered_stokes_cases(taus, np.ones((taus.size, settings.n_levels)),
+                                np.broadcast_to(greek, (taus.size, settings.n_levels)
+                                                + greek.shape),
+                                albedos, mu0, mu, phi, settings=settings)
+
+
+def rayleigh_greek_coefficients(delta: float, n_moments: int) -> np.ndarray:
+    """Generalised-spherical-function expansion of the Rayleigh phase matrix ([4]_).
+
+    Non-zero coefficients: ``alpha1_0 = 1``, ``alpha1_2 = Delta/2``, ``alpha2_2 = 3 Delta``,
+    ``beta1_2 = sqrt(6) Delta / 2`` (``alpha3 = 0``; ``alpha4`` only acts on V).
+
+    Returns
+    -------
+    ndarray (n_moments, 4)
+        Columns ``alpha1, alpha2, alpha3, beta1`` (sasktran2's order and sign convention).
+    """
+    g = np.zeros((int(n_moments), 4))
+    g[0, 0] = 1.0
+    g[2, 0] = delta / 2.0
+    g[2, 1] = 3.0 * delta
+    g[2, 3] = np.sqrt(6.0) * delta / 2.0
+    return g
+
+
+def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
+                         settings: EngineSettings = DEFAULT_SETTINGS,
+                         delta_m: bool = False) -> np.ndarray:
+    """Diffuse Stokes of slabs whose scattering properties vary with optical depth, several
+    cases (one engine "wavelength" each) at one sun in one engine call.
+
+    The slab is the homogeneous one of :func:`transmitted_stokes` in *total* extinction:
+    its ``settings.n_levels`` levels are equally spaced in optical depth (``taus / (n - 1)``
+    per layer, the set-up checked against the tables), level 0 at the ground. In a
+    plane-parallel atmosphere only the optical-depth coordinate matters, so any vertical
+    profile enters through the single-scattering albedo and phase matrix given per level.
+
+    Parameters
+    ----------
+    taus : array-like (m,)
+        Total optical thickness of each case, in :data:`VERIFIED_TAU_RANGE`.
+    ssa : array-like (m, n_levels)
+        Single-scattering albedo per case and level (level 0 at the ground), in [0, 1].
+    greek : array-like (m, n_levels, n_moments, 4)
+        Greek coefficients ``alpha1, alpha2, alpha3, beta1`` per moment ``l`` (sasktran2's
+        convention, ``alpha1_0 = 1``; :func:`rayleigh_greek_coefficients` is an example).
+        ``n_moments`` (>= ``settings.n_streams``) moments are used by the exact single
+        scatter; the discrete-ordinates multiple scatter uses the first ``n_streams``.
+    albedos : array-like (m,)
+        Lambertian ground albedo of each case, in [0, 1].
+    mu0, mu, phi_deg
+        As :func:`transmitted_stokes_cases`.
+    settings : EngineSettings
+    delta_m : bool
+        Delta-M scaling of the multiple-scatter phase matrices to ``n_streams`` moments
+        (Wiscombe 1977, J. Atmos. Sci. 34:1408, doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2),
+        for forward-peaked (aerosol) phase functions.
+
+    Returns
+    -------
+    ndarray (m, n, 3)
+        ``I, Q, U`` (skysim basis, incident flux ``pi``, direct beam excluded).
+    """
+    taus = np.atleast_1d(np.asarray(taus, float))
+    check_verified_tau("taus", taus)
+    albedos = np.broadcast_to(np.asarray(albedos, float), taus.shape)
+    check_in_range("albedos", albedos, 0.0, 1.0)
+    ssa = check_in_range("ssa", ssa, 0.0, 1.0)
+    greek = np.asarray(greek, dtype=float)
+    m, n_levels = taus.size, settings.n_levels
+    if ssa.shape != (m, n_levels) or greek.shape[:2] != (m, n_levels) or greek.shape[3] != 4:
+        raise InvalidParameterError(
+            f"ssa must have shape ({m}, {n_levels}) and greek ({m}, {n_levels}, n_moments, 4) "
+            f"for {m} case(s) and settings.n_levels = {n_levels}; got {ssa.shape} and "
+            f"{greek.shape}")
+    n_moments = greek.shape[2]
+    if n_moments < settings.n_streams:
+        raise InvalidParameterError(f"greek has {n_moments} moments; at least n_streams = "
+                                    f"{settings.n_streams} are needed")
+    mu0 = float(check_in_range("mu0", mu0, 0.0, 1.0, low_open=True,
+                               hint="the sun must be above the horizon"))
+    mu, phi = np.broadcast_arrays(np.atleast_1d(check_in_range("mu", mu, 0.0, 1.0)),
+                                  np.atleast_1d(np.asarray(phi_deg, dtype=float)))
     sk = require_sasktran2()
     cfg = sk.Config()
     cfg.num_stokes = 3
     cfg.single_scatter_source = sk.SingleScatterSource.Exact
     cfg.multiple_scatter_source = sk.MultipleScatterSource.DiscreteOrdinates
     cfg.num_streams = settings.n_streams
-    cfg.num_singlescatter_moments = max(16, settings.n_streams)
-    altitudes = np.linspace(0.0, settings.slab_height_m, settings.n_levels)
+    cfg.num_singlescatter_moments = n_moments
+    cfg.delta_m_scaling = bool(delta_m)
+    altitudes = np.linspace(0.0, settings.slab_height_m, n_levels)
     geometry = sk.Geometry1D(mu0, 0.0, settings.planet_radius_m, altitudes,
                              sk.InterpolationMethod.LinearInterpolation,
                              sk.GeometryType.Spherical)
     viewing = sk.ViewingGeometry()
-    for m, p in zip(np.clip(mu.ravel(), MU_MIN, MU_MAX), np.radians(phi.ravel())):
-        viewing.add_ray(sk.SolarAnglesObserverLocation(mu0, float(p), float(m), 0.0))
-    atmosphere = sk.Atmosphere(geometry, cfg, numwavel=taus.size, calculate_derivatives=False)
-    atmosphere.storage.total_extinction[:] = taus.ravel()[None, :] / settings.slab_height_m
-    atmosphere.storage.ssa[:] = 1.0
-    _set_rayleigh_phase_matrix(sk, atmosphere, delta)
-    atmosphere.surface.albedo[:] = albedos.ravel()
+    for mm, p in zip(np.clip(mu.ravel(), MU_MIN, MU_MAX), np.radians(phi.ravel())):
+        viewing.add_ray(sk.SolarAnglesObserverLocation(mu0, float(p), float(mm), 0.0))
+    atmosphere = sk.Atmosphere(geometry, cfg, numwavel=m, calculate_derivatives=False)
+    atmosphere.storage.total_extinction[:] = taus[None, :] / settings.slab_height_m
+    atmosphere.storage.ssa[:] = ssa.T
+    view = sk.polarization.LegendreStorageView(atmosphere.storage.leg_coeff, 3)
+    for k, target in enumerate((view.a1, view.a2, view.a3, view.b1)):
+        target[:] = np.transpose(greek[..., k], (2, 1, 0))  # (moment, level, case)
+    atmosphere.surface.albedo[:] = albedos
     radiance = sk.Engine(cfg, geometry, viewing).calculate_radiance(atmosphere)
     stokes = np.pi * np.asarray(radiance.radiance.values, dtype=float)  # (m, n, 3): I, Q, U
     stokes[..., 2] *= -1.0  # sasktran2's U has the opposite sense to skysim's (module docstring)

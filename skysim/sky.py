@@ -10,6 +10,8 @@ Models (select with :func:`make_sky`):
 - ``"multiple"``: plane-parallel multiple-scattering Rayleigh atmosphere over a Lambertian
   ground (optional extra ``skysim[rt]``).
 - ``"berry"``: the analytic neutral-point singularity model of Berry, Dennis & Lee (2004).
+- ``"aerosol"``: molecules and an aerosol type (OPAC presets, Mie optics) over a Lambertian
+  ground, multiple scattering (optional extra ``skysim[rt]``).
 """
 
 from __future__ import annotations
@@ -182,6 +184,7 @@ SKY_MODELS = {
     "rayleigh": "skysim.sky:RayleighSky",
     "multiple": "skysim.multiple:MultipleScatteringSky",
     "berry": "skysim.berry:BerrySky",
+    "aerosol": "skysim.aerosol:AerosolSky",
 }
 """Registered sky models: name -> 'module:Class' (imported lazily)."""
 

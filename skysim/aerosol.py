@@ -1,0 +1,455 @@
+"""Aerosol sky: Rayleigh + aerosol multiple scattering over a Lambertian ground (sasktran2).
+
+The clear molecular sky (:mod:`skysim.multiple`) is more polarized than the real one and its
+neutral points lie closer to the sun and anti-sun. Aerosol scattering, strongly forward
+peaked and weakly polarizing, lowers the degree of polarization and moves the neutral points
+outwards (Coulson 1988 [1]_, ch. 5; measured: Kreuter, Emde & Blumthaler 2010 [2]_).
+
+Model
+-----
+A plane-parallel atmosphere of Rayleigh scatterers (optical thickness from Bodhaine et al.
+1999 at the wavelength and surface pressure, scale height :data:`RAYLEIGH_SCALE_HEIGHT_KM`)
+and one aerosol type (:mod:`skysim.aerosol_types`: OPAC mixtures of log-normal components,
+Mie optics by sasktran2) with an exponential extinction profile of the type's scale height,
+over a Lambertian ground. The aerosol optical depth is given at 550 nm; at other wavelengths
+it follows the Mie extinction of the type (its Angstrom behaviour). Solved by sasktran2
+(exact single scatter with :data:`skysim.aerosol_types.N_MOMENTS` Greek moments,
+discrete-ordinates multiple scatter with delta-M scaling), in the slab set-up of
+:mod:`skysim.rt_sasktran` whose levels are equally spaced in total optical depth: the
+profile enters as the aerosol fraction of the extinction at each level
+(:func:`aerosol_fraction_levels`).
+
+Speed
+-----
+The aerosol phase function is forward peaked, so the azimuthal Fourier series of the field
+does not stop at ``m = 2`` as for Rayleigh scattering. The engine is called once per (sun
+elevation; all AODs and albedos of a batch together) on a grid of view zenith angles x
+relative azimuths (:class:`AerosolTable`), and the field is interpolated on that grid
+(cubic in both angles, mirror-symmetric about the solar meridian, continued through the
+zenith). Grid and error: ``docs/physical_sky.md``, tested in ``tests/test_aerosol.py``.
+
+Units: ``I`` (and Q, U) are normalised to an incident solar flux ``pi`` per unit area normal
+to the beam, direct beam excluded, as in :mod:`skysim.multiple`; Stokes basis and AoP as in
+``docs/conventions.md``.
+
+References
+----------
+.. [1] K. L. Coulson, *Polarization and Intensity of Light in the Atmosphere*, A. Deepak
+   (1988).
+.. [2] A. Kreuter, C. Emde, M. Blumthaler, "Measuring the influence of aerosols and albedo
+   on sky polarization", Atmos. Res. 98:363-367 (2010),
+   doi:10.1016/j.atmosres.2010.07.011.
+.. [3] B. A. Bodhaine, N. B. Wood, E. G. Dutton, J. R. Slusser, J. Atmos. Oceanic Technol.
+   16:1854-1861 (1999), doi:10.1175/1520-0426(1999)016<1854:ORODC>2.0.CO;2.
+"""
+
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+
+from .aerosol_types import (N_MOMENTS, REFERENCE_WAVELENGTH_NM, AerosolType, aerosol_optics,
+                            aerosol_type)
+from .exceptions import InvalidParameterError
+from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, layered_stokes_cases,
+                          rayleigh_depolarization_factor, rayleigh_greek_coefficients)
+from .sky import Sky
+from .validation import check_in_range
+
+__all__ = ["AOD_RANGE", "AerosolSky", "AerosolTable", "AerosolType", "N_AZIMUTH", "N_ZENITH",
+           "RAYLEIGH_SCALE_HEIGHT_KM", "aerosol_fraction_levels", "aerosol_stokes_cases",
+           "aerosol_tables_cases", "clear_tables_cache", "prefetch_tables", "table_grid"]
+
+RAYLEIGH_SCALE_HEIGHT_KM = 8.0
+"""Scale height of the molecular extinction [km] (US Standard Atmosphere 1976, lower
+troposphere)."""
+
+AOD_RANGE = (0.0, 2.0)
+"""Aerosol optical depths at 550 nm accepted [1]."""
+
+
+def aerosol_fraction_levels(tau_rayleigh: float, tau_aerosol, scale_height_km: float,
+                            n_levels: int,
+                            rayleigh_scale_height_km: float = RAYLEIGH_SCALE_HEIGHT_KM):
+    """Aerosol share of the extinction at levels equally spaced in total optical depth.
+
+    With exponential extinction profiles ``k_x(z) = (tau_x / H_x) exp(-z / H_x)`` of the
+    molecules (R) and the aerosol (A), the optical depth above height ``z`` is
+    ``C(z) = tau_R exp(-z/H_R) + tau_A exp(-z/H_A)``. Level ``k`` (0 at the ground) lies at
+    ``C(z_k) = (tau_R + tau_A) (1 - k / (n - 1))``, and its aerosol share is
+    ``k_A / (k_A + k_R)`` at ``z_k`` (the top level: the limit ``z -> inf``).
+
+    Parameters
+    ----------
+    tau_rayleigh : float
+        Molecular optical thickness (> 0).
+    tau_aerosol : array-like (m,)
+        Aerosol optical thickness at the wavelength, >= 0.
+    scale_height_km, rayleigh_scale_height_km : float
+        Scale heights [km] of the aerosol and the molecular extinction.
+    n_levels : int
+
+    Returns
+    -------
+    ndarray (m, n_levels)
+        Aerosol fraction of the extinction in [0, 1].
+    """
+    from scipy.special import expit
+    tau_a = np.atleast_1d(np.asarray(tau_aerosol, dtype=float))
+    h_a, h_r = float(scale_height_km), float(rayleigh_scale_height_km)
+    z = np.concatenate([[0.0], np.geomspace(1e-4, 60.0 * max(h_a, h_r), 4000)])  # [km]
+    k = np.arange(int(n_levels)) / (int(n_levels) - 1)
+    out = np.empty((tau_a.size, int(n_levels)))
+    for i, ta in enumerate(tau_a):  # a few AOD cases per engine call
+        if ta == 0.0:
+            out[i] = 0.0
+            continue
+        column = tau_rayleigh * np.exp(-z / h_r) + ta * np.exp(-z / h_a)
+        zk = np.interp((tau_rayleigh + ta) * (1.0 - k), column[::-1], z[::-1])
+        log_ratio = np.log(ta * h_r / (tau_rayleigh * h_a)) + zk * (1.0 / h_r - 1.0 / h_a)
+        out[i] = expit(log_ratio)
+        out[i, -1] = float(h_a > h_r) if h_a != h_r else expit(log_ratio[-1])
+    return out
+
+
+def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
+                         wavelength_nm: float, pressure_hPa: float = 1013.25,
+                         depolarization_ratio: float = 0.0,
+                         settings: EngineSettings = DEFAULT_SETTINGS,
+                         n_moments: int = N_MOMENTS) -> np.ndarray:
+    """Diffuse Stokes of the Rayleigh + aerosol sky for several (AOD, albedo) cases at one
+    sun, in one engine call.
+
+    Parameters
+    ----------
+    aods_550 : array-like (m,)
+        Aerosol optical depth at 550 nm of each case, in :data:`AOD_RANGE`.
+    albedos : array-like (m,) or float
+        Lambertian ground albedo, in [0, 1].
+    mu0 : float
+        Cosine of the solar zenith angle, in (0, 1].
+    mu, phi_deg : array-like (n,)
+        View cosines (looking up) and relative azimuths [deg] (view minus sun, clockwise).
+    preset : str or AerosolType
+        Aerosol type (:data:`skysim.aerosol_types.PRESETS`).
+    wavelength_nm : float
+        Wavelength [nm], 250-1000 (Rayleigh optical thickness from Bodhaine et al. [3]_).
+    pressure_hPa : float
+        Surface pressure [hPa].
+    depolarization_ratio : float
+        Molecular depolarization ratio.
+    settings : EngineSettings
+    n_moments : int
+        Greek moments of the exact single scatter.
+
+    Returns
+    -------
+    ndarray (m, n, 3)
+        ``I, Q, U`` (skysim basis, incident flux ``pi``, direct beam excluded).
+    """
+    from .multiple import bodhaine_optical_thickness
+    aods = np.atleast_1d(check_in_range("aods_550", aods_550, *AOD_RANGE,
+                                        hint="aerosol optical depth at 550 nm"))
+    albedos = np.broadcast_to(check_in_range("albedos", albedos, 0.0, 1.0), aods.shape)
+    t = aerosol_type(preset)
+    tau_r = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa))
+    optics = aerosol_optics(t, wavelength_nm, n_moments)
+    ref = aerosol_optics(t, REFERENCE_WAVELENGTH_NM, n_moments)
+    tau_a = aods * optics.extinction / ref.extinction
+    f = aerosol_fraction_levels(tau_r, tau_a, t.scale_height_km, settings.n_levels)
+    scat_r, scat_a = 1.0 - f, f * optics.ssa                    # (m, levels)
+    ssa = scat_r + scat_a
+    g_r = rayleigh_greek_coefficients(rayleigh_depolarization_factor(depolarization_ratio),
+                                      n_moments)
+    greek = (scat_r[..., None, None] * g_r + scat_a[..., None, None] * optics.greek) \
+        / ssa[..., None, None]
+    return layered_stokes_cases(tau_r + tau_a, ssa, greek, albedos, mu0, mu, phi_deg,
+                                settings=settings, delta_m=True)
+
+
+# --------------------------------------------------------------------------------------------
+# Tables: the field on a (view zenith x relative azimuth) grid, cubic B-spline interpolation
+# --------------------------------------------------------------------------------------------
+
+N_ZENITH = 25
+"""View zenith nodes of a table (:func:`skysim.multiple.zenith_nodes_deg`: sine spaced)."""
+N_AZIMUTH = 37
+"""Relative-azimuth nodes of a table, 0-180 deg (5 deg apart)."""
+_PAD = 3            # ghost nodes on each side of the grid (symmetry or extrapolation)
+_PARITY = np.array([1.0, 1.0, -1.0])  # I, Q even and U odd in the relative azimuth
+
+
+class AerosolTable:
+    """Diffuse Stokes field for one (aerosol, AOD, albedo, wavelength, sun) on a grid.
+
+    The grid is uniform in the index ``k`` of the sine-spaced zenith nodes
+    ``theta_k = 90 sin(pi k / (2 (n - 1)))`` [deg] and in the relative azimuth
+    ``phi`` in [0, 180] deg, so a cubic B-spline on a uniform grid
+    (:func:`scipy.ndimage.map_coordinates`) interpolates it. The grid is extended before the
+    spline is fitted: past ``phi = 0`` and ``180`` by the mirror symmetry about the solar
+    meridian (I, Q even, U odd), past the zenith by continuing along the great circle
+    (``f(-theta, phi) = s f(theta, 180 - phi)``, ``s = +1`` for I, Q and ``-1`` for U; the
+    meridian basis turns by 180 deg, which leaves Q and U unchanged), and past the horizon
+    by quadratic extrapolation.
+
+    Parameters
+    ----------
+    stokes : ndarray (n_zenith, n_azimuth, 3)
+        ``I, Q, U`` at the nodes (skysim basis).
+    """
+
+    def __init__(self, stokes: np.ndarray):
+        from scipy import ndimage
+        st = np.asarray(stokes, dtype=float)
+        self.n_zenith, self.n_azimuth = st.shape[:2]
+        self.azimuth_step_deg = 180.0 / (self.n_azimuth - 1)
+        p = _PAD
+        v = np.moveaxis(st, 2, 0) * 1.0                                   # (3, nz, na)
+        left = _PARITY[:, None, None] * v[:, :, p:0:-1]                   # phi < 0
+        right = _PARITY[:, None, None] * v[:, :, -2:-2 - p:-1]            # phi > 180
+        v = np.concatenate([left, v, right], axis=2)
+        through = _PARITY[:, None, None] * v[:, p:0:-1, ::-1]             # theta < 0
+        last = v[:, -3:]
+        beyond = np.stack([last[:, 2] * (1 + j) * (2 + j) / 2 - last[:, 1] * j * (2 + j)
+                           + last[:, 0] * j * (1 + j) / 2 for j in range(1, p + 1)], axis=1)
+        v = np.concatenate([through, v, beyond], axis=1)
+        self.stokes = st
+        self._coefficients = [ndimage.spline_filter(c, order=3, mode="nearest") for c in v]
+
+    def evaluate(self, theta_deg, phi_deg):
+        """``(I, Q, U)`` at view zenith angles ``theta_deg`` in [0, 90] and relative azimuths
+        ``phi_deg`` [deg] (any real value; broadcast)."""
+        from scipy import ndimage
+        theta, phi = np.broadcast_arrays(np.asarray(theta_deg, float),
+                                         np.asarray(phi_deg, float))
+        rel = (phi.ravel() + 180.0) % 360.0 - 180.0
+        k = (2.0 * (self.n_zenith - 1) / np.pi) * np.arcsin(np.clip(theta.ravel() / 90.0,
+                                                                     0.0, 1.0))
+        coords = np.stack([k + _PAD, np.abs(rel) / self.azimuth_step_deg + _PAD])
+        out = [ndimage.map_coordinates(c, coords, order=3, prefilter=False, mode="nearest")
+               for c in self._coefficients]
+        out[2] = np.where(rel < 0.0, -out[2], out[2])
+        return tuple(o.reshape(theta.shape) for o in out)
+
+
+def table_grid(n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH):
+    """View zenith [deg] and relative azimuth [deg] nodes of a table, as ``(n_zenith,
+    n_azimuth)`` arrays."""
+    from .multiple import zenith_nodes_deg
+    if int(n_azimuth) < 5:
+        raise InvalidParameterError(f"n_azimuth must be >= 5; got {n_azimuth}. Default: "
+                                    f"{N_AZIMUTH}.")
+    return np.meshgrid(zenith_nodes_deg(int(n_zenith)), np.linspace(0.0, 180.0, int(n_azimuth)),
+                       indexing="ij")
+
+
+TABLES_CACHE_SIZE = 512
+"""Aerosol tables kept per process (least recently used dropped first)."""
+_TABLES: OrderedDict = OrderedDict()
+
+
+def clear_tables_cache() -> None:
+    """Forget every cached aerosol table (the next evaluation calls the engine)."""
+    _TABLES.clear()
+
+
+def aerosol_tables_cases(aods_550, albedos, mu0: float, *, preset, wavelength_nm: float,
+                         pressure_hPa: float = 1013.25, depolarization_ratio: float = 0.0,
+                         n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH,
+                         settings: EngineSettings = DEFAULT_SETTINGS,
+                         n_moments: int = N_MOMENTS) -> list:
+    """Tables for several (AOD, albedo) cases at one sun; those not cached yet come from one
+    engine call together (:func:`aerosol_stokes_cases`; each case is an independent engine
+    "wavelength", so the tables equal those computed one by one).
+
+    Parameters are those of :func:`aerosol_stokes_cases`; ``n_zenith`` x ``n_azimuth`` is the
+    grid (:func:`table_grid`). Returns a list of :class:`AerosolTable`, one per case.
+    """
+    aods = np.atleast_1d(np.asarray(aods_550, dtype=float))
+    albedos = np.broadcast_to(np.asarray(albedos, dtype=float), aods.shape)
+    t = aerosol_type(preset)
+    shared = (t, float(wavelength_nm), float(pressure_hPa), float(depolarization_ratio),
+              float(mu0), int(n_zenith), int(n_azimuth), settings, int(n_moments))
+    keys = [(float(a), float(b)) + shared for a, b in zip(aods, albedos)]
+    missing = list(dict.fromkeys(k for k in keys if k not in _TABLES))
+    if missing:
+        theta, phi = table_grid(n_zenith, n_azimuth)
+        stokes = aerosol_stokes_cases(
+            [k[0] for k in missing], [k[1] for k in missing], float(mu0),
+            np.cos(np.radians(theta.ravel())), phi.ravel(), preset=t,
+            wavelength_nm=wavelength_nm, pressure_hPa=pressure_hPa,
+            depolarization_ratio=depolarization_ratio, settings=settings,
+            n_moments=n_moments)
+        for key, st in zip(missing, stokes):
+            _TABLES[key] = AerosolTable(st.reshape(theta.shape + (3,)))
+    for key in keys:
+        _TABLES.move_to_end(key)
+    out = [_TABLES[k] for k in keys]
+    while len(_TABLES) > TABLES_CACHE_SIZE:
+        _TABLES.popitem(last=False)
+    return out
+
+
+# --------------------------------------------------------------------------------------------
+# The Sky object
+# --------------------------------------------------------------------------------------------
+
+class AerosolSky(Sky):
+    """Multiple-scattering sky of molecules and aerosol over a Lambertian ground (sasktran2).
+
+    Parameters
+    ----------
+    preset : str or AerosolType
+        Aerosol type: a key of :data:`skysim.aerosol_types.PRESETS` (``continental_clean``,
+        ``continental_average``, ``urban``, ``maritime_clean``, ``desert``) or a user
+        :class:`~skysim.aerosol_types.AerosolType` (size distributions, refractive indices,
+        scale height).
+    aod_550 : float
+        Aerosol optical depth at 550 nm, in :data:`AOD_RANGE` (0: the molecular sky).
+    albedo : float
+        Lambertian ground albedo in [0, 1].
+    wavelength_nm : float
+        Wavelength [nm], 250-1000. The molecular optical thickness follows from Bodhaine
+        et al. (1999) at ``pressure_hPa``; the AOD from the type's Mie extinction.
+    pressure_hPa : float
+        Surface pressure [hPa].
+    depolarization_ratio : float or "bodhaine"
+        Molecular depolarization ratio; ``"bodhaine"`` (default): ~0.028 from Bodhaine et
+        al. (1999) at ``wavelength_nm``.
+    sun_step_deg : float, optional
+        For many sun positions: tables only at sun elevations that are multiples of this
+        step [deg], the Stokes vector interpolated linearly between the two neighbouring
+        nodes (suns lower than one step are computed exactly). None: one engine call per
+        distinct sun elevation. Error: ``docs/physical_sky.md`` (tested).
+    n_zenith, n_azimuth : int
+        Table grid (:class:`AerosolTable`); the engine traces ``n_zenith * n_azimuth`` rays.
+    settings : EngineSettings
+        Numerical set-up of sasktran2.
+    n_moments : int
+        Greek moments of the exact single scatter.
+
+    Notes
+    -----
+    ``I`` is normalised to an incident solar flux ``pi`` per unit area normal to the beam,
+    the direct beam excluded; Stokes basis and AoP as ``docs/conventions.md``. One engine
+    call per table (sun elevation node; several AODs/albedos at one sun share a call:
+    :func:`prefetch_tables`), cached per process.
+    """
+
+    name = "aerosol"
+
+    def __init__(self, preset="continental_average", aod_550: float = 0.1, albedo: float = 0.0,
+                 wavelength_nm: float = 550.0, *, pressure_hPa: float = 1013.25,
+                 depolarization_ratio="bodhaine", sun_step_deg: float | None = None,
+                 n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH,
+                 settings: EngineSettings = DEFAULT_SETTINGS, n_moments: int = N_MOMENTS):
+        from .multiple import _check_wavelength, bodhaine_depolarization_ratio
+        self.aerosol = aerosol_type(preset)
+        self.aod_550 = float(check_in_range("aod_550", aod_550, *AOD_RANGE,
+                                            hint="aerosol optical depth at 550 nm"))
+        self.albedo = float(check_in_range("albedo", albedo, 0.0, 1.0,
+                                           hint="Lambertian ground albedo is a fraction"))
+        self.wavelength_nm = float(_check_wavelength(wavelength_nm))
+        self.pressure_hPa = float(check_in_range("pressure_hPa", pressure_hPa, 0.0, 1100.0,
+                                                 low_open=True))
+        if isinstance(depolarization_ratio, str):
+            if depolarization_ratio != "bodhaine":
+                raise InvalidParameterError(f"depolarization_ratio={depolarization_ratio!r}: "
+                                            "give a number or 'bodhaine'")
+            depolarization_ratio = float(bodhaine_depolarization_ratio(self.wavelength_nm))
+        rayleigh_depolarization_factor(depolarization_ratio)  # validates
+        self.depolarization_ratio = float(depolarization_ratio)
+        self.sun_step_deg = None if sun_step_deg is None else float(
+            check_in_range("sun_step_deg", sun_step_deg, 0.0, 10.0, low_open=True,
+                           hint="a few degrees at most (None: exact per sun elevation)"))
+        table_grid(n_zenith, n_azimuth)  # validates
+        self.n_zenith, self.n_azimuth = int(n_zenith), int(n_azimuth)
+        self.settings = settings
+        self.n_moments = int(n_moments)
+
+    def _shared(self) -> dict:
+        return dict(preset=self.aerosol, wavelength_nm=self.wavelength_nm,
+                    pressure_hPa=self.pressure_hPa,
+                    depolarization_ratio=self.depolarization_ratio, n_zenith=self.n_zenith,
+                    n_azimuth=self.n_azimuth, settings=self.settings, n_moments=self.n_moments)
+
+    def table(self, sun_elevation_deg: float) -> AerosolTable:
+        """The table for one sun elevation [deg] (cached)."""
+        return aerosol_tables_cases([self.aod_550], [self.albedo], _mu0(sun_elevation_deg),
+                                    **self._shared())[0]
+
+    def sun_nodes_deg(self, sun_elevation_deg) -> tuple:
+        """Sun elevations [deg] whose tables give the sky at this one: itself (exact), or the
+        two neighbouring multiples of ``sun_step_deg``."""
+        lo, hi, _ = _sun_interval(np.atleast_1d(float(sun_elevation_deg)), self.sun_step_deg)
+        return (float(lo[0]),) if lo[0] == hi[0] else (float(lo[0]), float(hi[0]))
+
+    def _stokes(self, vel, vaz, sel, saz):
+        theta, phi = 90.0 - vel, vaz - saz
+        lo, hi, w = _sun_interval(sel, self.sun_step_deg)
+        out = np.zeros((3,) + vel.shape)
+        nodes, inverse = np.unique(np.concatenate([lo.ravel(), hi.ravel()]),
+                                   return_inverse=True)
+        i_lo, i_hi = inverse[:lo.size].reshape(lo.shape), inverse[lo.size:].reshape(hi.shape)
+        for k, node in enumerate(nodes):  # one table per sun node (cached engine call)
+            weight = np.where(i_lo == k, 1.0 - w, 0.0) + np.where(i_hi == k, w, 0.0)
+            use = weight > 0.0
+            if use.any():
+                st = self.table(node).evaluate(theta[use], phi[use])
+                out[:, use] += weight[use] * np.asarray(st)
+        return out[0], out[1], out[2]
+
+    def describe(self) -> dict:
+        optics = aerosol_optics(self.aerosol, self.wavelength_nm, self.n_moments)
+        ref = aerosol_optics(self.aerosol, REFERENCE_WAVELENGTH_NM, self.n_moments)
+        from .multiple import bodhaine_optical_thickness
+        return {"model": self.name, "aerosol": self.aerosol.describe(),
+                "aod_550": self.aod_550,
+                "aod": self.aod_550 * optics.extinction / ref.extinction,
+                "aerosol_ssa": optics.ssa, "aerosol_asymmetry": optics.asymmetry,
+                "rayleigh_tau": float(bodhaine_optical_thickness(self.wavelength_nm,
+                                                                 self.pressure_hPa)),
+                "rayleigh_scale_height_km": RAYLEIGH_SCALE_HEIGHT_KM,
+                "albedo": self.albedo, "wavelength_nm": self.wavelength_nm,
+                "pressure_hPa": self.pressure_hPa,
+                "depolarization_ratio": self.depolarization_ratio,
+                "sun_step_deg": self.sun_step_deg, "n_zenith": self.n_zenith,
+                "n_azimuth": self.n_azimuth, "n_moments": self.n_moments,
+                "engine": "sasktran2", "engine_settings": self.settings.to_dict(),
+                "I_normalisation": "incident solar flux pi per unit area normal to the beam "
+                                   "(F = 1); diffuse sky only, direct beam excluded"}
+
+
+def _mu0(sun_elevation_deg) -> float:
+    return float(np.sin(np.radians(sun_elevation_deg)))
+
+
+def _sun_interval(sun_elevation_deg, step):
+    """Lower and upper sun nodes [deg] and the weight of the upper one, elementwise: the sun
+    itself (weight 0) when ``step`` is None, the sun lies on a node or below the first node."""
+    el = np.asarray(sun_elevation_deg, dtype=float)
+    if step is None:
+        return el, el, np.zeros(el.shape)
+    lo = np.floor(el / step) * step
+    exact = (lo <= 0.0) | (lo == el)
+    hi = np.minimum(lo + step, 90.0)
+    lo, hi = np.where(exact, el, lo), np.where(exact, el, hi)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        w = np.where(exact, 0.0, (el - lo) / (hi - lo))
+    return lo, hi, w
+
+
+def prefetch_tables(aods_550, sun_elevation_deg, *, albedos=None, sky: AerosolSky) -> None:
+    """Compute, in one engine call per sun node, the tables that skies like ``sky`` but with
+    each of ``aods_550`` (and ``albedos``, default the sky's) need at these sun elevations
+    [deg] (with ``sky.sun_step_deg``: the nodes around them). Later evaluations of such skies
+    are cache hits; a fit of the AOD interpolating between AOD nodes calls this once.
+    """
+    aods = np.atleast_1d(np.asarray(aods_550, dtype=float))
+    alb = np.full(aods.shape, sky.albedo) if albedos is None else \
+        np.broadcast_to(np.asarray(albedos, float), aods.shape)
+    lo, hi, _ = _sun_interval(np.unique(np.asarray(sun_elevation_deg, float)),
+                              sky.sun_step_deg)
+    for node in np.unique(np.concatenate([lo, hi])):
+        aerosol_tables_cases(aods, alb, _mu0(node), **sky._shared())
