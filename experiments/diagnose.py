@@ -575,8 +575,9 @@ def register(sub) -> None:
                    help="measurement table or photodiode data (.csv/.parquet + sidecar)")
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
-                   "multiple_scattering,fov,occlusion,yaw_scale,clock_offset,tilt,aureole,"
-                   "stray_light")
+                   "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
+                   "tilt,aureole,stray_light (default), and aerosol (asked for by name: its "
+                   "engine runs take minutes)")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")

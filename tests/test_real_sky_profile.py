@@ -127,3 +127,23 @@ def test_solar_noon_matches_pvlib():
         pd.DatetimeIndex([t.floor("D")]), SITE.latitude_deg, SITE.longitude_deg)
     ref = tr["transit"].iloc[0].tz_convert("UTC").value / 1e9
     assert abs(noon - ref) < 30.0
+
+
+def test_aerosol_candidate_at_a_node_is_the_aerosol_sky():
+    """At one of its AOD nodes the candidate's interpolated sky is the node's
+    :class:`skysim.aerosol.AerosolSky` itself (weights 1 and 0: to rounding, 1e-12), and it
+    is asked for by name, not run by default (its engine runs take minutes)."""
+    pytest.importorskip("sasktran2")
+    from calibration.photodiode_diagnosis.effects import RING_EFFECT_NAMES, GridAerosolSky
+    assert "aerosol" not in RING_EFFECT_NAMES
+    e = get_ring_effect("aerosol")
+    rng = np.random.default_rng(2)
+    el, az = rng.uniform(30, 60, 50), rng.uniform(0, 360, 50)
+    sun = np.full(50, 35.0)
+    grid = GridAerosolSky(None)
+    f = grid.at(0.1).field(el, az, sun, 120.0)
+    ref = grid.skies[1].field(el, az, sun, 120.0)
+    assert grid.AOD_NODES[1] == 0.1
+    np.testing.assert_allclose(f.I, ref.I, rtol=1e-12)
+    np.testing.assert_allclose(f.dop, ref.dop, rtol=1e-12, atol=1e-15)
+    assert e.k == 1 and e.names == ("aod_550",)
