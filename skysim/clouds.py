@@ -1,0 +1,412 @@
+"""Overcast skies from radiative transfer: a liquid-water cloud layer in the Rayleigh slab.
+
+The cloud is a homogeneous layer of spherical water droplets between a base and a top height,
+inside the multiple-scattering Rayleigh atmosphere of :mod:`skysim.multiple`, solved by
+sasktran2 (:func:`skysim.rt_sasktran.layered_particle_stokes_cases`). Its optical properties
+come from the engine's own Lorenz-Mie code (``sasktran2.mie``) integrated over a gamma size
+distribution (Hansen & Travis 1974, eq. (2.56) [1]_) with effective radius 10 um and
+effective variance 0.1, a typical water cloud ([1]_, sect. 2.7), and the refractive index of
+water of Hale & Querry (1973) [2]_. (sasktran2's tabulated water index and its ice-crystal
+database are downloaded at run time, which a skysim installation cannot rely on; ice clouds
+are therefore not offered: spheres are a poor model of ice crystals.)
+
+The heights place the cloud in Rayleigh optical depth: the air below a height ``z`` holds
+the fraction ``1 - exp(-z / H)`` of the column's molecules, with the molecular scale height
+``H = 8.0 km`` [3]_; the engine's homogeneous slab puts the cloud at the same fractions.
+
+Measured overcast skies keep the clear sky's angle-of-polarization pattern while their
+degree of polarization stays below about 16 % (Hegedüs, Åkesson & Horváth 2007 [4]_); the
+clouds this model is verified for are thinner (:data:`CLOUD_TAU_RANGE`), and
+``tests/test_clouds.py`` checks that their DoP falls and their AoP pattern keeps to the clear
+sky's (Pomozi, Horváth & Wehner 2001 [5]_).
+
+References
+----------
+.. [1] J. E. Hansen, L. D. Travis, "Light scattering in planetary atmospheres", Space Sci.
+   Rev. 16:527-610 (1974), doi:10.1007/BF00168069.
+.. [2] G. M. Hale, M. R. Querry, "Optical constants of water in the 200-nm to 200-um
+   wavelength region", Appl. Opt. 12:555-563 (1973), doi:10.1364/AO.12.000555, Table I.
+.. [3] K. N. Liou, *An Introduction to Atmospheric Radiation*, 2nd ed., Academic Press
+   (2002), sect. 3.3.1 (scale height of the molecular atmosphere, about 8 km).
+.. [4] R. Hegedüs, S. Åkesson, G. Horváth, "Polarization patterns of thick clouds: overcast
+   skies have distribution of the angle of polarization similar to that of clear skies",
+   J. Opt. Soc. Am. A 24:2347-2356 (2007), doi:10.1364/JOSAA.24.002347.
+.. [5] G. Pomozi, G. Horváth, R. Wehner, "How the clear-sky angle of polarization pattern
+   continues underneath clouds", J. Exp. Biol. 204:2933-2942 (2001).
+"""
+
+from __future__ import annotations
+
+import functools
+from dataclasses import dataclass
+
+import numpy as np
+
+from .exceptions import InvalidParameterError
+from .multiple import MultipleScatteringSky, _mu0, zenith_nodes_deg
+from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, ParticleLayer
+from .validation import check_in_range
+
+__all__ = [
+    "CLOUD_TAU_RANGE",
+    "MOLECULAR_SCALE_HEIGHT_M",
+    "WATER_WAVELENGTH_RANGE_NM",
+    "AzimuthModes",
+    "CloudLayer",
+    "CloudOptics",
+    "CloudySky",
+    "cloud_optics",
+    "gamma_size_distribution",
+    "molecular_fraction_below",
+    "water_refractive_index",
+]
+
+MOLECULAR_SCALE_HEIGHT_M = 8000.0
+"""Scale height of the molecular atmosphere [m] (Liou 2002, sect. 3.3.1 [3]_)."""
+
+CLOUD_TAU_RANGE = (0.0, 2.0)
+"""Cloud optical thicknesses accepted [1]: up to 2 the transmitted flux agrees with the
+two-stream limit within 7 % (tests/test_clouds.py); beyond it the engine's discrete-ordinates
+solution with a truncated droplet phase matrix gains energy (transmittance 0.92 against 0.76
+at 3, above 1 at 5), so thicker clouds are refused rather than computed wrong."""
+
+# Hale & Querry (1973) [2]_, Table I: wavelength [nm], n, k of liquid water at 25 C
+_HALE_QUERRY = np.array([
+    [400.0, 1.339, 1.86e-9], [425.0, 1.338, 1.30e-9], [450.0, 1.337, 1.02e-9],
+    [475.0, 1.336, 9.35e-10], [500.0, 1.335, 1.00e-9], [525.0, 1.334, 1.32e-9],
+    [550.0, 1.333, 1.96e-9], [575.0, 1.333, 3.60e-9], [600.0, 1.332, 1.09e-8],
+    [625.0, 1.332, 1.39e-8], [650.0, 1.331, 1.64e-8], [675.0, 1.331, 2.23e-8],
+    [700.0, 1.331, 3.35e-8]])
+WATER_WAVELENGTH_RANGE_NM = (400.0, 700.0)
+"""Wavelengths [nm] of the tabulated refractive index of water (visible light)."""
+
+
+def water_refractive_index(wavelength_nm) -> np.ndarray:
+    """Complex refractive index ``n - i k`` of liquid water (sasktran2's sign of ``k``).
+
+    Linear interpolation of Hale & Querry (1973), Table I [2]_ (1.333 - 1.96e-9 i at 550 nm).
+
+    Parameters
+    ----------
+    wavelength_nm : array-like
+        Wavelength [nm] in :data:`WATER_WAVELENGTH_RANGE_NM`.
+    """
+    lam = check_in_range("wavelength_nm", wavelength_nm, *WATER_WAVELENGTH_RANGE_NM,
+                         hint="the cloud optics cover visible light, 400-700 nm")
+    t = _HALE_QUERRY
+    return np.interp(lam, t[:, 0], t[:, 1]) - 1j * np.interp(lam, t[:, 0], t[:, 2])
+
+
+def gamma_size_distribution(effective_radius_um: float, effective_variance: float):
+    """Gamma droplet size distribution of Hansen & Travis (1974), eq. (2.56) [1]_.
+
+    ``n(r) ~ r^((1 - 3b)/b) exp(-r / (a b))`` with effective radius ``a`` and effective
+    variance ``b``: a scipy gamma distribution of shape ``(1 - 2b)/b`` and scale ``a b``.
+
+    Parameters
+    ----------
+    effective_radius_um : float
+        Effective radius ``a`` [um], > 0.
+    effective_variance : float
+        Effective variance ``b`` [1], in (0, 0.5).
+
+    Returns
+    -------
+    scipy.stats frozen distribution over radius [um].
+    """
+    from scipy.stats import gamma
+    a = float(check_in_range("effective_radius_um", effective_radius_um, 0.0, 100.0,
+                             low_open=True, hint="cloud droplets: 2-30 um"))
+    b = float(check_in_range("effective_variance", effective_variance, 0.0, 0.5,
+                             low_open=True, high_open=True, hint="water clouds: about 0.1"))
+    return gamma(a=(1.0 - 2.0 * b) / b, scale=a * b)
+
+
+@dataclass(frozen=True)
+class CloudOptics:
+    """Single-scattering properties of a droplet population at one wavelength.
+
+    Attributes
+    ----------
+    greek : ndarray (4, L)
+        Greek coefficients ``a1, a2, a3, b1`` (engine convention, ``a1[0] = 1``).
+    single_scattering_albedo : float
+    asymmetry_parameter : float
+        ``g = a1[1] / 3``.
+    angle_deg, p11, p12 : ndarray
+        Scattering angles [deg] and phase-matrix elements (``p11`` normalised to mean 1 over
+        the sphere; ``p12 / p11 > 0`` where the light is polarized perpendicular to the
+        scattering plane).
+    """
+
+    greek: np.ndarray
+    single_scattering_albedo: float
+    asymmetry_parameter: float
+    angle_deg: np.ndarray
+    p11: np.ndarray
+    p12: np.ndarray
+
+
+@functools.lru_cache(maxsize=8)
+def cloud_optics(wavelength_nm: float = 550.0, effective_radius_um: float = 10.0,
+                 effective_variance: float = 0.1, n_moments: int = 1000) -> CloudOptics:
+    """Mie optics of a water cloud from sasktran2's Lorenz-Mie code (cached; ~4 s).
+
+    Parameters
+    ----------
+    wavelength_nm : float
+        Wavelength [nm] in :data:`WATER_WAVELENGTH_RANGE_NM`.
+    effective_radius_um, effective_variance : float
+        Gamma size distribution (:func:`gamma_size_distribution`).
+    n_moments : int
+        Greek coefficients kept (1000 resolve the forward peak of 10-um droplets at 550 nm:
+        the last ones are below 1e-4).
+    """
+    from .rt_sasktran import require_sasktran2
+    require_sasktran2()
+    from sasktran2.mie import LinearizedMie, integrate_mie
+    dist = gamma_size_distribution(effective_radius_um, effective_variance)
+    n = complex(water_refractive_index(wavelength_nm))
+    lam_um = float(wavelength_nm) * 1e-3
+    out = integrate_mie(LinearizedMie(), dist, lambda _: n, np.array([lam_um]),
+                        num_angles=1801, num_quad=1024, compute_coeffs=True,
+                        num_coeffs=int(n_moments))
+    greek = np.stack([out[k].values[0] for k in ("lm_a1", "lm_a2", "lm_a3", "lm_b1")])
+    ssa = float(out.xs_scattering.values[0] / out.xs_total.values[0])
+    return CloudOptics(greek, min(ssa, 1.0), float(greek[0, 1] / 3.0),
+                       out.angle.values.copy(), out.p11.values[0].copy(),
+                       out.p12.values[0].copy())
+
+
+def molecular_fraction_below(height_m) -> np.ndarray:
+    """Fraction of the molecular (Rayleigh) optical depth below ``height_m`` [m]:
+    ``1 - exp(-z / H)`` with :data:`MOLECULAR_SCALE_HEIGHT_M` [3]_."""
+    z = check_in_range("height_m", height_m, 0.0, 20000.0,
+                       hint="cloud heights above the site in m (cirrus tops at most ~15 km)")
+    return 1.0 - np.exp(-z / MOLECULAR_SCALE_HEIGHT_M)
+
+
+@dataclass(frozen=True)
+class CloudLayer:
+    """A homogeneous liquid-water cloud layer.
+
+    Parameters
+    ----------
+    tau : float
+        Optical thickness [1] at ``wavelength_nm`` in :data:`CLOUD_TAU_RANGE` (thin
+        clouds; thick stratus, 10-30, lies beyond what the engine set-up is verified for).
+    base_m, top_m : float
+        Cloud base and top above the site [m], ``0 <= base < top <= 20000``.
+    effective_radius_um, effective_variance : float
+        Droplet size distribution (default: 10 um, 0.1 after Hansen & Travis 1974 [1]_).
+    wavelength_nm : float
+        Wavelength [nm] of the optics, in :data:`WATER_WAVELENGTH_RANGE_NM`.
+    """
+
+    tau: float
+    base_m: float = 1000.0
+    top_m: float = 2000.0
+    effective_radius_um: float = 10.0
+    effective_variance: float = 0.1
+    wavelength_nm: float = 550.0
+
+    def __post_init__(self):
+        check_in_range("cloud tau", self.tau, *CLOUD_TAU_RANGE,
+                       hint="cloud optical thickness; thicker clouds are not verified with this engine set-up")
+        if not 0.0 <= self.base_m < self.top_m <= 20000.0:
+            raise InvalidParameterError(
+                f"cloud base and top must satisfy 0 <= base < top <= 20000 m; got "
+                f"base_m={self.base_m!r}, top_m={self.top_m!r}")
+        gamma_size_distribution(self.effective_radius_um, self.effective_variance)
+        water_refractive_index(self.wavelength_nm)
+
+    def optics(self) -> CloudOptics:
+        return cloud_optics(float(self.wavelength_nm), float(self.effective_radius_um),
+                            float(self.effective_variance))
+
+    def particle_layer(self) -> ParticleLayer:
+        """The layer in the engine's terms (heights as molecular optical-depth fractions)."""
+        o = self.optics()
+        return ParticleLayer(float(molecular_fraction_below(self.base_m)),
+                             float(molecular_fraction_below(self.top_m)),
+                             o.single_scattering_albedo, o.greek)
+
+    def to_dict(self) -> dict:
+        return {"tau": float(self.tau), "base_m": float(self.base_m), "top_m": float(self.top_m),
+                "phase": "liquid water droplets, Mie (sasktran2)",
+                "size_distribution": "gamma (Hansen & Travis 1974, eq. 2.56)",
+                "effective_radius_um": float(self.effective_radius_um),
+                "effective_variance": float(self.effective_variance),
+                "wavelength_nm": float(self.wavelength_nm)}
+
+
+# --------------------------------------------------------------------------------------------
+# Azimuthal modes of an overcast field
+# --------------------------------------------------------------------------------------------
+
+def fit_azimuths_deg(step_deg: float) -> np.ndarray:
+    """Relative azimuths [deg] 0..180 at which the engine is called per zenith node."""
+    n = int(round(180.0 / step_deg))
+    if n < 4 or abs(n * step_deg - 180.0) > 1e-9:
+        raise InvalidParameterError(f"azimuth_step_deg must divide 180 into >= 4 steps; got "
+                                    f"{step_deg!r}. Default: 15.")
+    return np.linspace(0.0, 180.0, n + 1)
+
+
+@dataclass(frozen=True)
+class AzimuthModes:
+    """Cosine (I, Q) and sine (U) series in relative azimuth of a field that is symmetric
+    about the solar meridian, interpolating engine values at equally spaced azimuths
+    0..180 deg (trigonometric interpolation, the discrete cosine/sine transform), each mode
+    a cubic spline in view zenith angle with the parity of :class:`skysim.multiple.FourierModes`.
+
+    Attributes
+    ----------
+    theta_deg : ndarray (n,)
+        View zenith angles of the engine rays [deg].
+    coefficients : ndarray (3, M + 1, n)
+        ``I_m, Q_m`` (cosine) and ``U_m`` (sine) for ``m = 0..M``.
+    """
+
+    theta_deg: np.ndarray
+    coefficients: np.ndarray
+
+    @classmethod
+    def from_samples(cls, theta_deg, stokes) -> "AzimuthModes":
+        """Modes from engine Stokes ``(n_zenith, M + 1, 3)`` at azimuths ``k 180 / M``."""
+        stokes = np.asarray(stokes, float)
+        M = stokes.shape[1] - 1
+        m = np.arange(M + 1)
+        phi = np.pi * m / M
+        w = np.ones(M + 1)
+        w[0] = w[-1] = 0.5          # trapezoid weights of the discrete transforms
+        cos = np.cos(np.outer(m, phi)) * w      # (mode, azimuth)
+        sin = np.sin(np.outer(m, phi)) * w
+        scale = np.full(M + 1, 2.0 / M)
+        scale[0] = scale[-1] = 1.0 / M
+        c_iq = np.einsum("ka,tac->ctk", cos, stokes[..., :2]) * scale  # (2, theta, mode)
+        sin_scale = np.full(M + 1, 2.0 / M)
+        c_u = np.einsum("ka,ta->tk", sin, stokes[..., 2]) * sin_scale
+        coeffs = np.stack([c_iq[0].T, c_iq[1].T, c_u.T])                # (3, mode, theta)
+        return cls(np.asarray(theta_deg, float), coeffs)
+
+    @functools.cached_property
+    def _spline(self):
+        from scipy.interpolate import CubicSpline
+        n_modes = self.coefficients.shape[1]
+        parity = np.where(np.arange(n_modes) % 2 == 0, 1.0, -1.0)[None, :, None]
+        th = self.theta_deg
+        keep = th > 0
+        theta = np.concatenate([-th[keep][::-1], th])
+        values = np.concatenate([parity * self.coefficients[:, :, keep][:, :, ::-1],
+                                 self.coefficients], axis=2)
+        return CubicSpline(theta, values, axis=2)
+
+    def evaluate(self, theta_deg, phi_deg):
+        """Return ``(I, Q, U)`` at view zenith ``theta_deg`` and relative azimuth ``phi_deg``
+        [deg] (broadcast)."""
+        theta, phi = np.broadcast_arrays(np.asarray(theta_deg, float),
+                                         np.asarray(phi_deg, float))
+        c = self._spline(theta.ravel())                                  # (3, mode, N)
+        m = np.arange(c.shape[1])[:, None]
+        p = np.radians(phi.ravel())[None, :]
+        cos, sin = np.cos(m * p), np.sin(m * p)
+        out = (np.sum(c[0] * cos, 0), np.sum(c[1] * cos, 0), np.sum(c[2] * sin, 0))
+        return tuple(o.reshape(theta.shape) for o in out)
+
+
+_OVERCAST_CACHE: dict = {}
+
+
+def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
+                   n_zenith: int = 17, azimuth_step_deg: float = 15.0,
+                   depolarization_ratio: float = 0.0,
+                   settings: EngineSettings = DEFAULT_SETTINGS) -> AzimuthModes:
+    """Azimuth modes of the sky below a Rayleigh slab with a cloud layer (one engine call,
+    cached per arguments).
+
+    Parameters
+    ----------
+    tau, albedo : float
+        Rayleigh optical thickness and ground albedo (as :class:`MultipleScatteringSky`).
+    cloud : CloudLayer
+    mu0 : float
+        Cosine of the solar zenith angle, in (0, 1].
+    n_zenith : int
+        View zenith nodes (:func:`skysim.multiple.zenith_nodes_deg`).
+    azimuth_step_deg : float
+        Spacing of the engine's relative azimuths [deg] (divides 180).
+    """
+    key = (float(tau), float(albedo), cloud, float(mu0), int(n_zenith), float(azimuth_step_deg),
+           float(depolarization_ratio), settings)
+    if key not in _OVERCAST_CACHE:
+        from .rt_sasktran import MU_MAX, MU_MIN, layered_particle_stokes_cases
+        mu = np.clip(np.cos(np.radians(zenith_nodes_deg(int(n_zenith)))), MU_MIN, MU_MAX)
+        az = fit_azimuths_deg(azimuth_step_deg)
+        M, P = np.meshgrid(mu, az, indexing="ij")
+        st = layered_particle_stokes_cases(tau, albedo, [cloud.tau], cloud.particle_layer(),
+                                           float(mu0), M.ravel(), P.ravel(),
+                                           depolarization_ratio=depolarization_ratio,
+                                           settings=settings)[0]
+        _OVERCAST_CACHE[key] = AzimuthModes.from_samples(np.degrees(np.arccos(mu)),
+                                                         st.reshape(M.shape + (3,)))
+    return _OVERCAST_CACHE[key]
+
+
+class CloudySky(MultipleScatteringSky):
+    """Overcast sky: the multiple-scattering Rayleigh sky with a water-cloud layer.
+
+    Parameters
+    ----------
+    cloud : CloudLayer
+        The cloud (optical thickness, base and top, droplets).
+    tau, albedo, wavelength_nm, pressure_hPa, latitude_deg, altitude_m, depolarization_ratio,
+    sun_step_deg, settings
+        As :class:`skysim.multiple.MultipleScatteringSky` (the clear atmosphere around the
+        cloud; ``wavelength_nm`` also sets the cloud optics' wavelength when given).
+    n_zenith : int
+        View zenith nodes (default 17).
+    azimuth_step_deg : float
+        Relative-azimuth spacing of the engine rays [deg] (default 15: 13 azimuths, modes up
+        to m = 12; the interpolation error is stated in ``tests/test_clouds.py``).
+
+    Notes
+    -----
+    ``I`` has the normalisation of :class:`MultipleScatteringSky` (incident flux ``pi``,
+    direct beam excluded; under a cloud of optical thickness ``tau_c`` the direct beam is
+    attenuated by ``exp(-tau_c / mu0)`` and is left out). One engine call (a few s) per sun
+    elevation and cloud.
+    """
+
+    name = "cloudy"
+
+    def __init__(self, cloud: CloudLayer, tau=None, albedo=0.0, wavelength_nm=None,
+                 pressure_hPa=1013.25, *, latitude_deg=45.0, altitude_m=0.0,
+                 depolarization_ratio=0.0, n_zenith: int = 17, azimuth_step_deg: float = 15.0,
+                 sun_step_deg: float | None = None,
+                 settings: EngineSettings = DEFAULT_SETTINGS):
+        if not isinstance(cloud, CloudLayer):
+            raise InvalidParameterError(f"cloud must be a CloudLayer; got {cloud!r}")
+        super().__init__(tau, albedo, wavelength_nm, pressure_hPa, latitude_deg=latitude_deg,
+                         altitude_m=altitude_m, depolarization_ratio=depolarization_ratio,
+                         n_zenith=n_zenith, sun_step_deg=sun_step_deg, settings=settings)
+        if wavelength_nm is not None and cloud.wavelength_nm != wavelength_nm:
+            raise InvalidParameterError(
+                f"the cloud's wavelength_nm={cloud.wavelength_nm!r} differs from the sky's "
+                f"wavelength_nm={wavelength_nm!r}; give the cloud the same wavelength")
+        fit_azimuths_deg(azimuth_step_deg)  # validates
+        self.cloud = cloud
+        self.azimuth_step_deg = float(azimuth_step_deg)
+
+    def modes(self, sun_elevation_deg: float) -> AzimuthModes:
+        """Azimuth modes for one sun elevation [deg] (cached)."""
+        return overcast_modes(self.tau, self.albedo, self.cloud, _mu0(sun_elevation_deg),
+                              n_zenith=self.n_zenith, azimuth_step_deg=self.azimuth_step_deg,
+                              depolarization_ratio=self.depolarization_ratio,
+                              settings=self.settings)
+
+    def describe(self) -> dict:
+        out = super().describe()
+        out.update(model=self.name, cloud=self.cloud.to_dict(),
+                   azimuth_step_deg=self.azimuth_step_deg)
+        return out
