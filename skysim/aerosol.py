@@ -52,7 +52,7 @@ import numpy as np
 from .aerosol_types import (N_MOMENTS, REFERENCE_WAVELENGTH_NM, AerosolType, aerosol_optics,
                             aerosol_type)
 from .exceptions import InvalidParameterError
-from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, layered_stokes_cases,
+from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, layered_stokes_cases, lru_take,
                           rayleigh_depolarization_factor, rayleigh_greek_coefficients)
 from .sky import Sky
 from .validation import check_in_range
@@ -191,7 +191,8 @@ class AerosolTable:
     meridian (I, Q even, U odd), past the zenith by continuing along the great circle
     (``f(-theta, phi) = s f(theta, 180 - phi)``, ``s = +1`` for I, Q and ``-1`` for U; the
     meridian basis turns by 180 deg, which leaves Q and U unchanged), and past the horizon
-    by quadratic extrapolation.
+    by quadratic extrapolation. The spline interpolates ``ln I``, ``Q/I`` and ``U/I`` (same
+    parities), smooth also in the aureole.
 
     Parameters
     ----------
@@ -205,7 +206,9 @@ class AerosolTable:
         self.n_zenith, self.n_azimuth = st.shape[:2]
         self.azimuth_step_deg = 180.0 / (self.n_azimuth - 1)
         p = _PAD
-        v = np.moveaxis(st, 2, 0) * 1.0                                   # (3, nz, na)
+        # log I, Q/I, U/I: smooth where I has the aureole's steep peak (a spline of I itself
+        # rings there, down to I ~ 0 a degree from the sun)
+        v = np.stack([np.log(st[..., 0]), st[..., 1] / st[..., 0], st[..., 2] / st[..., 0]])
         left = _PARITY[:, None, None] * v[:, :, p:0:-1]                   # phi < 0
         right = _PARITY[:, None, None] * v[:, :, -2:-2 - p:-1]            # phi > 180
         v = np.concatenate([left, v, right], axis=2)
@@ -229,8 +232,9 @@ class AerosolTable:
         coords = np.stack([k + _PAD, np.abs(rel) / self.azimuth_step_deg + _PAD])
         out = [ndimage.map_coordinates(c, coords, order=3, prefilter=False, mode="nearest")
                for c in self._coefficients]
-        out[2] = np.where(rel < 0.0, -out[2], out[2])
-        return tuple(o.reshape(theta.shape) for o in out)
+        i = np.exp(out[0])
+        q, u = i * out[1], i * np.where(rel < 0.0, -out[2], out[2])
+        return tuple(o.reshape(theta.shape) for o in (i, q, u))
 
 
 def table_grid(n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH):
@@ -283,12 +287,7 @@ def aerosol_tables_cases(aods_550, albedos, mu0: float, *, preset, wavelength_nm
             n_moments=n_moments)
         for key, st in zip(missing, stokes):
             _TABLES[key] = AerosolTable(st.reshape(theta.shape + (3,)))
-    for key in keys:
-        _TABLES.move_to_end(key)
-    out = [_TABLES[k] for k in keys]
-    while len(_TABLES) > TABLES_CACHE_SIZE:
-        _TABLES.popitem(last=False)
-    return out
+    return lru_take(_TABLES, keys, TABLES_CACHE_SIZE)
 
 
 # --------------------------------------------------------------------------------------------
@@ -345,6 +344,7 @@ class AerosolSky(Sky):
                  n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH,
                  settings: EngineSettings = DEFAULT_SETTINGS, n_moments: int = N_MOMENTS):
         from .multiple import _check_wavelength, bodhaine_depolarization_ratio
+        from .rt_sasktran import require_sasktran2
         self.aerosol = aerosol_type(preset)
         self.aod_550 = float(check_in_range("aod_550", aod_550, *AOD_RANGE,
                                             hint="aerosol optical depth at 550 nm"))
@@ -367,6 +367,7 @@ class AerosolSky(Sky):
         self.n_zenith, self.n_azimuth = int(n_zenith), int(n_azimuth)
         self.settings = settings
         self.n_moments = int(n_moments)
+        require_sasktran2()  # fail here, with the install command, not at the first map
 
     def _shared(self) -> dict:
         return dict(preset=self.aerosol, wavelength_nm=self.wavelength_nm,

@@ -67,6 +67,7 @@ __all__ = [
     "VERIFIED_TAU_RANGE",
     "check_verified_tau",
     "layered_stokes_cases",
+    "lru_take",
     "rayleigh_greek_coefficients",
     "tau_check",
     "rayleigh_depolarization_factor",
@@ -178,6 +179,18 @@ class EngineSettings:
 
 
 DEFAULT_SETTINGS = EngineSettings()
+
+
+def lru_take(cache, keys, max_size: int) -> list:
+    """The values of ``keys`` in the ordered dict ``cache`` (all present), marked as used
+    most recently; then the least recently used entries beyond ``max_size`` are dropped.
+    The per-process cache of engine results (Fourier modes, aerosol tables)."""
+    for key in keys:
+        cache.move_to_end(key)
+    out = [cache[k] for k in keys]
+    while len(cache) > max_size:
+        cache.popitem(last=False)
+    return out
 
 
 def require_sasktran2():
