@@ -39,15 +39,17 @@ range, as quoted in their abstract (about 0.7 and 0.4)."""
 
 def principal_plane(sky, sun_elevation_deg: float, step_deg: float = 0.05) -> pd.DataFrame:
     """Stokes along the solar vertical: towards the sun (``phi = 0``) and away from it
-    (``phi = 180``), elevations 0-90 deg in ``step_deg`` steps; with the scattering angle
-    [deg] and the signed DoP ``-Q/I`` (U vanishes there by symmetry)."""
+    (``phi = 180``), elevations 0-90 deg in ``step_deg`` steps; with the angle from the sun
+    along the vertical ``from_sun_deg`` (negative below the sun), the scattering angle [deg]
+    and the signed DoP ``-Q/I`` (U vanishes there by symmetry)."""
     el = np.arange(0.0, 90.0 + step_deg / 2, step_deg)
     parts = []
     for phi in (0.0, 180.0):
         f = sky.field(el, phi, sun_elevation_deg, 0.0)
-        gamma = np.abs(el - sun_elevation_deg) if phi == 0.0 else 180.0 - el - sun_elevation_deg
+        along = el - sun_elevation_deg if phi == 0.0 else 180.0 - el - sun_elevation_deg
         parts.append(pd.DataFrame({"phi_deg": phi, "elevation_deg": el,
-                                   "scattering_angle_deg": gamma, "I": f.I, "Q": f.Q,
+                                   "from_sun_deg": along,
+                                   "scattering_angle_deg": np.abs(along), "I": f.I, "Q": f.Q,
                                    "signed_dop": -f.Q / f.I, "dop": f.dop}))
     return pd.concat(parts, ignore_index=True)
 
@@ -108,21 +110,28 @@ def _figures(out: Path, planes: pd.DataFrame, maxima: pd.DataFrame) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, len(SUNS_DEG), figsize=(11, 4), sharey=True)
-    for ax, sun in zip(axes, SUNS_DEG):
+    fig, axes = plt.subplots(2, len(SUNS_DEG), figsize=(11, 6.5), sharex="col",
+                             gridspec_kw={"height_ratios": [2, 1]})
+    for col, sun in enumerate(SUNS_DEG):
         for k, (a, g) in enumerate(planes[planes.sun_elevation_deg == sun].groupby("aod_550")):
-            for phi, ls in ((0.0, "-"), (180.0, "--")):
-                s = g[g.phi_deg == phi]
-                ax.plot(s.scattering_angle_deg, s.signed_dop, ls, color=f"C{k}", lw=1,
-                        label=(f"AOD {a:g}" + (" (molecular)" if a == 0 else ""))
-                        if phi == 0.0 else None)
-        ax.axhline(0.0, color="k", lw=0.5)
-        ax.set_xlabel("scattering angle [deg]")
-        ax.set_title(f"sun at {sun:g} deg; solid: sun side, dashed: anti-sun side", fontsize=8)
-    axes[0].set_ylabel("signed DoP  -Q/I  on the solar vertical")
-    axes[-1].legend(fontsize=7, loc="upper right")
-    fig.suptitle(f"{PRESET}, {WAVELENGTH_NM:g} nm, albedo {ALBEDO:g}: zeros are the neutral "
-                 "points", fontsize=9)
+            s = g.sort_values("from_sun_deg")
+            for ax in axes[:, col]:
+                ax.plot(s.from_sun_deg, s.signed_dop, color=f"C{k}", lw=1,
+                        label=f"AOD {a:g}" + (" (molecular)" if a == 0 else ""))
+        for ax in axes[:, col]:
+            ax.axhline(0.0, color="k", lw=0.5)
+            ax.axvline(0.0, color="orange", lw=0.8, ls=":")
+            ax.axvline(90.0 - sun, color="grey", lw=0.8, ls=":")
+        axes[1, col].set_ylim(-0.06, 0.06)
+        axes[1, col].set_xlabel("angle from the sun along the solar vertical [deg] "
+                                "(negative: below it)")
+        axes[0, col].set_title(f"sun at {sun:g} deg (dotted: the sun and the zenith)",
+                               fontsize=8)
+    axes[0, 0].set_ylabel("signed DoP  -Q/I")
+    axes[1, 0].set_ylabel("zoom: zeros = neutral points")
+    axes[0, -1].legend(fontsize=7, loc="upper left")
+    fig.suptitle(f"{PRESET}, {WAVELENGTH_NM:g} nm, albedo {ALBEDO:g}: DoP on the solar vertical",
+                 fontsize=9)
     fig.tight_layout()
     save_png(fig, out / "aerosol_principal_plane.png")
 

@@ -361,8 +361,9 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
     settings : EngineSettings
     delta_m : bool
         Delta-M scaling of the multiple-scatter phase matrices to ``n_streams`` moments
-        (Wiscombe 1977, J. Atmos. Sci. 34:1408, doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2),
-        for forward-peaked (aerosol) phase functions.
+        (Wiscombe 1977, J. Atmos. Sci. 34:1408,
+        doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2), for forward-peaked (aerosol)
+        phase functions.
 
     Returns
     -------
