@@ -62,7 +62,9 @@ def vertical_zeros(pp: pd.DataFrame, sun_elevation_deg: float) -> dict:
     for name, phi, side in (("babinet", 0.0, 1), ("brewster", 0.0, -1), ("arago", 180.0, 0)):
         s = pp[pp.phi_deg == phi]
         el, q = s.elevation_deg.to_numpy(), s.Q.to_numpy()
-        i = np.flatnonzero(np.sign(q[:-1]) * np.sign(q[1:]) < 0)
+        # a sign change between samples, or a zero on a sample (not counted twice)
+        i = np.flatnonzero(((q[:-1] == 0.0) | (np.sign(q[:-1]) * np.sign(q[1:]) < 0))
+                           & (q[1:] != q[:-1]))
         z = el[i] - q[i] * (el[i + 1] - el[i]) / (q[i + 1] - q[i])
         if side == 1:
             z = z[z > sun_elevation_deg]
