@@ -189,8 +189,10 @@ def _sky(args) -> int:
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
-        if args.model in ("multiple", "aerosol"):  # radiance (flux pi)
+        if args.model == "multiple":  # radiance (flux pi)
             maps["I (flux pi)"] = (table["I"], "magma", None)
+        if args.model == "aerosol":  # log scale: the aureole is brighter by orders of magnitude
+            maps["log10 I (flux pi)"] = (np.log10(table["I"]), "magma", None)
         if args.model == "multiple":  # and the neutral points
             from skysim.neutral_points import neutral_points_from_modes
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
@@ -361,7 +363,7 @@ def register(sub) -> None:
                    help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
     p.add_argument("--plot", type=output_file(".png"),
                    help="PNG with polar maps of DoP and AoP (multiple: also I and the neutral "
-                        "points; aerosol: also I)")
+                        "points; aerosol: also log10 I)")
     p.set_defaults(func=_sky)
 
     s = sub.add_parser("sample", help="simulate a three-pair sensor sweep (measurement table)",
