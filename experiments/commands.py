@@ -15,7 +15,8 @@ __all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CO
 
 MODEL_OPTIONS = {"rayleigh": ("dmax",),
                  "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
-                 "berry": ("delta_deg", "dmax")}
+                 "berry": ("delta_deg", "dmax"),
+                 "aerosol": ("preset", "aod_550", "albedo", "wavelength_nm", "pressure_hPa")}
 """The ``skysim sky`` options of each sky model (attribute names of the parsed arguments)."""
 
 SKY_BYTES_PER_DIRECTION = 400
@@ -27,6 +28,11 @@ SAMPLE_BYTES_PER_SAMPLE = 1000
 """Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
 the table and its CSV text): tracemalloc peak 343 B per sample at 1e5 samples, 1.1 kB at
 2e4 (fixed costs included); about 3x the large-run value."""
+
+_AEROSOL_PRESETS = ("continental_clean", "continental_average", "urban", "maritime_clean",
+                    "desert")
+"""Keys of ``skysim.aerosol_types.PRESETS`` (listed here so that ``--help`` needs no import;
+tests/test_aerosol_cli.py checks that they match)."""
 
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
@@ -105,12 +111,18 @@ def _sky_params(args) -> dict:
              if getattr(args, k, None) is not None}
     foreign = sorted(given - set(MODEL_OPTIONS[args.model]))
     if foreign:
-        flag = "--" + foreign[0].replace("_", "-").replace("-hpa", "-hPa")
+        flag = _flag(foreign[0])
         owners = " or ".join(m for m, o in MODEL_OPTIONS.items() if foreign[0] in o)
-        takes = ", ".join("--" + k.replace("_", "-") for k in MODEL_OPTIONS[args.model])
+        takes = ", ".join(_flag(k) for k in MODEL_OPTIONS[args.model])
         raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
                          f"takes {takes}")
     return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
+
+
+def _flag(option: str) -> str:
+    """The command-line flag of a parsed sky option (``aod_550`` -> ``--aod``)."""
+    return {"preset": "--aerosol", "aod_550": "--aod"}.get(
+        option, "--" + option.replace("_", "-").replace("-hpa", "-hPa"))
 
 
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
@@ -181,9 +193,12 @@ def _sky(args) -> int:
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
-        if args.model == "multiple" and args.source == "sun":  # radiance (flux pi), neutral points
-            from skysim.neutral_points import neutral_points_from_modes
+        if args.model == "multiple":  # radiance (flux pi)
             maps["I (flux pi)"] = (table["I"], "magma", None)
+        if args.model == "aerosol":  # log scale: the aureole is brighter by orders of magnitude
+            maps["log10 I (flux pi)"] = (np.log10(table["I"]), "magma", None)
+        if args.model == "multiple" and args.source == "sun":  # and the neutral points
+            from skysim.neutral_points import neutral_points_from_modes
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
                         title=sky_title(sky.describe(), sun_el, sun_az) if args.source == "sun"
@@ -342,12 +357,18 @@ def register(sub) -> None:
     p.add_argument("--tau", type=positive_float,
                    help="multiple: Rayleigh optical thickness (or give --wavelength-nm)")
     p.add_argument("--albedo", type=float_in(0, 1),
-                   help="multiple: Lambertian ground albedo (model default 0)")
+                   help="multiple, aerosol: Lambertian ground albedo [1] (model default 0)")
     p.add_argument("--wavelength-nm", type=positive_float,
-                   help="multiple: wavelength [nm], sets tau instead of --tau")
+                   help="multiple: wavelength [nm], sets tau instead of --tau; aerosol: "
+                        "wavelength [nm] (model default 550)")
     p.add_argument("--pressure-hPa", type=positive_float, dest="pressure_hPa",
-                   help="multiple: surface pressure [hPa] with --wavelength-nm "
+                   help="multiple (with --wavelength-nm), aerosol: surface pressure [hPa] "
                         "(model default 1013.25)")
+    p.add_argument("--aerosol", dest="preset", choices=sorted(_AEROSOL_PRESETS),
+                   help="aerosol: aerosol type, OPAC mixture (model default "
+                        "continental_average)")
+    p.add_argument("--aod", dest="aod_550", type=float_in(0, 2),
+                   help="aerosol: aerosol optical depth at 550 nm [1] (model default 0.1)")
     p.add_argument("--delta-deg", type=float_in(0, 90, low_open=True, high_open=True,
                                                 unit="deg"),
                    help="berry: separation of the neutral-point pairs [deg] (model default 40)")
@@ -355,7 +376,7 @@ def register(sub) -> None:
                    help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
     p.add_argument("--plot", type=output_file(".png"),
                    help="PNG with polar maps of DoP and AoP (multiple: also I and the neutral "
-                        "points)")
+                        "points; aerosol: also log10 I)")
     p.set_defaults(func=_sky)
 
     s = sub.add_parser("sample", help="simulate a three-pair sensor sweep (measurement table)",

@@ -14,6 +14,9 @@
 - ``zenith_dop.csv`` and ``zenith_dop.png``: zenith DoP vs sun elevation for single
   scattering, multiple scattering (black ground and albedo 0.25) and Berry, with the tables'
   numbers (0.72, 0.63, 0.53 at mu0 = 0.4);
+- ``aerosol_*.csv`` and ``.png``: aerosol skies beside the molecular one
+  (:mod:`experiments.aerosol_sky`: principal-plane DoP, neutral points and maximum DoP vs
+  AOD, with Kreuter et al. 2010);
 - ``summary.json``.
 
 Nothing is fitted to the tables: the engine set-up is fixed by convergence studies
@@ -284,6 +287,9 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
     _figures(out, per_case, points, npts, zen,
              (el, az, sun, (ms, berry, single), n.marks(sun[1])))
 
+    from .aerosol_sky import aerosol_section
+    aerosol_summary = aerosol_section(out, quick=quick)
+
     row04 = zen[np.isclose(zen.sun_elevation_deg, MU0_04_ELEVATION_DEG)].iloc[0]
     summary = {
         "cases": len(per_case), "points": len(points), "quick": quick,
@@ -302,6 +308,7 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
                                "tau0.25_A0.25": float(row04["multiple_tau0.25_A0.25"]),
                                "natraj2009": [0.72, 0.63, 0.53]},
         "aop_rms_over_sky": aop_rms,
+        "aerosol": aerosol_summary,
         "elapsed_s": time.perf_counter() - t0,
         "config": {"reference": str(table), "min_mu": 0.1,
                    "cases": "quick subset " + repr(QUICK_CASES) if quick else "all shared",
@@ -341,6 +348,11 @@ def _print(result, out: Path) -> None:
           f"{a['sun_elevation_deg']:g} deg): Berry (delta {a['berry_delta_deg']:.1f}) "
           f"{a['berry_vs_multiple_deg']:.2f} deg, single scattering "
           f"{a['single_vs_multiple_deg']:.2f} deg")
+    print("  aerosol skies (continental average, 450 nm, albedo 0.1): neutral-point "
+          "distances [deg] and maximum DoP vs AOD at 550 nm")
+    npt = pd.DataFrame(s["aerosol"]["neutral_points"]).merge(
+        pd.DataFrame(s["aerosol"]["max_dop"]), on=["aod_550", "sun_elevation_deg"])
+    print(npt.to_string(index=False, float_format=lambda x: f"{x:.3f}"))
     print(f"wrote {out}/ (validation.csv, neutral_points.csv, zenith_dop.csv, summary.json, "
           f"figures) in {s['elapsed_s']:.0f} s")
 

@@ -10,7 +10,8 @@ from .figures import pyplot, save_png
 
 __all__ = ["plot_polar_maps", "sky_title"]
 
-TITLE_PARAMETERS = ("dmax", "tau", "albedo", "wavelength_nm", "pressure_hPa", "delta_deg")
+TITLE_PARAMETERS = ("dmax", "tau", "aod_550", "albedo", "wavelength_nm", "pressure_hPa",
+                    "delta_deg")
 """The physical parameters of a sky model shown in a map's title (numerical settings are in
 the sidecar)."""
 

@@ -48,7 +48,7 @@ import numpy as np
 
 from .exceptions import InvalidParameterError
 from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, TauBeyondTablesWarning,
-                          check_verified_tau, tau_check)
+                          check_verified_tau, lru_take, tau_check)
 from .sky import Sky
 from .validation import check_in_range
 
@@ -292,12 +292,7 @@ def fourier_modes_cases(taus, albedos, mu0: float, *, n_zenith: int = 25,
         for key, st in zip(missing, stokes):
             I, Q, U = (st[:, c].reshape(M.shape) for c in range(3))
             _MODES_CACHE[key] = _fit_modes(theta, I, Q, U)
-    for key in keys:
-        _MODES_CACHE.move_to_end(key)
-    out = [_MODES_CACHE[k] for k in keys]
-    while len(_MODES_CACHE) > MODES_CACHE_SIZE:
-        _MODES_CACHE.popitem(last=False)
-    return out
+    return lru_take(_MODES_CACHE, keys, MODES_CACHE_SIZE)
 
 
 def _fit_modes(theta, I, Q, U) -> FourierModes:

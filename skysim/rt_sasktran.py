@@ -73,6 +73,7 @@ __all__ = [
     "delta_m_truncation",
     "layered_particle_stokes_cases",
     "layered_stokes_cases",
+    "lru_take",
     "rayleigh_greek_coefficients",
     "tau_check",
     "rayleigh_depolarization_factor",
@@ -184,6 +185,18 @@ class EngineSettings:
 
 
 DEFAULT_SETTINGS = EngineSettings()
+
+
+def lru_take(cache, keys, max_size: int) -> list:
+    """The values of ``keys`` in the ordered dict ``cache`` (all present), marked as used
+    most recently; then the least recently used entries beyond ``max_size`` are dropped.
+    The per-process cache of engine results (Fourier modes, aerosol tables)."""
+    for key in keys:
+        cache.move_to_end(key)
+    out = [cache[k] for k in keys]
+    while len(cache) > max_size:
+        cache.popitem(last=False)
+    return out
 
 
 def require_sasktran2():
@@ -386,8 +399,9 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
     settings : EngineSettings
     delta_m : bool
         Delta-M scaling of the multiple-scatter phase matrices to ``n_streams`` moments
-        (Wiscombe 1977, J. Atmos. Sci. 34:1408, doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2),
-        for forward-peaked (aerosol) phase functions.
+        (Wiscombe 1977, J. Atmos. Sci. 34:1408,
+        doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2), for forward-peaked (aerosol)
+        phase functions.
 
     Returns
     -------

@@ -157,12 +157,12 @@ def test_zero_aod_is_the_molecular_sky():
 # ------------------------------------------------------------------ table and sun-step errors
 
 def test_table_against_direct_engine():
-    """The interpolated table (25 zenith x 37 azimuth nodes) against direct engine rays at
-    300 random directions, sun at 35 deg, AOD 0.3. Beyond 20 deg from the sun: |dI/I| <=
-    7e-3 and |dDoP| <= 4e-3 (measured 4.7e-3 and 2.9e-3; the 95th percentile of |dDoP| is
-    7e-4 and does not fall with a 33 x 73 grid: the engine's multiple-scatter field differs
-    by that much between ray sets). Near the sun the aureole is not resolved (I within 15 %
-    at 10-20 deg)."""
+    """The interpolated table (25 zenith x 37 azimuth nodes; ln I, Q/I, U/I splined) against
+    direct engine rays at 300 random directions, sun at 35 deg, AOD 0.3. Measured beyond
+    20 deg from the sun: |dI/I| <= 4.4e-3, |dDoP| <= 1.4e-3. Tolerances 7e-3 and 3e-3: the
+    95th percentile of |dDoP| (7e-4) does not fall with a 33 x 73 grid, the engine's
+    multiple-scatter field differs by that much between ray sets, so the bound is a few
+    times it. Closer to the sun the aureole is resolved less well (docs/physical_sky.md)."""
     el, phi = _random_directions(300)
     sun = 35.0
     ref = aerosol_stokes_cases([0.3], [ALB], np.sin(np.radians(sun)), np.sin(np.radians(el)),
@@ -172,7 +172,7 @@ def test_table_against_direct_engine():
     far = _sun_distance(el, phi, sun) > 20.0
     assert far.sum() > 200
     assert np.max(np.abs(f.I[far] / ref[far, 0] - 1)) < 7e-3
-    assert np.max(np.abs(f.dop[far] - np.hypot(ref[far, 1], ref[far, 2]) / ref[far, 0])) < 4e-3
+    assert np.max(np.abs(f.dop[far] - np.hypot(ref[far, 1], ref[far, 2]) / ref[far, 0])) < 3e-3
 
 
 def test_sun_step_interpolation_error_and_engine_calls(monkeypatch):

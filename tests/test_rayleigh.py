@@ -101,7 +101,7 @@ def test_bad_input():
         RayleighSky(dmax=0.0)
     with pytest.raises(InvalidParameterError, match="nan"):
         RayleighSky().field(np.nan, 0.0, 20.0, 100.0)
-    with pytest.raises(ValueError, match="valid: berry, multiple, rayleigh"):
+    with pytest.raises(ValueError, match="valid: aerosol, berry, multiple, rayleigh"):
         make_sky("mie")
 
 
