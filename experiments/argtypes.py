@@ -15,7 +15,7 @@ from pathlib import Path
 
 __all__ = ["DefaultsHelpFormatter", "aware_time", "existing_file", "float_in", "int_at_least", "nonnegative_float",
            "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
-           "seed"]
+           "seed", "time_step"]
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """Adds ``(default: X)`` to an option's help unless the help already speaks of its
@@ -156,3 +156,19 @@ def output_dir(text: str) -> Path:
     """An output folder that exists or can be created, and is writable."""
     from skysim.io import check_output_dir
     return _path_error(check_output_dir, text, "output folder")
+
+
+def time_step(text: str):
+    """A positive time step as a pandas offset (``1s``, ``10min``, ``1h``, ``1D``)."""
+    import pandas as pd
+    try:
+        offset = pd.tseries.frequencies.to_offset(text)
+        step = (pd.Timestamp("2000-01-01", tz="UTC") + offset) - pd.Timestamp("2000-01-01",
+                                                                               tz="UTC")
+    except (ValueError, TypeError):
+        raise argparse.ArgumentTypeError(
+            f"not a time step: {text!r}; write a number and a unit, e.g. 1s, 10min, 1h, "
+            "1D") from None
+    if step <= pd.Timedelta(0):
+        raise argparse.ArgumentTypeError(f"must be a positive time step; got {text!r}")
+    return offset

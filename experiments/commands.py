@@ -110,6 +110,9 @@ def _sky_params(args) -> dict:
         takes = ", ".join("--" + k.replace("_", "-") for k in MODEL_OPTIONS[args.model])
         raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
                          f"takes {takes}")
+    if args.model == "multiple" and not given & {"tau", "wavelength_nm"}:
+        raise ValueError("--model multiple needs --tau (Rayleigh optical thickness, about "
+                         "0.097 at 550 nm) or --wavelength-nm")
     return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
 
 
@@ -326,8 +329,9 @@ def register(sub) -> None:
                    help="sky model; berry: Berry-Dennis-Lee singularity sky, DoP "
                         "dmax |w|/(2 - |w|) (Rayleigh for delta 0), without horizon "
                         "depolarization (too high near the horizon)")
-    p.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True),
-                   help="rayleigh, berry: maximum degree of polarization (model default 1)")
+    p.add_argument("--dmax", type=float_in(0, 1, low_open=True),
+                   help="rayleigh, berry: maximum degree of polarization, in (0, 1] (model "
+                        "default 1)")
     p.add_argument("--tau", type=positive_float,
                    help="multiple: Rayleigh optical thickness (or give --wavelength-nm)")
     p.add_argument("--albedo", type=float_in(0, 1),

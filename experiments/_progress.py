@@ -1,0 +1,49 @@
+"""What a long command tells its user while it runs: the expected duration before the work,
+progress bars during it (tqdm, on stderr), and warnings as one readable line each.
+
+Every command that can run longer than :data:`ANNOUNCE_AFTER_S` says so before it starts
+(:func:`announce_duration`), so that a user can stop a run that would take too long instead of
+waiting for it in silence.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+__all__ = ["ANNOUNCE_AFTER_S", "announce_duration", "format_duration",
+           "install_warning_format"]
+
+ANNOUNCE_AFTER_S = 10.0
+"""Runs expected to take longer than this [s] print their expected duration first."""
+
+
+def format_duration(seconds: float) -> str:
+    """``seconds`` [s] in words a person reads at a glance: ``45 s``, ``3.5 min``, ``2.1 h``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.2g} min"
+    return f"{seconds / 3600:.2g} h"
+
+
+def announce_duration(seconds: float, what: str, how_to_shorten: str = "") -> None:
+    """Print ``what: expected duration about ...`` to stderr when ``seconds`` [s] exceeds
+    :data:`ANNOUNCE_AFTER_S`; ``how_to_shorten`` names the option that makes it faster."""
+    if seconds <= ANNOUNCE_AFTER_S:
+        return
+    hint = f"; {how_to_shorten}" if how_to_shorten else ""
+    print(f"{what}: expected duration about {format_duration(seconds)}{hint}",
+          file=sys.stderr, flush=True)
+
+
+def _one_line(message, category, filename, lineno, line=None) -> str:
+    """A warning as ``skysim: warning: message (Category)``: no source line, no file path."""
+    text = " ".join(str(message).split())
+    return f"skysim: warning: {text} ({category.__name__})\n"
+
+
+def install_warning_format() -> None:
+    """Show every warning as one line (:func:`_one_line`); which warnings show is left to
+    Python's filters (``-W``, ``PYTHONWARNINGS``)."""
+    warnings.formatwarning = _one_line
