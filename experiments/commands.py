@@ -6,9 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
-from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file,
-                       float_in, nonnegative_float, output_file, positive_float, positive_int,
-                       seed)
+from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
+                       existing_file, float_in, nonnegative_float, output_file, positive_float,
+                       positive_int, refuse_replacing_inputs, seed)
 
 __all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CONVENTION",
            "MODEL_OPTIONS"]
@@ -137,6 +137,9 @@ def _sky(args) -> int:
     from skysim.sky import make_sky
 
     params = _sky_params(args)
+    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
+                              sidecar_path(args.out)), ("--plot", args.plot)],
+                            [("--directions", args.directions)])
     if args.sun_elevation is not None:
         if args.sun_azimuth is None:
             raise ValueError("--sun-elevation needs --sun-azimuth")
@@ -218,12 +221,17 @@ def _sample(args) -> int:
     from skysim.sky import make_sky
     from skysim.sun import Site
 
+    from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
                          f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
+    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
+                                                    sidecar_path(args.out))],
+                            [("--errors", args.errors if args.errors not in ("random", "none")
+                              else None)])
     total = args.n * args.sweeps
     check_memory(total * SAMPLE_BYTES_PER_SAMPLE, f"{total} samples (--n {args.n} x "
                  f"--sweeps {args.sweeps})", "use fewer samples or sweeps")
@@ -289,6 +297,8 @@ def _calibrate(args) -> int:
     from sensor.measurement import read_measurement
     from skysim.io import write_json_atomic
 
+    refuse_replacing_inputs([("--out", args.out)],
+                            [("file", p) for p in data_file_and_sidecars(args.file)])
     meas = read_measurement(args.file)
     result = calibrate_measurement(meas)
     rows = pd.DataFrame(result.summary_rows())

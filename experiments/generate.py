@@ -546,7 +546,15 @@ def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
 
 
 def _generate_command(args) -> int:
+    from skysim.io import sidecar_path
+
+    from .argtypes import refuse_replacing_inputs
     config = load_generate_config(args.config)
+    written = [Path(args.out) / "manifest.json"] + [
+        f for kind in _KINDS for e in config.get(kind, [])
+        for f in (Path(args.out) / f"{e['name']}.{e.get('format', 'csv')}",
+                  sidecar_path(Path(args.out) / f"{e['name']}.{e.get('format', 'csv')}"))]
+    refuse_replacing_inputs([("--out", f) for f in written], [("config", args.config)])
     manifest = generate(config, args.out)
     for name, info in manifest["files"].items():
         print(f"{info['kind']:<12s} {name:<40s} sha256 {info['sha256'][:16]}")
@@ -572,8 +580,28 @@ def _parse_tolerances(items) -> dict:
     return tol
 
 
+def _compared_files(what: str, path) -> list[tuple[str, Path]]:
+    """The files ``compare`` reads from ``path`` (a data file and its sidecars, or a generated
+    folder's manifest and the files it lists), each with the argument that names it."""
+    from .argtypes import data_file_and_sidecars
+    path = Path(path)
+    if not path.is_dir():
+        return [(what, p) for p in data_file_and_sidecars(path)]
+    manifest = path / "manifest.json"
+    try:
+        names = list(json.loads(manifest.read_text())["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        names = []
+    return [(what, manifest)] + [(what, p) for n in names
+                                 for p in data_file_and_sidecars(path / n)]
+
+
 def _compare_command(args) -> int:
     from skysim.io import write_json_atomic
+
+    from .argtypes import refuse_replacing_inputs
+    refuse_replacing_inputs([("--report", args.report)], _compared_files("theirs", args.theirs)
+                            + _compared_files("truth", args.truth))
     tolerances = _parse_tolerances(args.tol)
     report = compare_paths(args.theirs, args.truth, tolerances)
     for name, rows in report["files"].items():

@@ -163,7 +163,7 @@ def write_sky_series(path, sky, view_elevation_deg, view_azimuth_deg, sun_elevat
     block -= block % chunk_rows  # whole chunks per block: no chunk is written twice
     t_ns = _time_ns(times, sel.size)
     check_free_space(path, sel.size * el.size * series_bytes_per_value(
-        suffix, dtype.itemsize, t_ns is not None), f"{sel.size} times x {el.size} directions")
+        suffix, dtype.itemsize, t_ns is not None), f"{sel.size} time steps x {el.size} directions")
     meta = _metadata(sky, times, el.size, sel.size)
     blocks = iter_sky_series(sky, el, az, sel, saz, budget, block_suns=block)
     n_blocks = -(-sel.size // block)
@@ -258,6 +258,12 @@ def _sky_series(args) -> int:
 
     from .commands import _sky_params, sky_grid_size, view_directions
 
+    from skysim.io import sidecar_path
+
+    from .argtypes import refuse_replacing_inputs
+    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
+                                                    sidecar_path(args.out))],
+                            [("--directions", args.directions)])
     site = Site(args.lat, args.lon, args.alt)
     params = _sky_params(args)
     if args.float32:

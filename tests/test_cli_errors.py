@@ -520,3 +520,159 @@ def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
         t.join(timeout=30)
     done = sum(Path(t).exists() for t in tasks)
     assert 1 <= done <= 8, done        # 24 would mean the queue was drained
+
+
+# --------------------------------------------------------------------------- sky-series
+
+SERIES = ["sky-series", "--lat", "34.1", "--lon", "108.5", "--start",
+          "2013-05-22T10:00+08:00", "--grid-step", "30"]
+
+
+@pytest.mark.parametrize("extra,needles", [
+    (["--periods", "0"], ["--periods", "'0'"]),
+    (["--periods", "-3"], ["--periods", "'-3'"]),
+    (["--periods", "2.5"], ["--periods", "'2.5'"]),
+    (["--periods", "5", "--freq", "0s"], ["--freq", "positive", "'0s'"]),
+    (["--periods", "5", "--freq=-1min"], ["--freq", "positive", "'-1min'"]),
+    (["--periods", "5", "--freq", "fortnightly"], ["--freq", "'fortnightly'"]),
+    (["--end", "2013-05-22T09:00+08:00"], ["--end 2013-05-22T09:00:00+08:00",
+                                            "before --start"]),
+    (["--end", "2013-05-22T11:00"], ["--end", "no UTC offset"]),
+    (["--periods", "3", "--end", "2013-05-22T11:00+08:00"], ["--end or --periods"]),
+    ([], ["--end or --periods"]),
+    (["--periods", "1e9"], ["--periods 1000000000", "1678-2261"]),
+    (["--periods", "3", "--model", "multiple"], ["--model multiple needs --tau"]),
+    (["--periods", "3", "--tau", "0.1"], ["--tau", "--model multiple"]),
+    (["--periods", "3", "--model", "berry", "--float32"], ["--float32", "--model berry"]),
+    (["--periods", "3", "--max-memory-mb", "0"], ["--max-memory-mb", "'0'"]),
+    (["--periods", "3", "--dmax", "1.5"], ["--dmax", "'1.5'"]),
+    (["--periods", "3", "--lat", "nan"], ["--lat", "'nan'"]),
+])
+def test_sky_series_options(extra, needles, capsys, tmp_path):
+    out = tmp_path / "s.nc"
+    _fails([*SERIES, *extra, "--out", str(out)], capsys, *needles)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, monkeypatch):
+    out = tmp_path / "s.parquet"
+    # 1e8 steps of 1 s fit the years; their times alone would need ~20 GB
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1000")
+    _fails([*SERIES, "--periods", "1e8", "--freq", "1s", "--out", str(out)], capsys,
+           "100000000 time steps x 48 directions", "--periods")
+    monkeypatch.delenv("SKYSIM_MEMORY_LIMIT_MB")
+    import shutil
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
+    _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
+           "100 time steps x 48 directions", "only 10 kB is free")
+    from experiments.sky_series import write_sky_series   # the library's writer checks too
+    from skysim.io import WriteError
+    from skysim.sky import make_sky
+    with pytest.raises(WriteError, match="1000 time steps x 2 directions would take about 80 kB"):
+        write_sky_series(tmp_path / "s.nc", make_sky("rayleigh"), [10, 20], [0, 0],
+                         np.full(1000, 30.0), np.zeros(1000))
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".parquet"])
+def test_sky_series_failed_write_names_the_file_and_leaves_nothing(suffix, capsys, tmp_path,
+                                                                    monkeypatch):
+    """A disk that fills up part-way: one error line naming the file, no partial file, and an
+    earlier series of the same name kept."""
+    pytest.importorskip("h5netcdf")
+    import errno
+
+    import experiments.sky_series as ss
+    out = tmp_path / f"s{suffix}"
+    assert main([*SERIES, "--periods", "3", "--out", str(out)]) == 0
+    before = out.read_bytes()
+    writer = "_write_netcdf" if suffix == ".nc" else "_write_parquet"
+    real = getattr(ss, writer)
+
+    def full_disk(tmp, blocks, *rest):
+        real(tmp, iter(list(blocks)[:1]), *rest)       # part of the series reaches the disk
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(ss, writer, full_disk)
+    capsys.readouterr()
+    _fails([*SERIES, "--periods", "5", "--freq", "10min", "--out", str(out)], capsys,
+           f"writing {out} failed (No space left on device)")
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [out.name] + ([out.name + ".json"] if suffix == ".parquet" else []))
+
+
+def test_sky_series_multiple_takes_tau_and_albedo(tmp_path):
+    pytest.importorskip("sasktran2")
+    out = tmp_path / "s.parquet"
+    assert main([*SERIES, "--grid-step", "45", "--periods", "1", "--model", "multiple",
+                 "--tau", "0.1", "--albedo", "0.2", "--out", str(out)]) == 0
+    side = json.loads((tmp_path / "s.parquet.json").read_text())
+    assert side["sky"]["tau"] == 0.1 and side["sky"]["albedo"] == 0.2
+
+
+def test_dmax_one_is_accepted_as_its_help_says(tmp_path):
+    """d_max lies in (0, 1]: 1 (an ideal Rayleigh atmosphere) is the model default."""
+    out = tmp_path / "sky.csv"
+    assert main(["sky", *SUN, "--dmax", "1", "--grid-step", "30", "--out", str(out)]) == 0
+    assert pd.read_csv(out).dop.max() == pytest.approx(1.0, abs=0.02)
+    assert main([*SERIES, "--periods", "2", "--dmax", "1", "--out",
+                 str(tmp_path / "s.parquet")]) == 0
+
+
+# --------------------------------------------------------------------------- TOML datetimes
+
+def test_an_unquoted_toml_datetime_is_the_same_time_as_a_quoted_one(tmp_path, capsys):
+    text = ('seed = 1\n[site]\nlatitude_deg = 34.0\nlongitude_deg = 108.0\n[[sky_map]]\n'
+            'name = "a"\ntime = {t}\ngrid_step_deg = 30.0\n[[measurement]]\nname = "b"\n'
+            'start = {t}\nn = 20\n')
+    for name, t in (("bare", "2013-05-22T17:10:00+08:00"), ("quoted", '"2013-05-22T17:10:00+08:00"')):
+        (tmp_path / f"{name}.toml").write_text(text.format(t=t))
+        assert main(["generate", str(tmp_path / f"{name}.toml"), "--out",
+                     str(tmp_path / name)]) == 0
+    for f in ("a.csv", "b.csv", "manifest.json"):
+        assert (tmp_path / "bare" / f).read_bytes() == (tmp_path / "quoted" / f).read_bytes()
+    (tmp_path / "naive.toml").write_text(text.format(t="2013-05-22T17:10:00"))
+    _fails(["generate", str(tmp_path / "naive.toml"), "--out", str(tmp_path / "n")], capsys,
+           "'2013-05-22T17:10:00'", "timezone-naive")
+    assert not (tmp_path / "n").exists()
+
+
+# --------------------------------------------------------------------------- outputs vs inputs
+
+@pytest.mark.parametrize("case", ["sky_directions", "calibrate_sidecar", "compare_manifest",
+                                  "compare_sidecar", "generate_config", "series_sidecar",
+                                  "sample_sidecar"])
+def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
+    data, cfg = Path(inputs["data"]), Path(inputs["cfg"])
+    dirs = tmp_path / "in" / "d.csv"
+    dirs.write_text("elevation_deg,azimuth_deg\n10,20\n")
+    sdirs = tmp_path / "in" / "d.parquet.json"   # named like the sidecar of d.parquet
+    sdirs.write_text(dirs.read_text())
+    truth = tmp_path / "truth"
+    assert main(["generate", str(cfg), "--out", str(truth)]) == 0
+    errors = tmp_path / "in" / "x.csv.json"      # named like the sidecar of x.csv
+    errors.write_text('{"misalignment_deg": [0, 0, 0, 0, 0, 0], "transmittance": [0, 0, 0], '
+                      '"noise_V": [0, 0, 0]}')
+    cfg_in_out = truth / "m.csv"      # the data file its own entry "m" writes
+    argv, victim = {
+        "sky_directions": (["sky", *SUN, "--directions", str(dirs), "--out", str(dirs)], dirs),
+        "calibrate_sidecar": (["calibrate", str(data), "--out", f"{data}.json"],
+                              Path(f"{data}.json")),
+        "compare_manifest": (["compare", str(truth), str(truth), "--report",
+                              str(truth / "manifest.json")], truth / "manifest.json"),
+        "compare_sidecar": (["compare", str(truth / "m.csv"), str(truth / "m.csv"), "--report",
+                             str(truth / "m.csv.json")], truth / "m.csv.json"),
+        "generate_config": (["generate", str(cfg_in_out), "--out", str(truth)], cfg_in_out),
+        "series_sidecar": ([*SERIES, "--periods", "2", "--directions", str(sdirs), "--out",
+                            str(sdirs.with_name("d.parquet"))], sdirs),
+        "sample_sidecar": (["sample", "--errors", str(errors), "--out",
+                            str(errors.with_name("x.csv"))], errors),
+    }[case]
+    if case == "generate_config":
+        cfg_in_out.write_text(cfg.read_text())
+    before = victim.read_bytes()
+    capsys.readouterr()
+    line = _fails(argv, capsys, "would replace the input", str(victim))
+    assert line.count(str(victim)) == 2
+    assert victim.read_bytes() == before
