@@ -11,11 +11,39 @@ from __future__ import annotations
 import sys
 import warnings
 
-__all__ = ["ANNOUNCE_AFTER_S", "announce_duration", "format_duration",
-           "install_warning_format"]
+__all__ = ["ANNOUNCE_AFTER_S", "REPRODUCTION_SECONDS", "announce_duration",
+           "expected_reproduction_seconds", "format_duration", "install_warning_format"]
 
 ANNOUNCE_AFTER_S = 10.0
 """Runs expected to take longer than this [s] print their expected duration first."""
+
+
+REPRODUCTION_SECONDS = {
+    # target: (full run [s], --quick run [s], trials of the full run or None)
+    "yang2014": (60.0, 8.0, 200),
+    "dark-current": (80.0, 16.0, 100),
+    "compound-eye": (20.0, 4.0, 50),
+    "jin2020": (73.0, 28.0, 20),
+    "sky-gap": (840.0, 0.0, None),
+    "physical-sky": (240.0, 0.0, None),
+    "camera": (53.0, 0.0, None),
+    "real-sky-compass": (0.0, 0.0, None),
+}
+"""Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
+sky-gap (14 min), physical-sky (4 min), jin2020 (73 s) and camera (53 s), every --quick run;
+the other full runs scaled from their quick runs by the number of trials. Zero: not
+measured (nothing is announced)."""
+
+
+def expected_reproduction_seconds(target: str, quick: bool, trials: int | None) -> float:
+    """Expected wall time of ``skysim reproduce target`` [s] (0 when unknown); ``--trials``
+    scales the full run's time in proportion."""
+    full, short, full_trials = REPRODUCTION_SECONDS.get(target, (0.0, 0.0, None))
+    if quick:
+        return short
+    if trials and full_trials:
+        return full * trials / full_trials
+    return full
 
 
 def format_duration(seconds: float) -> str:

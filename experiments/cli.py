@@ -61,11 +61,18 @@ DEFAULT_SEED = 20140601
 
 
 def _run_target(targets: dict, args) -> int:
-    """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
+    """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``.
+
+    Options the target does not use are errors; the memory of ``--trials`` is checked and
+    the expected duration announced before any work; the output folder is replaced as a
+    whole (:func:`experiments._run_folder.replacing_folder`)."""
+    from ._progress import announce_duration, expected_reproduction_seconds
+    from ._run_folder import replacing_folder
     func = targets[args.target]
-    if args.reference is not None and not getattr(func, "takes_reference", False):
-        takers = sorted(n for n, f in targets.items() if getattr(f, "takes_reference", False))
-        raise ValueError(f"--reference applies to {', '.join(takers)}, not {args.target}")
+    for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
+        if getattr(args, option) is not None and not getattr(func, attr, False):
+            takers = sorted(n for n, f in targets.items() if getattr(f, attr, False))
+            raise ValueError(f"--{option} applies to {', '.join(takers)}, not {args.target}")
     per_trial = getattr(sys.modules.get(func.__module__), "MEMORY_PER_TRIAL_BYTES", None)
     if per_trial and args.trials:
         from skysim.resources import check_memory
@@ -73,7 +80,24 @@ def _run_target(targets: dict, args) -> int:
                      "use fewer --trials")
     if args.seed is None:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
-    return func(args)
+    run = {"target": args.target, "quick": bool(args.quick), "trials": args.trials,
+           "seed": args.seed}
+    with replacing_folder(args.out or _default_out(args.target), run, force=args.force) as out:
+        args.out = out
+        announce_duration(expected_reproduction_seconds(args.target, args.quick, args.trials),
+                          f"skysim reproduce {args.target}",
+                          "" if args.quick else "--quick is a small run of a few seconds to "
+                                                "minutes")
+        return func(args)
+
+
+_DEFAULT_OUT = {"dark-current": "results/dark_current",
+                "real-sky-compass": "results/real_sky_compass"}
+"""Default output folders that are not ``results/<target>``."""
+
+
+def _default_out(target: str) -> Path:
+    return Path(_DEFAULT_OUT.get(target, f"results/{target}"))
 
 
 def build_parser(command: str | None = "") -> argparse.ArgumentParser:
@@ -106,7 +130,11 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true",
                      help="a small, fast run (few trials) for smoke tests")
     rep.add_argument("--out", type=output_dir, default=None,
-                     help="output folder (default: results/<target>)")
+                     help="output folder, replaced as a whole when the run ends (an interrupted "
+                          "or failed run leaves the earlier one) (default: results/<target>)")
+    rep.add_argument("--force", action="store_true",
+                     help="replace an --out folder that holds other files, or a full run by a "
+                          "--quick one")
     rep.add_argument("--data", default=None, metavar="DIR",
                      help="real-sky-compass: folder of recorded photodiode sessions (default: "
                           "the reference recordings beside the checkout)")
@@ -163,8 +191,10 @@ def _quiet_stdout() -> None:
 
 def main(argv=None) -> int:
     """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
+    from ._progress import install_warning_format
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
+    install_warning_format()   # a library's warning as one line, not its source line
     try:
         try:
             parser = build_parser(next((a for a in argv if not a.startswith("-")), None))

@@ -676,3 +676,126 @@ def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
     line = _fails(argv, capsys, "would replace the input", str(victim))
     assert line.count(str(victim)) == 2
     assert victim.read_bytes() == before
+
+
+# --------------------------------------------------------------------------- reproduction folders
+
+def _interrupting_target(monkeypatch, module: str):
+    """Make ``module``'s reproduction write one file, then be interrupted (Ctrl-C)."""
+    import importlib
+    mod = importlib.import_module(f"experiments.{module}")
+    real = mod._reproduce
+
+    def interrupted(args):
+        (Path(args.out) / "table1.csv").write_text("seed,partial\n")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(mod, "_reproduce", interrupted)
+    return real
+
+
+def test_reproduction_folder_is_replaced_whole(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "r"
+    assert main(["reproduce", "compound-eye", "--trials", "3", "--out", str(out)]) == 0
+    full = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert json.loads(full["run.json"]) == {"target": "compound-eye", "quick": False,
+                                            "trials": 3, "seed": 20140601}
+    # a quick run would replace the full one: refused, then allowed with --force
+    _fails(["reproduce", "compound-eye", "--quick", "--out", str(out)], capsys,
+           f"--out {out} holds a full run of compound-eye", "--force")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == full
+    # another target, or a folder of other files: refused
+    _fails(["reproduce", "yang2014", "--quick", "--out", str(out)], capsys,
+           "not a run of yang2014")
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "mine.txt").write_text("keep")
+    _fails(["reproduce", "yang2014", "--quick", "--out", str(other)], capsys,
+           f"--out {other} already holds files")
+    assert (other / "mine.txt").read_text() == "keep"
+    # an interrupted run leaves the earlier run as it was, with nothing of its own
+    _interrupting_target(monkeypatch, "compound_eye")
+    assert main(["reproduce", "compound-eye", "--trials", "2", "--seed", "5", "--out",
+                 str(out)]) == EXIT_INTERRUPTED
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == full
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes", "r"]   # nothing left aside
+    monkeypatch.undo()
+    # --force: the quick run replaces the folder; no file of the full run stays beside it
+    assert main(["reproduce", "compound-eye", "--quick", "--force", "--out", str(out)]) == 0
+    assert json.loads((out / "run.json").read_text())["quick"] is True
+    quick_names = {p.name for p in out.iterdir()}
+    assert quick_names <= set(full) and all(
+        (out / n).stat().st_mtime_ns >= (out / "run.json").stat().st_mtime_ns - 10**11
+        for n in quick_names)
+
+
+def test_reproduction_options_that_do_not_apply(tmp_path, capsys):
+    _fails(["reproduce", "yang2014", "--data", str(tmp_path), "--out", str(tmp_path / "o")],
+           capsys, "--data applies to real-sky-compass, not yang2014")
+    _fails(["gap-benchmark", "--real", str(tmp_path / "none"), "--out", str(tmp_path / "o")],
+           capsys, "give --real DIR")
+    assert not (tmp_path / "o").exists()
+
+
+def test_gap_benchmark_size_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
+    _fails(["gap-benchmark", "--n", "1e6", "--out", str(tmp_path / "o")], capsys,
+           "1000000 data sets of gap-benchmark", "--n")
+    assert not (tmp_path / "o").exists()
+
+
+def test_long_runs_state_their_expected_duration(capsys):
+    from experiments._progress import announce_duration, expected_reproduction_seconds
+    assert expected_reproduction_seconds("sky-gap", False, None) == 840.0
+    assert expected_reproduction_seconds("yang2014", False, 2000) == 10 * \
+        expected_reproduction_seconds("yang2014", False, None)
+    announce_duration(5.0, "a run of five seconds")      # below 10 s: silent
+    announce_duration(840.0, "skysim reproduce sky-gap", "--quick is shorter")
+    err = capsys.readouterr().err
+    assert err == "skysim reproduce sky-gap: expected duration about 14 min; --quick is " \
+                  "shorter\n"
+
+
+def test_warnings_are_one_readable_line():
+    """A library's warning during a command: one line on stderr, no source line (run in a
+    fresh interpreter: pytest records warnings itself)."""
+    import subprocess
+    code = ("import warnings, experiments.commands as c\n"
+            "def warns(args):\n"
+            "    warnings.warn('invalid value encountered in\\n    arccos', RuntimeWarning)\n"
+            "    return 0\n"
+            "c._sky = warns\n"
+            "from experiments.cli import main\n"
+            "raise SystemExit(main(['sky', '--sun-elevation', '30', '--sun-azimuth', '10']))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == "skysim: warning: invalid value encountered in arccos " \
+                         "(RuntimeWarning)\n"
+
+
+# --------------------------------------------------------------------------- help of every option
+
+def _all_options():
+    import argparse
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, p in sorted(sub.choices.items()):
+        for action in p._actions:
+            if not isinstance(action, argparse._HelpAction):
+                yield name, p, action
+
+
+@pytest.mark.parametrize("name,parser,action", list(_all_options()),
+                         ids=lambda x: x if isinstance(x, str) else getattr(x, "dest", ""))
+def test_every_option_has_help_and_no_empty_default(name, parser, action):
+    if name in ("camera",) and action.dest in ("lens", "sky"):
+        pytest.xfail("camera options owned elsewhere have no help yet")
+    assert action.help and len(action.help) > 10, (name, action.option_strings or action.dest)
+    fmt = parser._get_formatter()
+    text = fmt._expand_help(action) if action.help else ""
+    assert "default: None" not in text, (name, action.dest, text)
+    if action.required or not action.option_strings:
+        assert "(default:" not in text, (name, action.dest, text)
+    if action.choices and not isinstance(action.choices, dict):
+        usage = parser.format_help()
+        assert all(str(c) in usage for c in action.choices), (name, action.dest)
