@@ -26,7 +26,7 @@ REPRODUCTION_SECONDS = {
     "jin2020": (73.0, 28.0, 20),
     "sky-gap": (840.0, 114.0, None),
     "physical-sky": (240.0, 30.0, None),
-    "camera": (53.0, 18.0, None),
+    "camera": (53.0, 18.0, 10),
     "real-sky-compass": (0.0, 64.0, None),
 }
 """Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
@@ -47,12 +47,15 @@ def expected_reproduction_seconds(target: str, quick: bool, trials: int | None) 
 
 
 def format_duration(seconds: float) -> str:
-    """``seconds`` [s] in words a person reads at a glance: ``45 s``, ``3.5 min``, ``2.1 h``."""
+    """``seconds`` [s] in words a person reads at a glance: ``45 s``, ``14 min``, ``2.5 h``,
+    ``6 days``."""
     if seconds < 90:
         return f"{seconds:.0f} s"
     if seconds < 5400:
-        return f"{seconds / 60:.2g} min"
-    return f"{seconds / 3600:.2g} h"
+        return f"{seconds / 60:.0f} min"
+    if seconds < 48 * 3600:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.0f} days"
 
 
 def announce_duration(seconds: float, what: str, how_to_shorten: str = "") -> None:

@@ -10,7 +10,7 @@ Errors have one path (:func:`main`). Options are checked when parsed
 its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
 ``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
 that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
-130); a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
+130), SIGTERM as ``terminated`` (exit 143), each after the clean-up; a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
 SIGPIPE); an unexpected exception (a bug) as one ``internal error`` line with exit code 70
 (``SKYSIM_TRACEBACK=1`` re-raises it). Files are written atomically (:mod:`skysim.io`), so
 none of these leaves a half-written file.
@@ -32,19 +32,22 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import pkgutil  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import experiments
 from experiments.argtypes import output_dir, positive_int, seed
 
-__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE",
-           "EXIT_INTERNAL"]
+__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
+           "EXIT_BROKEN_PIPE", "EXIT_INTERNAL"]
 
 EXIT_ERROR = 2
 """Exit code of any error in the input (options, files, configurations), as argparse's."""
 EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+EXIT_TERMINATED = 143
+"""Exit code after SIGTERM (128 + SIGTERM)."""
 EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of the output went away (128 + SIGPIPE)."""
 EXIT_INTERNAL = 70
@@ -195,6 +198,7 @@ def main(argv=None) -> int:
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
     install_warning_format()   # a library's warning as one line, not its source line
+    previous_term = _stop_on_sigterm()
     try:
         try:
             parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
@@ -204,6 +208,9 @@ def main(argv=None) -> int:
         command = f"skysim {args.command}"
         rc = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+    except Terminated:
+        print(f"\n{command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -225,7 +232,28 @@ def main(argv=None) -> int:
         return EXIT_ERROR
     except Exception as exc:  # a bug
         return _internal_error(command, exc)
+    finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
     return int(rc or 0)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch scheduler's time limit), raised where the program is so that
+    every clean-up runs (temporary files removed, an earlier output folder put back)."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated
+
+
+def _stop_on_sigterm():
+    """Turn SIGTERM into :class:`Terminated`; return the previous handler (None when not in
+    the main thread, where Python allows no handler)."""
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
 def _internal_error(command: str, exc: Exception) -> int:

@@ -799,3 +799,33 @@ def test_every_option_has_help_and_no_empty_default(name, parser, action):
     if action.choices and not isinstance(action.choices, dict):
         usage = parser.format_help()
         assert all(str(c) in usage for c in action.choices), (name, action.dest)
+
+
+def test_durations_read_at_a_glance():
+    from experiments._progress import format_duration
+    assert [format_duration(s) for s in (45, 840, 9000, 5.3e5)] == [
+        "45 s", "14 min", "2.5 h", "6 days"]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs POSIX signals")
+def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
+    """``kill`` (or a scheduler's time limit) mid-run: the earlier output folder is put back."""
+    import signal
+    import subprocess
+    import time
+    out = tmp_path / "r"
+    assert main(["reproduce", "compound-eye", "--trials", "2", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "reproduce", "camera",
+                             "--trials", "1000", "--out", str(out), "--force"],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not any(p.name.startswith(".r.earlier-") for p in tmp_path.iterdir()):
+        assert time.time() < deadline and proc.poll() is None, proc.stderr.read()
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 143
+    assert "terminated" in proc.stderr.read()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["r"]
