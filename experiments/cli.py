@@ -179,7 +179,9 @@ def describe_error(exc: BaseException) -> str:
     """One line for an error: the message, or for a bare ``OSError`` its file and reason."""
     if isinstance(exc, OSError) and exc.strerror and exc.filename:
         return f"{exc.filename}: {exc.strerror}"
-    return str(exc) or type(exc).__name__
+    text = str(exc) or type(exc).__name__
+    # one line: a library's message may quote a file's bytes (newlines, control characters)
+    return " ".join("".join(c if c.isprintable() else " " for c in text).split())
 
 
 def _quiet_stdout() -> None:

@@ -119,11 +119,11 @@ def _sky_params(args) -> dict:
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     """View directions [deg] from a CSV (:func:`read_directions`), or else the default
     full-sky grid (:func:`sky_grid`), after checking its memory."""
-    from skysim.resources import check_memory
+    from skysim.resources import check_memory, format_count
     if directions_csv:
         return read_directions(directions_csv)
     check_memory(sky_grid_size(grid_step_deg) * SKY_BYTES_PER_DIRECTION,
-                 f"{sky_grid_size(grid_step_deg)} sky directions (--grid-step "
+                 f"{format_count(sky_grid_size(grid_step_deg))} sky directions (--grid-step "
                  f"{grid_step_deg:g})", "use a coarser --grid-step")
     return sky_grid(grid_step_deg)
 
@@ -242,7 +242,10 @@ def _sample(args) -> int:
     # 90 deg counter-clockwise of the sun at its own start (as the paper's groups a, b, c)
     offsets_s = (np.arange(args.sweeps)[:, None] * interval
                  + np.linspace(0.0, args.duration, args.n)[None, :])
-    end = args.start + pd.Timedelta(seconds=float(offsets_s.max()))  # pandas' range
+    try:
+        end = args.start + pd.Timedelta(seconds=float(offsets_s.max()))  # pandas' range
+    except (OverflowError, ValueError):    # beyond what a pandas time difference holds
+        end = pd.Timestamp.max.tz_localize("UTC")
     if end.year > PANDAS_YEARS[1]:
         raise ValueError(f"the last sample ({end}) is beyond the supported years "
                          f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; shorten --duration, "

@@ -454,7 +454,7 @@ def _quantities(schema: str, truth) -> dict:
 def _row_labels(schema: str, truth, where: str, theirs) -> list[str] | None:
     """Check the rows are the same samples/directions; return labels of the truth rows."""
     if len(theirs) != len(truth):
-        raise CompareError(f"{where}: {len(theirs)} rows, truth has {len(truth)}")
+        raise CompareError(f"{where}: {len(theirs)} rows, the truth has {len(truth)}")
     if schema == SKYMAP_SCHEMA:
         keys = ["elevation_deg", "azimuth_deg"]
         a, b = theirs[keys].to_numpy(float), truth[keys].to_numpy(float)
@@ -490,7 +490,7 @@ def compare_tables(theirs_path, truth_path, tolerances: dict | None = None):
     truth, sidecar = _read(truth_path)
     theirs, _ = _read(theirs_path)
     schema = sidecar.get("schema")
-    where = str(theirs_path)
+    where = f"{theirs_path} against the truth {truth_path}"
     _row_labels(schema, truth, where, theirs)
     results = []
     for quantity, cols in _quantities(schema, truth).items():

@@ -232,13 +232,23 @@ def _count_times(args) -> int:
 def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     """Refuse a series that does not fit the memory or the disk, and say how long it takes."""
     from skysim.io import check_free_space
-    from skysim.resources import check_memory
+    from skysim.resources import check_memory, format_count
+    from skysim.series import VALUES_PER_POINT
 
     from ._progress import announce_duration
-    what = f"{n_times} time steps x {n_directions} directions"
-    check_memory(n_times * SERIES_BYTES_PER_TIME + args.max_memory_mb * 2**20, what,
-                 "use fewer time steps (--periods, or an earlier --end or a longer --freq) "
-                 "or a smaller --max-memory-mb")
+    from .commands import SKY_BYTES_PER_DIRECTION
+    directions = f"{format_count(n_directions)} directions"
+    what = f"{format_count(n_times)} time steps x {directions}"
+    n_directions = float(min(n_directions, 10**300))
+    budget = args.max_memory_mb * 2**20
+    check_memory(n_times * SERIES_BYTES_PER_TIME + n_directions * SKY_BYTES_PER_DIRECTION
+                 + budget, what, "use fewer time steps (--periods, or an earlier --end or a "
+                 "longer --freq), a coarser --grid-step or a smaller --max-memory-mb")
+    one_step = VALUES_PER_POINT * itemsize * n_directions
+    if budget < one_step:
+        raise ValueError(f"--max-memory-mb {args.max_memory_mb:g} is below the arrays of one "
+                         f"time step ({one_step / 2**20:.3g} MiB for {directions}); raise it "
+                         "or use fewer directions")
     suffix = Path(args.out).suffix.lower()
     check_free_space(args.out, n_times * n_directions * series_bytes_per_value(suffix, itemsize),
                      what)

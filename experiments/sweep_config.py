@@ -364,12 +364,16 @@ def read_toml(path, error_cls: type[Exception]) -> dict:
     if not path.is_file():
         raise FileNotFoundError(f"no configuration file {path}")
     try:
-        return _iso_times(tomllib.loads(path.read_text()))
+        config = _iso_times(tomllib.loads(path.read_text()))
     except tomllib.TOMLDecodeError as exc:
         raise error_cls(f"{path}: invalid TOML ({exc})") from exc
     except UnicodeDecodeError:
         raise error_cls(f"{path} is not a text file (not UTF-8); give a TOML "
                         "configuration") from None
+    if not config:
+        raise error_cls(f"{path} holds no settings (an empty configuration); see the "
+                        "examples/ folder for a complete one")
+    return config
 
 
 def _iso_times(value):

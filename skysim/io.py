@@ -154,6 +154,7 @@ def check_free_space(path, nbytes: float, what: str) -> None:
     while not folder.exists() and folder != folder.parent:
         folder = folder.parent
     free = shutil.disk_usage(folder).free
+    nbytes = float(min(nbytes, 10**300))   # sizes beyond a float
     if FREE_SPACE_MARGIN * nbytes > free:
         raise WriteError(f"{path}: {what} would take about {_size(nbytes)} on disk; only "
                          f"{_size(free)} is free in {folder}; free some space or write "

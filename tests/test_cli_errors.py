@@ -829,3 +829,106 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
     assert "terminated" in proc.stderr.read()
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
     assert [p.name for p in tmp_path.iterdir()] == ["r"]
+
+
+# --------------------------------------------------------------------------- fuzz batteries
+
+_FUZZ_BASE = {
+    "sky": ["sky", *SUN, "--grid-step", "30"],
+    "sky-series": [*SERIES, "--periods", "2", "--out", "s.parquet"],
+    "sample": ["sample", "--out", "s.csv", "--n", "20"],
+}
+_FUZZ_OPTIONS = {
+    "sky": ["--alt", "--sun-elevation", "--sun-azimuth", "--grid-step", "--dmax", "--tau",
+            "--albedo", "--wavelength-nm", "--pressure-hPa", "--delta-deg"],
+    "sky-series": ["--lat", "--lon", "--alt", "--periods", "--grid-step", "--dmax",
+                   "--max-memory-mb"],
+    "sample": ["--lat", "--lon", "--alt", "--duration", "--n", "--sweeps", "--sweep-interval",
+               "--dmax", "--seed"],
+}
+_FUZZ_VALUES = ["0", "-1", "1e30", "1e-300", "nan", "-inf", "1e400", "x"]
+
+
+@pytest.mark.parametrize("command,option", [(c, o) for c, os_ in _FUZZ_OPTIONS.items()
+                                            for o in os_])
+def test_numeric_options_fuzzed(command, option, tmp_path, capsys, monkeypatch):
+    """Zero, negative, huge, tiny, not-a-number and non-numeric values of every numeric
+    option: a result (exit 0) or one specific error line (exit 2); never a bug, a traceback
+    or a leftover file. Values that are not finite numbers are refused when parsed, naming
+    the option."""
+    monkeypatch.chdir(tmp_path)
+    for value in _FUZZ_VALUES:
+        rc = main(_FUZZ_BASE[command] + [f"{option}={value}"])   # "-inf" is not an option
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc in (0, 2), (option, value, err[-1:])
+        if value in ("nan", "-inf", "1e400", "x"):
+            assert rc == 2 and f"argument {option}" in err[-1] and repr(value) in err[-1]
+        if rc == 2:
+            assert err[-1].startswith(f"skysim {command}: error: "), (option, value, err)
+            assert "internal error" not in err[-1] and "\n" not in err[-1]
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".tmp-")]
+        for p in tmp_path.iterdir():
+            p.unlink()
+
+
+@pytest.fixture(scope="module")
+def fuzz_inputs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fuzz")
+    assert main(["sample", "--out", str(root / "good.csv"), "--n", "40", "--sweeps", "3"]) == 0
+    cfg = root / "g.toml"
+    cfg.write_text('seed = 1\n[[sky_map]]\nname = "m"\nsun_elevation_deg = 30.0\n'
+                   'sun_azimuth_deg = 0.0\ngrid_step_deg = 30.0\n')
+    assert main(["generate", str(cfg), "--out", str(root / "truth")]) == 0
+    return root
+
+
+_BAD_CONTENT = {
+    "empty": b"",
+    "binary": bytes(range(256)) * 4,
+    "prose": b"hello world\n",
+    "semicolons": b"a;b;c\n1;2;3\n",
+    "json_list": b"[1, 2]",
+    "broken_toml": b"seed = = 1\n[[",
+    "header_only": b"time,heading_deg,U1_V,U2_V,U3_V\n",
+}
+
+
+def _file_commands(f: str, root: Path) -> dict:
+    truth = str(root / "truth" / "m.csv")
+    return {
+        "sky --directions": ["sky", *SUN, "--directions", f],
+        "sky-series --directions": [*SERIES, "--periods", "2", "--directions", f, "--out",
+                                    str(root / "o.parquet")],
+        "calibrate": ["calibrate", f],
+        "diagnose": ["diagnose", f, "--out", str(root / "dg")],
+        "compare theirs": ["compare", f, truth],
+        "compare truth": ["compare", truth, f],
+        "generate": ["generate", f, "--out", str(root / "gg")],
+        "sweep": ["sweep", f, "--out", str(root / "sw"), "--no-progress", "--no-figures"],
+        "sample --errors": ["sample", "--errors", f, "--out", str(root / "se.csv")],
+    }
+
+
+@pytest.mark.parametrize("kind", [*_BAD_CONTENT, "folder", "missing"])
+@pytest.mark.parametrize("suffix", [".csv", ".toml", ".json"])
+def test_malformed_input_files(kind, suffix, fuzz_inputs, capsys):
+    """Every file-reading command given an empty, binary, wrongly formatted, header-only,
+    missing file or a folder (a data file with a valid sidecar beside it, so that the table
+    itself is what is wrong): exit 2, one line naming the file, nothing written."""
+    root = fuzz_inputs
+    f = root / f"in_{kind}{suffix}"
+    if kind == "folder":
+        f.mkdir(exist_ok=True)
+    elif kind != "missing":
+        f.write_bytes(_BAD_CONTENT[kind])
+        if suffix == ".csv":
+            (root / f"in_{kind}.csv.json").write_bytes((root / "good.csv.json").read_bytes())
+    before = sorted(p.name for p in root.iterdir())
+    for name, argv in _file_commands(str(f), root).items():
+        capsys.readouterr()
+        rc = main(argv)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2, (name, rc, err[-1:])
+        assert err[-1].startswith("skysim ") and "internal error" not in err[-1], (name, err)
+        assert f.name in err[-1], (name, err[-1])
+        assert sorted(p.name for p in root.iterdir()) == before, name
