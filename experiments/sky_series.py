@@ -347,8 +347,7 @@ def register(sub) -> None:
     p.add_argument("--periods", type=positive_int,
                    help="number of time steps, >= 1 (or give --end)")
     p.add_argument("--freq", type=time_step, default="1min",
-                   help="time step, a positive pandas offset: 1s, 10min, 1h, 1D "
-                        "(negative steps: write --freq=-1min; they are refused)")
+                   help="time step, a positive pandas offset: 1s, 10min, 1h, 1D")
     p.add_argument("--daylight-only", action="store_true",
                    help="leave out the times with the sun at or below the horizon")
     p.add_argument("--directions", type=existing_file,
