@@ -404,5 +404,6 @@ def register(sub) -> None:
                                    "terms and d_max (Yang et al. 2014, eqs. 10-14).")
     c.add_argument("file", type=existing_file,
                    help="measurement table (.csv/.parquet) with its JSON sidecar")
-    c.add_argument("--out", type=output_file(".json"), help="write the fitted parameters as JSON")
+    c.add_argument("--out", type=output_file(".json"),
+                   help="write the fitted parameters as JSON (.json; not the table's sidecar)")
     c.set_defaults(func=_calibrate)

@@ -603,7 +603,8 @@ def register(sub) -> None:
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)
     b.add_argument("--n", type=positive_int, default=200,
-                   help="number of data sets (with --real: of sessions, default 3)")
+                   help="number of data sets, >= 1 (default 200; with --real: number of "
+                        "sessions, default 3); about 1.5 s each")
     b.add_argument("--quick", action="store_true", help="27 data sets (3 per label)")
     b.add_argument("--seed", type=seed, default=7, help="master seed, >= 0")
     b.add_argument("--out", type=output_dir,

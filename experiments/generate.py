@@ -624,7 +624,9 @@ def register(sub) -> None:
                                         "configuration (byte-identical for the same seed)")
     g.add_argument("config", type=existing_file,
                    help="configuration (.toml), see docs/ground_truth.md")
-    g.add_argument("--out", required=True, type=output_dir, help="output folder")
+    g.add_argument("--out", required=True, type=output_dir,
+                   help="output folder: one data file and sidecar per entry, and "
+                        "manifest.json (a failed run leaves it as it was)")
     g.set_defaults(func=_generate_command)
     c = sub.add_parser("compare", help="compare another implementation's output with "
                                        "generated ground truth (exit 1 on failure)")
@@ -632,5 +634,7 @@ def register(sub) -> None:
     c.add_argument("truth", help="a generated file, or a `skysim generate` folder")
     c.add_argument("--tol", action="append", metavar="NAME=VALUE",
                    help="override a tolerance, e.g. --tol aop_deg=1e-3 (repeatable)")
-    c.add_argument("--report", type=output_file(".json"), help="write the comparison as JSON")
+    c.add_argument("--report", type=output_file(".json"),
+                   help="write the comparison as JSON (.json; never one of the compared "
+                        "files)")
     c.set_defaults(func=_compare_command)

@@ -569,8 +569,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("jin2020", help="Jin et al. 2020 attitude filter (with --quick)",
                               description="Same as 'skysim reproduce jin2020', plus --quick.")
     p.add_argument("--trials", type=positive_int, default=20,
-                   help="seeds (>= 20 for the acceptance)")
-    p.add_argument("--seed", type=seed_type, default=2020, help="master random seed, >= 0")
+                   help="number of seeds, >= 1 (default 20, the acceptance needs >= 20); "
+                        "about 3.5 s each")
+    p.add_argument("--seed", type=seed_type, default=2020,
+                   help="master random seed, >= 0 (default 2020)")
     p.add_argument("--out", type=output_dir, default=None,
                    help="output folder (default: results/jin2020)")
     p.add_argument("--quick", action="store_true", help="shorter runs (120 s static, 60 s dynamic)")

@@ -165,10 +165,11 @@ def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
     out = Path(out)
     settings = EngineSettings(n_streams=16)  # 16 streams: as accurate as 40 here (tables README)
     table = natraj_table(reference)
+    from tqdm import tqdm
     rows, docs, maps = [], {}, {}
-    for (tau, albedo), g in table.groupby(["tau", "albedo"]):
-        if quick and (tau, albedo) not in QUICK_CONFIGS:
-            continue
+    groups = [(k, g) for k, g in table.groupby(["tau", "albedo"])
+              if not quick or k in QUICK_CONFIGS]
+    for (tau, albedo), g in tqdm(groups, desc="sky-gap", unit="atmosphere"):
         c, mu0s = cases_from_natraj(g)
         cal = [int(k) for k, m in enumerate(mu0s) if np.any(np.isclose(m, CALIBRATION_MU0))]
         d = diagnose_sky(c, cal, noise_floor=NOISE_FLOOR, settings=settings,
