@@ -13,9 +13,10 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["DefaultsHelpFormatter", "aware_time", "existing_file", "float_in", "int_at_least", "nonnegative_float",
-           "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
-           "seed"]
+__all__ = ["DefaultsHelpFormatter", "aware_time", "data_file_and_sidecars", "existing_file",
+           "float_in", "int_at_least", "nonnegative_float", "nonnegative_int", "output_dir",
+           "output_file", "positive_float", "positive_int", "refuse_replacing_inputs", "seed",
+           "time_step"]
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """Adds ``(default: X)`` to an option's help unless the help already speaks of its
@@ -156,3 +157,61 @@ def output_dir(text: str) -> Path:
     """An output folder that exists or can be created, and is writable."""
     from skysim.io import check_output_dir
     return _path_error(check_output_dir, text, "output folder")
+
+
+def time_step(text: str):
+    """A positive time step as a pandas offset (``1s``, ``10min``, ``1h``, ``1D``)."""
+    import pandas as pd
+    try:
+        offset = pd.tseries.frequencies.to_offset(text)
+        step = (pd.Timestamp("2000-01-01", tz="UTC") + offset) - pd.Timestamp("2000-01-01",
+                                                                               tz="UTC")
+    except (ValueError, TypeError):
+        raise argparse.ArgumentTypeError(
+            f"not a time step: {text!r}; write a number and a unit, e.g. 1s, 10min, 1h, "
+            "1D") from None
+    if step <= pd.Timedelta(0):
+        raise argparse.ArgumentTypeError(f"must be a positive time step; got {text!r}")
+    return offset
+
+
+def _same_file(a: Path, b: Path) -> bool:
+    import os
+    try:
+        if a.exists() and b.exists():
+            return os.path.samefile(a, b)
+    except OSError:
+        pass
+    return a.resolve() == b.resolve()
+
+
+def data_file_and_sidecars(path) -> list[Path]:
+    """A data file and those spellings of its JSON sidecar (``m.csv.json``, ``m.json``) that
+    exist: what reading it may read."""
+    from skysim.io import legacy_sidecar_path, sidecar_path
+    return [Path(path)] + [s for s in (sidecar_path(path), legacy_sidecar_path(path))
+                           if s.exists()]
+
+
+def refuse_replacing_inputs(outputs, inputs) -> None:
+    """Refuse, before any work, an output that would replace an input file.
+
+    Parameters
+    ----------
+    outputs, inputs : iterable of (str, path or None)
+        ``(what, path)`` pairs, ``what`` naming the option as the user typed it (e.g.
+        ``"--out"``, ``"the sidecar of --out"``); None paths are skipped.
+
+    Raises
+    ------
+    ValueError
+        Naming both paths, if an output is the same file as an input.
+    """
+    inputs = [(what, Path(p)) for what, p in inputs if p is not None]
+    for what_out, out in outputs:
+        if out is None:
+            continue
+        for what_in, inp in inputs:
+            if _same_file(Path(out), inp):
+                raise ValueError(f"{what_out} {out} would replace the input {what_in} {inp}; "
+                                 "write the output elsewhere")

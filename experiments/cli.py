@@ -10,7 +10,7 @@ Errors have one path (:func:`main`). Options are checked when parsed
 its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
 ``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
 that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
-130); a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
+130), SIGTERM as ``terminated`` (exit 143), each after the clean-up; a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
 SIGPIPE); an unexpected exception (a bug) as one ``internal error`` line with exit code 70
 (``SKYSIM_TRACEBACK=1`` re-raises it). Files are written atomically (:mod:`skysim.io`), so
 none of these leaves a half-written file.
@@ -32,19 +32,22 @@ for _var in ("OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS", "OMP_NUM_THREADS"):
 import argparse  # noqa: E402
 import importlib  # noqa: E402
 import pkgutil  # noqa: E402
+import signal  # noqa: E402
 import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import experiments
 from experiments.argtypes import output_dir, positive_int, seed
 
-__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_BROKEN_PIPE",
-           "EXIT_INTERNAL"]
+__all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
+           "EXIT_BROKEN_PIPE", "EXIT_INTERNAL"]
 
 EXIT_ERROR = 2
 """Exit code of any error in the input (options, files, configurations), as argparse's."""
 EXIT_INTERRUPTED = 130
 """Exit code after Ctrl-C (128 + SIGINT, as a shell reports it)."""
+EXIT_TERMINATED = 143
+"""Exit code after SIGTERM (128 + SIGTERM)."""
 EXIT_BROKEN_PIPE = 141
 """Exit code when the reader of the output went away (128 + SIGPIPE)."""
 EXIT_INTERNAL = 70
@@ -61,11 +64,18 @@ DEFAULT_SEED = 20140601
 
 
 def _run_target(targets: dict, args) -> int:
-    """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``."""
+    """Run a reproduce target; ``--seed`` defaults to its module's ``DEFAULT_SEED``.
+
+    Options the target does not use are errors; the memory of ``--trials`` is checked and
+    the expected duration announced before any work; the output folder is replaced as a
+    whole (:func:`experiments._run_folder.replacing_folder`)."""
+    from ._progress import announce_duration, expected_reproduction_seconds
+    from ._run_folder import replacing_folder
     func = targets[args.target]
-    if args.reference is not None and not getattr(func, "takes_reference", False):
-        takers = sorted(n for n, f in targets.items() if getattr(f, "takes_reference", False))
-        raise ValueError(f"--reference applies to {', '.join(takers)}, not {args.target}")
+    for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
+        if getattr(args, option) is not None and not getattr(func, attr, False):
+            takers = sorted(n for n, f in targets.items() if getattr(f, attr, False))
+            raise ValueError(f"--{option} applies to {', '.join(takers)}, not {args.target}")
     per_trial = getattr(sys.modules.get(func.__module__), "MEMORY_PER_TRIAL_BYTES", None)
     if per_trial and args.trials:
         from skysim.resources import check_memory
@@ -73,7 +83,24 @@ def _run_target(targets: dict, args) -> int:
                      "use fewer --trials")
     if args.seed is None:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
-    return func(args)
+    run = {"target": args.target, "quick": bool(args.quick), "trials": args.trials,
+           "seed": args.seed}
+    with replacing_folder(args.out or _default_out(args.target), run, force=args.force) as out:
+        args.out = out
+        announce_duration(expected_reproduction_seconds(args.target, args.quick, args.trials),
+                          f"skysim reproduce {args.target}",
+                          "" if args.quick else "--quick is a small run of a few seconds to "
+                                                "minutes")
+        return func(args)
+
+
+_DEFAULT_OUT = {"dark-current": "results/dark_current",
+                "real-sky-compass": "results/real_sky_compass"}
+"""Default output folders that are not ``results/<target>``."""
+
+
+def _default_out(target: str) -> Path:
+    return Path(_DEFAULT_OUT.get(target, f"results/{target}"))
 
 
 def build_parser(command: str | None = "") -> argparse.ArgumentParser:
@@ -106,7 +133,11 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     rep.add_argument("--quick", action="store_true",
                      help="a small, fast run (few trials) for smoke tests")
     rep.add_argument("--out", type=output_dir, default=None,
-                     help="output folder (default: results/<target>)")
+                     help="output folder, replaced as a whole when the run ends (an interrupted "
+                          "or failed run leaves the earlier one) (default: results/<target>)")
+    rep.add_argument("--force", action="store_true",
+                     help="replace an --out folder that holds other files, or a full run by a "
+                          "--quick one")
     rep.add_argument("--data", default=None, metavar="DIR",
                      help="real-sky-compass: folder of recorded photodiode sessions; "
                           "moonlit-sky: folder of the FORS2 moonlit-sky table (default: the "
@@ -149,7 +180,9 @@ def describe_error(exc: BaseException) -> str:
     """One line for an error: the message, or for a bare ``OSError`` its file and reason."""
     if isinstance(exc, OSError) and exc.strerror and exc.filename:
         return f"{exc.filename}: {exc.strerror}"
-    return str(exc) or type(exc).__name__
+    text = str(exc) or type(exc).__name__
+    # one line: a library's message may quote a file's bytes (newlines, control characters)
+    return " ".join("".join(c if c.isprintable() else " " for c in text).split())
 
 
 def _quiet_stdout() -> None:
@@ -164,8 +197,11 @@ def _quiet_stdout() -> None:
 
 def main(argv=None) -> int:
     """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
+    from ._progress import install_warning_format
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
+    install_warning_format()   # a library's warning as one line, not its source line
+    previous_term = _stop_on_sigterm()
     try:
         try:
             parser = build_parser(next((a for a in argv if not a.startswith("-")), None))
@@ -175,6 +211,9 @@ def main(argv=None) -> int:
         command = f"skysim {args.command}"
         rc = args.func(args)
         sys.stdout.flush()  # a closed pipe shows here, inside the handlers below
+    except Terminated:
+        print(f"\n{command}: terminated", file=sys.stderr)
+        return EXIT_TERMINATED
     except KeyboardInterrupt:
         print(f"\n{command}: interrupted", file=sys.stderr)
         return EXIT_INTERRUPTED
@@ -196,7 +235,28 @@ def main(argv=None) -> int:
         return EXIT_ERROR
     except Exception as exc:  # a bug
         return _internal_error(command, exc)
+    finally:
+        if previous_term is not None:
+            signal.signal(signal.SIGTERM, previous_term)
     return int(rc or 0)
+
+
+class Terminated(KeyboardInterrupt):
+    """SIGTERM (``kill``, a batch scheduler's time limit), raised where the program is so that
+    every clean-up runs (temporary files removed, an earlier output folder put back)."""
+
+
+def _raise_terminated(signum, frame):
+    raise Terminated
+
+
+def _stop_on_sigterm():
+    """Turn SIGTERM into :class:`Terminated`; return the previous handler (None when not in
+    the main thread, where Python allows no handler)."""
+    import threading
+    if threading.current_thread() is not threading.main_thread():
+        return None
+    return signal.signal(signal.SIGTERM, _raise_terminated)
 
 
 def _internal_error(command: str, exc: Exception) -> int:

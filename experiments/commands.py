@@ -6,9 +6,9 @@ import argparse
 import json
 from pathlib import Path
 
-from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, existing_file,
-                       float_in, nonnegative_float, output_file, positive_float, positive_int,
-                       seed)
+from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
+                       existing_file, float_in, nonnegative_float, output_file, positive_float,
+                       positive_int, refuse_replacing_inputs, seed)
 
 __all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CONVENTION",
            "MODEL_OPTIONS"]
@@ -116,6 +116,9 @@ def _sky_params(args) -> dict:
         takes = ", ".join(_flag(k) for k in MODEL_OPTIONS[args.model])
         raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
                          f"takes {takes}")
+    if args.model == "multiple" and not given & {"tau", "wavelength_nm"}:
+        raise ValueError("--model multiple needs --tau (Rayleigh optical thickness, about "
+                         "0.097 at 550 nm) or --wavelength-nm")
     return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
 
 
@@ -128,11 +131,11 @@ def _flag(option: str) -> str:
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     """View directions [deg] from a CSV (:func:`read_directions`), or else the default
     full-sky grid (:func:`sky_grid`), after checking its memory."""
-    from skysim.resources import check_memory
+    from skysim.resources import check_memory, format_count
     if directions_csv:
         return read_directions(directions_csv)
     check_memory(sky_grid_size(grid_step_deg) * SKY_BYTES_PER_DIRECTION,
-                 f"{sky_grid_size(grid_step_deg)} sky directions (--grid-step "
+                 f"{format_count(sky_grid_size(grid_step_deg))} sky directions (--grid-step "
                  f"{grid_step_deg:g})", "use a coarser --grid-step")
     return sky_grid(grid_step_deg)
 
@@ -146,6 +149,9 @@ def _sky(args) -> int:
     from skysim.sky import make_sky
 
     params = _sky_params(args)
+    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
+                              sidecar_path(args.out)), ("--plot", args.plot)],
+                            [("--directions", args.directions)])
     sky = None
     if args.source == "moon":  # the night sky: the Moon as the source (experiments.moonlit_sky)
         from .moonlit_sky import moon_sky
@@ -235,12 +241,17 @@ def _sample(args) -> int:
     from skysim.sky import make_sky
     from skysim.sun import Site
 
+    from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
                          f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
+    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
+                                                    sidecar_path(args.out))],
+                            [("--errors", args.errors if args.errors not in ("random", "none")
+                              else None)])
     total = args.n * args.sweeps
     check_memory(total * SAMPLE_BYTES_PER_SAMPLE, f"{total} samples (--n {args.n} x "
                  f"--sweeps {args.sweeps})", "use fewer samples or sweeps")
@@ -251,7 +262,10 @@ def _sample(args) -> int:
     # 90 deg counter-clockwise of the sun at its own start (as the paper's groups a, b, c)
     offsets_s = (np.arange(args.sweeps)[:, None] * interval
                  + np.linspace(0.0, args.duration, args.n)[None, :])
-    end = args.start + pd.Timedelta(seconds=float(offsets_s.max()))  # pandas' range
+    try:
+        end = args.start + pd.Timedelta(seconds=float(offsets_s.max()))  # pandas' range
+    except (OverflowError, ValueError):    # beyond what a pandas time difference holds
+        end = pd.Timestamp.max.tz_localize("UTC")
     if end.year > PANDAS_YEARS[1]:
         raise ValueError(f"the last sample ({end}) is beyond the supported years "
                          f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; shorten --duration, "
@@ -306,6 +320,8 @@ def _calibrate(args) -> int:
     from sensor.measurement import read_measurement
     from skysim.io import write_json_atomic
 
+    refuse_replacing_inputs([("--out", args.out)],
+                            [("file", p) for p in data_file_and_sidecars(args.file)])
     meas = read_measurement(args.file)
     result = calibrate_measurement(meas)
     rows = pd.DataFrame(result.summary_rows())
@@ -352,8 +368,9 @@ def register(sub) -> None:
                    help="sky model; berry: Berry-Dennis-Lee singularity sky, DoP "
                         "dmax |w|/(2 - |w|) (Rayleigh for delta 0), without horizon "
                         "depolarization (too high near the horizon)")
-    p.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True),
-                   help="rayleigh, berry: maximum degree of polarization (model default 1)")
+    p.add_argument("--dmax", type=float_in(0, 1, low_open=True),
+                   help="rayleigh, berry: maximum degree of polarization, in (0, 1] (model "
+                        "default 1)")
     p.add_argument("--tau", type=positive_float,
                    help="multiple: Rayleigh optical thickness (or give --wavelength-nm)")
     p.add_argument("--albedo", type=float_in(0, 1),
@@ -419,5 +436,6 @@ def register(sub) -> None:
                                    "terms and d_max (Yang et al. 2014, eqs. 10-14).")
     c.add_argument("file", type=existing_file,
                    help="measurement table (.csv/.parquet) with its JSON sidecar")
-    c.add_argument("--out", type=output_file(".json"), help="write the fitted parameters as JSON")
+    c.add_argument("--out", type=output_file(".json"),
+                   help="write the fitted parameters as JSON (.json; not the table's sidecar)")
     c.set_defaults(func=_calibrate)

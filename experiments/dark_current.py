@@ -518,7 +518,7 @@ def _plot(result: dict, out: Path):
         ax2.semilogy(g.depth_m, g.illuminance_lx, "k:", lw=0.8)
         ax2.set_ylabel("lux equivalent [lx] (dotted)")
         valid = f"to {bound:g} m" if bound > 0 else "at the surface only"
-        ax.set(title=f"{name}: DoP validated {valid}", xlabel="depth [m] (linear below 1)",
+        ax.set(title=f"{name.replace('_', ' ')}: DoP validated {valid}", xlabel="depth [m] (linear below 1)",
                ylabel="heading error 3σ [deg]")
         ax.grid(True, which="both", alpha=0.3)
     handles, labels = axes[0, 0].get_legend_handles_labels()

@@ -539,11 +539,28 @@ def _real_benchmark_cmd(args) -> int:
     return 0
 
 
+BENCHMARK_BYTES_PER_SET = 20_000
+"""Memory one data set of the blind benchmark keeps until the end [bytes]: its seed, its
+row of the case table (about 30 values and two JSON strings) and its share of the final
+frame and CSV text; rounded up from about 5 kB."""
+
+BENCHMARK_SECONDS_PER_SET = 1.5
+"""Time to generate and diagnose one data set twice (with and without its effect) [s]:
+1.4-2.2 s measured on a shared 2-core machine."""
+
+
 def _benchmark_cmd(args) -> int:
+    from skysim.resources import check_memory
+
+    from ._progress import announce_duration
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
+    check_memory(n * BENCHMARK_BYTES_PER_SET, f"{n} data sets of gap-benchmark", "use a "
+                 "smaller --n")
     effects = _effects_arg(args.effects)
+    announce_duration(n * BENCHMARK_SECONDS_PER_SET, f"skysim gap-benchmark: {n} data sets",
+                      "a smaller --n or --quick makes it shorter")
     out = Path(args.out or "results/gap_benchmark")
     t0 = time.perf_counter()
     cases = run_benchmark(n, args.seed, effects, n_folds=args.folds)
@@ -587,7 +604,8 @@ def register(sub) -> None:
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)
     b.add_argument("--n", type=positive_int, default=200,
-                   help="number of data sets (with --real: of sessions, default 3)")
+                   help="number of data sets, >= 1 (default 200; with --real: number of "
+                        "sessions, default 3); about 1.5 s each")
     b.add_argument("--quick", action="store_true", help="27 data sets (3 per label)")
     b.add_argument("--seed", type=seed, default=7, help="master seed, >= 0")
     b.add_argument("--out", type=output_dir,

@@ -454,7 +454,7 @@ def _quantities(schema: str, truth) -> dict:
 def _row_labels(schema: str, truth, where: str, theirs) -> list[str] | None:
     """Check the rows are the same samples/directions; return labels of the truth rows."""
     if len(theirs) != len(truth):
-        raise CompareError(f"{where}: {len(theirs)} rows, truth has {len(truth)}")
+        raise CompareError(f"{where}: {len(theirs)} rows, the truth has {len(truth)}")
     if schema == SKYMAP_SCHEMA:
         keys = ["elevation_deg", "azimuth_deg"]
         a, b = theirs[keys].to_numpy(float), truth[keys].to_numpy(float)
@@ -490,7 +490,7 @@ def compare_tables(theirs_path, truth_path, tolerances: dict | None = None):
     truth, sidecar = _read(truth_path)
     theirs, _ = _read(theirs_path)
     schema = sidecar.get("schema")
-    where = str(theirs_path)
+    where = f"{theirs_path} against the truth {truth_path}"
     _row_labels(schema, truth, where, theirs)
     results = []
     for quantity, cols in _quantities(schema, truth).items():
@@ -546,7 +546,15 @@ def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
 
 
 def _generate_command(args) -> int:
+    from skysim.io import sidecar_path
+
+    from .argtypes import refuse_replacing_inputs
     config = load_generate_config(args.config)
+    written = [Path(args.out) / "manifest.json"] + [
+        f for kind in _KINDS for e in config.get(kind, [])
+        for f in (Path(args.out) / f"{e['name']}.{e.get('format', 'csv')}",
+                  sidecar_path(Path(args.out) / f"{e['name']}.{e.get('format', 'csv')}"))]
+    refuse_replacing_inputs([("--out", f) for f in written], [("config", args.config)])
     manifest = generate(config, args.out)
     for name, info in manifest["files"].items():
         print(f"{info['kind']:<12s} {name:<40s} sha256 {info['sha256'][:16]}")
@@ -572,8 +580,28 @@ def _parse_tolerances(items) -> dict:
     return tol
 
 
+def _compared_files(what: str, path) -> list[tuple[str, Path]]:
+    """The files ``compare`` reads from ``path`` (a data file and its sidecars, or a generated
+    folder's manifest and the files it lists), each with the argument that names it."""
+    from .argtypes import data_file_and_sidecars
+    path = Path(path)
+    if not path.is_dir():
+        return [(what, p) for p in data_file_and_sidecars(path)]
+    manifest = path / "manifest.json"
+    try:
+        names = list(json.loads(manifest.read_text())["files"])
+    except (OSError, ValueError, KeyError, TypeError):
+        names = []
+    return [(what, manifest)] + [(what, p) for n in names
+                                 for p in data_file_and_sidecars(path / n)]
+
+
 def _compare_command(args) -> int:
     from skysim.io import write_json_atomic
+
+    from .argtypes import refuse_replacing_inputs
+    refuse_replacing_inputs([("--report", args.report)], _compared_files("theirs", args.theirs)
+                            + _compared_files("truth", args.truth))
     tolerances = _parse_tolerances(args.tol)
     report = compare_paths(args.theirs, args.truth, tolerances)
     for name, rows in report["files"].items():
@@ -596,7 +624,9 @@ def register(sub) -> None:
                                         "configuration (byte-identical for the same seed)")
     g.add_argument("config", type=existing_file,
                    help="configuration (.toml), see docs/ground_truth.md")
-    g.add_argument("--out", required=True, type=output_dir, help="output folder")
+    g.add_argument("--out", required=True, type=output_dir,
+                   help="output folder: one data file and sidecar per entry, and "
+                        "manifest.json (a failed run leaves it as it was)")
     g.set_defaults(func=_generate_command)
     c = sub.add_parser("compare", help="compare another implementation's output with "
                                        "generated ground truth (exit 1 on failure)")
@@ -604,5 +634,7 @@ def register(sub) -> None:
     c.add_argument("truth", help="a generated file, or a `skysim generate` folder")
     c.add_argument("--tol", action="append", metavar="NAME=VALUE",
                    help="override a tolerance, e.g. --tol aop_deg=1e-3 (repeatable)")
-    c.add_argument("--report", type=output_file(".json"), help="write the comparison as JSON")
+    c.add_argument("--report", type=output_file(".json"),
+                   help="write the comparison as JSON (.json; never one of the compared "
+                        "files)")
     c.set_defaults(func=_compare_command)

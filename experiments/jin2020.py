@@ -483,19 +483,32 @@ def _write(out: Path, result: dict, figures: bool, seed: int, sc: Scenario) -> N
 
 
 def plot_attitude(r: dict, path: Path, title: str) -> None:
-    """Yaw, pitch and roll over time: truth and the three estimators (seed 0); like Figs. 3-4."""
+    """Yaw, pitch and roll over time (seed 0), like Figs. 3-4: the truth and the three
+    estimators on the left (they overlie each other at this scale), each estimator's error
+    (estimate minus truth, yaw wrapped to [-180, 180)) on the right, where they separate."""
     plt = pyplot()
     ts = _timeseries(r)
-    fig, axes = plt.subplots(3, 1, figsize=(8, 7.5), sharex=True)
-    for ax, ang in zip(axes, ("yaw", "pitch", "roll")):
-        ax.plot(ts.t_s, ts[f"true_{ang}_deg"], "k-", lw=1.5, label="true")
-        for m, style in zip(METHODS, ("-", "--", ":")):
-            ax.plot(ts.t_s, ts[f"{m}_{ang}_deg"], style, lw=1, label=LABELS[m])
+    fig, axes = plt.subplots(3, 2, figsize=(12, 7.5), sharex=True, layout="constrained")
+    styles = dict(zip(METHODS, ("-", "--", ":")))
+    for (ax, err_ax), ang in zip(axes, ("yaw", "pitch", "roll")):
+        ax.plot(ts.t_s, ts[f"true_{ang}_deg"], color="0.6", lw=4, label="true")
+        for m in METHODS:
+            est = ts[f"{m}_{ang}_deg"]
+            ax.plot(ts.t_s, est, styles[m], lw=1, label=LABELS[m])
+            diff = est - ts[f"true_{ang}_deg"]
+            if ang == "yaw":
+                diff = (diff + 180.0) % 360.0 - 180.0
+            err_ax.plot(ts.t_s, diff, styles[m], lw=1)
+        err_ax.axhline(0.0, color="0.6", lw=1)
         ax.set_ylabel(f"{ang} [deg]")
-    axes[0].legend(fontsize=8, ncol=2)
-    axes[-1].set_xlabel("time since start [s]")
+        err_ax.set_ylabel(f"{ang} error [deg]")
+    for ax in axes[-1]:
+        ax.set_xlabel("time since start [s]")
+    axes[0, 0].set_title("attitude")
+    axes[0, 1].set_title("estimate minus truth")
+    handles, labels = axes[0, 0].get_legend_handles_labels()
+    fig.legend(handles, labels, loc="outside lower center", ncol=4, fontsize=9)
     fig.suptitle(f"{title}: attitude, seed 0 ({r['start']:%Y-%m-%d %H:%M:%S %Z})")
-    fig.tight_layout()
     save_png(fig, path, dpi=110)
 
 
@@ -510,7 +523,7 @@ def plot_errors(runs: dict, path: Path) -> None:
         ax.set(xlabel="time since start [s]", ylabel="attitude error, RMS over seeds [deg]",
                title=f"{kind} run ({r['errors']['gyro']['total'].shape[0]} seeds)")
         ax.grid(True, which="both", lw=0.3)
-        ax.legend(fontsize=8)
+        ax.legend(fontsize=8, loc="best")
     fig.tight_layout()
     save_png(fig, path, dpi=110)
 
@@ -556,8 +569,10 @@ def register(subparsers) -> None:
     p = subparsers.add_parser("jin2020", help="Jin et al. 2020 attitude filter (with --quick)",
                               description="Same as 'skysim reproduce jin2020', plus --quick.")
     p.add_argument("--trials", type=positive_int, default=20,
-                   help="seeds (>= 20 for the acceptance)")
-    p.add_argument("--seed", type=seed_type, default=2020, help="master random seed, >= 0")
+                   help="number of seeds, >= 1 (default 20, the acceptance needs >= 20); "
+                        "about 3.5 s each")
+    p.add_argument("--seed", type=seed_type, default=2020,
+                   help="master random seed, >= 0 (default 2020)")
     p.add_argument("--out", type=output_dir, default=None,
                    help="output folder (default: results/jin2020)")
     p.add_argument("--quick", action="store_true", help="shorter runs (120 s static, 60 s dynamic)")

@@ -24,13 +24,14 @@ DEFAULT_SEED = 2023
 QUICK_EFFECTS = ("yaw_scale", "occlusion")
 
 
-def session_files(folder) -> list[Path]:
-    """Photodiode sessions (data files with a ``skysim.photodiodes/1`` sidecar) of a folder."""
+def session_files(folder, option: str = "--data") -> list[Path]:
+    """Photodiode sessions (data files with a ``skysim.photodiodes/1`` sidecar) of a folder;
+    ``option`` is the command-line option that names the folder (for the error message)."""
     import json
     folder = Path(folder)
     if not folder.is_dir():
         raise FileNotFoundError(
-            f"no session folder {folder}: give --data DIR with skysim.photodiodes/1 files "
+            f"no session folder {folder}: give {option} DIR with skysim.photodiodes/1 files "
             "(e.g. the ring-compass recordings of Gkanias et al. 2023)")
     out = []
     for f in sorted(folder.iterdir()):
@@ -260,7 +261,7 @@ def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessi
     from tqdm import tqdm
 
     from .real_injection import inject
-    files = session_files(folder)[:n_sessions]
+    files = session_files(folder, "--real")[:n_sessions]
     rng = np.random.default_rng(seed)
     rows = []
     jobs = [(f, e) for f in files for e in effects_to_inject]
@@ -333,6 +334,9 @@ def _reproduce(args) -> int:
     print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png "
           "and one diagnosis.json per session")
     return 0
+
+
+_reproduce.takes_data = True
 
 
 def register_reproduce(targets: dict) -> None:

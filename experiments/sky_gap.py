@@ -70,6 +70,18 @@ def _residuals(c, effect, params, settings):
     return np.hypot(q - c.q, u - c.u)
 
 
+def _words(name: str) -> str:
+    """An effect or verdict name as words for a figure (``ground_albedo`` -> ground albedo)."""
+    return str(name).replace("_", " ")
+
+
+def _case_words(key: str) -> str:
+    """``tau0.25_A0`` -> ``tau = 0.25, ground albedo 0``."""
+    import re
+    m = re.fullmatch(r"tau([\d.]+)_A([\d.]+)", key)
+    return f"tau = {m[1]}, ground albedo {m[2]}" if m else key
+
+
 def _figures(out: Path, docs: dict, maps: dict) -> None:
     import matplotlib
     matplotlib.use("Agg")
@@ -77,41 +89,50 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
 
     dims = ["by_sun_distance", "by_view_zenith", "horizon", "neutral_points"]
     n = len(docs)
-    fig, axes = plt.subplots(n, 1, figsize=(11, 2.6 * n), squeeze=False)
+    fig, axes = plt.subplots(n, 1, figsize=(12, 3.6 * n), squeeze=False,
+                             layout="constrained")
     for ax, (key, d) in zip(axes[:, 0], docs.items()):
         names, before, after = [], [], []
         for dim in dims:
             for b, a in zip(d["where"][dim], d["where_after"][dim]):
-                names.append(b["slice"].replace(" deg", "").replace("from sun", "sun"))
+                names.append(b["slice"].replace(" deg from sun", " deg from the sun"))
                 before.append(b["rms"])
                 after.append(a["rms"])
         x = np.arange(len(names))
         ax.bar(x - 0.2, before, 0.4, label="single scattering, fitted d_max")
-        ax.bar(x + 0.2, after, 0.4, label=f"after: {d['verdict']['best_candidate']}")
-        ax.axhline(d["verdict"]["noise_floor"], color="k", ls="--", lw=0.8, label="noise floor")
+        ax.bar(x + 0.2, after, 0.4,
+               label=f"after fitting {_words(d['verdict']['best_candidate'])}")
+        ax.axhline(d["verdict"]["noise_floor"], color="k", ls="--", lw=0.8,
+                   label="noise floor (engine vs tables)")
         ax.set_yscale("log")
         ax.set_xticks(x)
-        ax.set_xticklabels(names, rotation=30, ha="right", fontsize=6)
-        ax.set_ylabel("withheld RMS |(dq,du)|", fontsize=7)
-        ax.set_title(f"{key}: verdict {d['verdict']['effect']}", fontsize=8)
-        ax.legend(fontsize=6)
-    fig.tight_layout()
+        ax.set_xticklabels(names, rotation=25, ha="right", fontsize=8)
+        ax.set_ylabel("withheld RMS |(dq, du)|", fontsize=9)
+        ax.set_title(f"{_case_words(key)}: verdict {_words(d['verdict']['effect'])}",
+                     fontsize=10)
+        ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
     save_png(fig, out / "gap_by_slice.png")
 
-    fig, axes = plt.subplots(len(maps), 2, figsize=(7, 3.2 * len(maps)), squeeze=False,
-                             subplot_kw={"projection": "polar"})
+    fig, axes = plt.subplots(len(maps), 2, figsize=(8.5, 3.8 * len(maps)), squeeze=False,
+                             subplot_kw={"projection": "polar"}, layout="constrained")
     for row, (key, (c, before, after, best)) in zip(axes, maps.items()):
         vmax = float(np.max(before))
-        for ax, r, title in [(row[0], before, "single scattering"), (row[1], after, best)]:
+        for ax, r, title in [(row[0], before, "single scattering, fitted d_max"),
+                             (row[1], after, f"after fitting {_words(best)}")]:
             sc = ax.scatter(np.radians(c.view_azimuth_deg), 90.0 - c.view_elevation_deg, c=r,
                             s=14, cmap="magma", vmin=0, vmax=vmax)
             ax.set_theta_zero_location("N")
             ax.set_theta_direction(-1)
             ax.set_ylim(0, 90)
-            ax.set_title(f"{key}, mu0 = {MAP_MU0}: {title}", fontsize=7)
-            fig.colorbar(sc, ax=ax, fraction=0.04)
-    fig.suptitle("|(dq, du)| over the withheld sky (sun at azimuth 0)", fontsize=8)
-    fig.tight_layout()
+            ax.set_yticks([30, 60, 90])
+            ax.set_yticklabels(["30", "60", "90 deg"], fontsize=7)
+            ax.set_rlabel_position(157.5)   # zenith-angle labels where the grid has no data
+            ax.tick_params(axis="x", labelsize=7)
+            ax.set_title(f"{_case_words(key)}, mu0 = {MAP_MU0}\n{title}", fontsize=8)
+        fig.colorbar(sc, ax=row.tolist(), fraction=0.04, pad=0.06,
+                     label="withheld residual |(dq, du)|")
+    fig.suptitle("Residual of the normalised Stokes vector over the withheld sky (sun at "
+                 "azimuth 0; radius: view zenith angle)", fontsize=9)
     save_png(fig, out / "residual_maps.png")
 
 
@@ -144,10 +165,11 @@ def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
     out = Path(out)
     settings = EngineSettings(n_streams=16)  # 16 streams: as accurate as 40 here (tables README)
     table = natraj_table(reference)
+    from tqdm import tqdm
     rows, docs, maps = [], {}, {}
-    for (tau, albedo), g in table.groupby(["tau", "albedo"]):
-        if quick and (tau, albedo) not in QUICK_CONFIGS:
-            continue
+    groups = [(k, g) for k, g in table.groupby(["tau", "albedo"])
+              if not quick or k in QUICK_CONFIGS]
+    for (tau, albedo), g in tqdm(groups, desc="sky-gap", unit="atmosphere"):
         c, mu0s = cases_from_natraj(g)
         cal = [int(k) for k, m in enumerate(mu0s) if np.any(np.isclose(m, CALIBRATION_MU0))]
         d = diagnose_sky(c, cal, noise_floor=NOISE_FLOOR, settings=settings,

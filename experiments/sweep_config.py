@@ -352,11 +352,37 @@ def load_config(path) -> SweepConfig:
 
 
 def read_toml(path, error_cls: type[Exception]) -> dict:
-    """Parse a TOML file; a missing file is ``FileNotFoundError``, bad TOML ``error_cls``."""
+    """Parse a TOML file; a missing file is ``FileNotFoundError``, bad TOML ``error_cls``.
+
+    TOML's own dates and times (``start = 2013-05-22T17:10:00+08:00`` without quotes) are
+    returned as their ISO 8601 text, the form every reader of times here takes (and JSON
+    can store): the unquoted and the quoted spelling mean the same time.
+    """
     path = Path(path)
+    if path.is_dir():
+        raise error_cls(f"{path} is a folder; give a .toml file")
     if not path.is_file():
         raise FileNotFoundError(f"no configuration file {path}")
     try:
-        return tomllib.loads(path.read_text())
+        config = _iso_times(tomllib.loads(path.read_text()))
     except tomllib.TOMLDecodeError as exc:
         raise error_cls(f"{path}: invalid TOML ({exc})") from exc
+    except UnicodeDecodeError:
+        raise error_cls(f"{path} is not a text file (not UTF-8); give a TOML "
+                        "configuration") from None
+    if not config:
+        raise error_cls(f"{path} holds no settings (an empty configuration); see the "
+                        "examples/ folder for a complete one")
+    return config
+
+
+def _iso_times(value):
+    """``value`` with every TOML date, time or datetime replaced by its ISO 8601 text."""
+    import datetime
+    if isinstance(value, dict):
+        return {k: _iso_times(v) for k, v in value.items()}
+    if isinstance(value, list):
+        return [_iso_times(v) for v in value]
+    if isinstance(value, (datetime.date, datetime.time)):   # datetime is a date
+        return value.isoformat()
+    return value

@@ -109,4 +109,7 @@ def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
             pd.read_csv(path, **read_csv_kwargs)
     except Exception as exc:  # pandas/pyarrow raise many types for corrupt files
         raise error_cls(f"{path}: cannot read table ({exc})") from exc
+    if table.empty:
+        raise error_cls(f"{path} has no rows (a header at most); a {schema} table needs one "
+                        "row per sample")
     return table, sidecar

@@ -20,14 +20,23 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
-__all__ = ["OutputPathError", "atomic_write", "atomic_write_many", "check_output_dir",
-           "check_output_file", "find_sidecar", "legacy_sidecar_path", "sidecar_path",
-           "write_json_atomic"]
+__all__ = ["OutputPathError", "WriteError", "atomic_write", "atomic_write_many",
+           "check_free_space", "check_output_dir", "check_output_file", "find_sidecar",
+           "legacy_sidecar_path", "sidecar_path", "write_json_atomic"]
+
+FREE_SPACE_MARGIN = 1.1
+"""Free space a writer asks for, relative to its size estimate: room for the estimate's
+error and for the file system's own blocks."""
 
 
 class OutputPathError(OSError):
     """An output path cannot be written: it is a folder, lies under a file, or its folder is
     not writable. The message names the path and what to give instead."""
+
+
+class WriteError(OSError):
+    """Writing a file failed part-way (a full disk, a quota, a lost network share): the message
+    names the destination and the reason; the destination is left as it was."""
 
 
 def sidecar_path(path) -> Path:
@@ -120,6 +129,45 @@ def check_output_dir(path, what: str = "output folder") -> Path:
     return path
 
 
+def check_free_space(path, nbytes: float, what: str) -> None:
+    """Check before any work that the file system of ``path`` has room for ``nbytes``.
+
+    A library writing into a full disk may fail in ways no caller can catch (HDF5 has been
+    seen to crash the interpreter); the estimate is checked first instead.
+
+    Parameters
+    ----------
+    path : str or Path
+        The file to be written (its nearest existing folder is asked).
+    nbytes : float
+        Estimated size of what will be written [bytes].
+    what : str
+        What is written, for the message (e.g. ``"1440 times x 8280 directions"``).
+
+    Raises
+    ------
+    WriteError
+        If the free space is below ``FREE_SPACE_MARGIN * nbytes``.
+    """
+    import shutil
+    folder = Path(path).absolute().parent
+    while not folder.exists() and folder != folder.parent:
+        folder = folder.parent
+    free = shutil.disk_usage(folder).free
+    nbytes = float(min(nbytes, 10**300))   # sizes beyond a float
+    if FREE_SPACE_MARGIN * nbytes > free:
+        raise WriteError(f"{path}: {what} would take about {_size(nbytes)} on disk; only "
+                         f"{_size(free)} is free in {folder}; free some space or write "
+                         "elsewhere")
+
+
+def _size(n: float) -> str:
+    for unit, scale in (("GB", 1e9), ("MB", 1e6), ("kB", 1e3)):
+        if n >= scale:
+            return f"{n / scale:.3g} {unit}"
+    return f"{int(n)} B"
+
+
 @contextlib.contextmanager
 def _temp_in(directory: Path, suffix: str):
     fd, tmp = tempfile.mkstemp(dir=directory, prefix=".tmp-", suffix=suffix)
@@ -140,6 +188,8 @@ def atomic_write_many(items: Iterable[tuple[Path, Callable[[Path], None]]]) -> N
     ------
     OutputPathError
         If a destination is a folder, lies under a file or its folder is not writable.
+    WriteError
+        If a writer fails with an ``OSError`` (e.g. the disk is full); no destination changes.
     """
     items = [(check_output_file(dest), fn) for dest, fn in items]
     with contextlib.ExitStack() as stack:
@@ -151,7 +201,14 @@ def atomic_write_many(items: Iterable[tuple[Path, Callable[[Path], None]]]) -> N
                 raise OutputPathError(f"cannot create folder {dest.parent} ({exc.strerror})") \
                     from exc
             tmp = stack.enter_context(_temp_in(dest.parent, dest.suffix))
-            fn(tmp)
+            try:
+                fn(tmp)
+            except OSError as exc:
+                if isinstance(exc, (OutputPathError, WriteError)):
+                    raise
+                reason = exc.strerror or str(exc) or type(exc).__name__
+                raise WriteError(f"writing {dest} failed ({reason}); {dest} is left as it "
+                                 "was") from exc
             os.chmod(tmp, _FILE_MODE)
             temps.append((tmp, dest))
         for tmp, dest in temps:

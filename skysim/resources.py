@@ -12,7 +12,7 @@ import os
 
 from .exceptions import InvalidParameterError
 
-__all__ = ["MemoryLimitError", "check_memory", "memory_limit_bytes"]
+__all__ = ["MemoryLimitError", "check_memory", "format_count", "memory_limit_bytes"]
 
 AVAILABLE_FRACTION = 0.8
 """Share of the available memory one run may plan to use (the rest: the interpreter,
@@ -55,6 +55,11 @@ def memory_limit_bytes() -> int:
     return int(AVAILABLE_FRACTION * _available_bytes())
 
 
+def format_count(n) -> str:
+    """A count for a message: exact up to 10^12, else three digits (``3.24e+305``)."""
+    return str(int(n)) if n < 10**12 else f"{float(min(n, 10**300)):.3g}"
+
+
 def _gib(n: float) -> str:
     return f"{n / 2**30:.3g} GiB" if n >= 2**30 else f"{n / 2**20:.3g} MiB"
 
@@ -72,6 +77,7 @@ def check_memory(nbytes: float, what: str, fix: str) -> None:
         How to make it fit, e.g. ``"use a coarser --grid-step"``.
     """
     limit = memory_limit_bytes()
+    nbytes = float(min(nbytes, 10**300))   # sizes beyond a float (a step of 1e-300 deg)
     if nbytes > limit:
         raise MemoryLimitError(
             f"{what} would need about {_gib(nbytes)} of memory, more than the {_gib(limit)} "

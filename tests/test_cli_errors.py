@@ -520,3 +520,415 @@ def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
         t.join(timeout=30)
     done = sum(Path(t).exists() for t in tasks)
     assert 1 <= done <= 8, done        # 24 would mean the queue was drained
+
+
+# --------------------------------------------------------------------------- sky-series
+
+SERIES = ["sky-series", "--lat", "34.1", "--lon", "108.5", "--start",
+          "2013-05-22T10:00+08:00", "--grid-step", "30"]
+
+
+@pytest.mark.parametrize("extra,needles", [
+    (["--periods", "0"], ["--periods", "'0'"]),
+    (["--periods", "-3"], ["--periods", "'-3'"]),
+    (["--periods", "2.5"], ["--periods", "'2.5'"]),
+    (["--periods", "5", "--freq", "0s"], ["--freq", "positive", "'0s'"]),
+    (["--periods", "5", "--freq=-1min"], ["--freq", "positive", "'-1min'"]),
+    (["--periods", "5", "--freq", "fortnightly"], ["--freq", "'fortnightly'"]),
+    (["--end", "2013-05-22T09:00+08:00"], ["--end 2013-05-22T09:00:00+08:00",
+                                            "before --start"]),
+    (["--end", "2013-05-22T11:00"], ["--end", "no UTC offset"]),
+    (["--periods", "3", "--end", "2013-05-22T11:00+08:00"], ["--end or --periods"]),
+    ([], ["--end or --periods"]),
+    (["--periods", "1e9"], ["--periods 1000000000", "1678-2261"]),
+    (["--periods", "3", "--model", "multiple"], ["--model multiple needs --tau"]),
+    (["--periods", "3", "--tau", "0.1"], ["--tau", "--model multiple"]),
+    (["--periods", "3", "--model", "berry", "--float32"], ["--float32", "--model berry"]),
+    (["--periods", "3", "--max-memory-mb", "0"], ["--max-memory-mb", "'0'"]),
+    (["--periods", "3", "--dmax", "1.5"], ["--dmax", "'1.5'"]),
+    (["--periods", "3", "--lat", "nan"], ["--lat", "'nan'"]),
+])
+def test_sky_series_options(extra, needles, capsys, tmp_path):
+    out = tmp_path / "s.nc"
+    _fails([*SERIES, *extra, "--out", str(out)], capsys, *needles)
+    assert list(tmp_path.iterdir()) == []
+
+
+def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, monkeypatch):
+    out = tmp_path / "s.parquet"
+    # 1e8 steps of 1 s fit the years; their times alone would need ~20 GB
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1000")
+    _fails([*SERIES, "--periods", "1e8", "--freq", "1s", "--out", str(out)], capsys,
+           "100000000 time steps x 48 directions", "--periods")
+    monkeypatch.delenv("SKYSIM_MEMORY_LIMIT_MB")
+    import shutil
+    usage = shutil.disk_usage(tmp_path)
+    monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
+    _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
+           "100 time steps x 48 directions", "only 10 kB is free")
+    from experiments.sky_series import write_sky_series   # the library's writer checks too
+    from skysim.io import WriteError
+    from skysim.sky import make_sky
+    with pytest.raises(WriteError, match="1000 time steps x 2 directions would take about 80 kB"):
+        write_sky_series(tmp_path / "s.nc", make_sky("rayleigh"), [10, 20], [0, 0],
+                         np.full(1000, 30.0), np.zeros(1000))
+    assert list(tmp_path.iterdir()) == []
+
+
+@pytest.mark.parametrize("suffix", [".nc", ".parquet"])
+def test_sky_series_failed_write_names_the_file_and_leaves_nothing(suffix, capsys, tmp_path,
+                                                                    monkeypatch):
+    """A disk that fills up part-way: one error line naming the file, no partial file, and an
+    earlier series of the same name kept."""
+    pytest.importorskip("h5netcdf")
+    import errno
+
+    import experiments.sky_series as ss
+    out = tmp_path / f"s{suffix}"
+    assert main([*SERIES, "--periods", "3", "--out", str(out)]) == 0
+    before = out.read_bytes()
+    writer = "_write_netcdf" if suffix == ".nc" else "_write_parquet"
+    real = getattr(ss, writer)
+
+    def full_disk(tmp, blocks, *rest):
+        real(tmp, iter(list(blocks)[:1]), *rest)       # part of the series reaches the disk
+        raise OSError(errno.ENOSPC, "No space left on device")
+    monkeypatch.setattr(ss, writer, full_disk)
+    capsys.readouterr()
+    _fails([*SERIES, "--periods", "5", "--freq", "10min", "--out", str(out)], capsys,
+           f"writing {out} failed (No space left on device)")
+    assert out.read_bytes() == before
+    assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
+        [out.name] + ([out.name + ".json"] if suffix == ".parquet" else []))
+
+
+def test_sky_series_multiple_takes_tau_and_albedo(tmp_path):
+    pytest.importorskip("sasktran2")
+    out = tmp_path / "s.parquet"
+    assert main([*SERIES, "--grid-step", "45", "--periods", "1", "--model", "multiple",
+                 "--tau", "0.1", "--albedo", "0.2", "--out", str(out)]) == 0
+    side = json.loads((tmp_path / "s.parquet.json").read_text())
+    assert side["sky"]["tau"] == 0.1 and side["sky"]["albedo"] == 0.2
+
+
+def test_dmax_one_is_accepted_as_its_help_says(tmp_path):
+    """d_max lies in (0, 1]: 1 (an ideal Rayleigh atmosphere) is the model default."""
+    out = tmp_path / "sky.csv"
+    assert main(["sky", *SUN, "--dmax", "1", "--grid-step", "30", "--out", str(out)]) == 0
+    assert pd.read_csv(out).dop.max() == pytest.approx(1.0, abs=0.02)
+    assert main([*SERIES, "--periods", "2", "--dmax", "1", "--out",
+                 str(tmp_path / "s.parquet")]) == 0
+
+
+# --------------------------------------------------------------------------- TOML datetimes
+
+def test_an_unquoted_toml_datetime_is_the_same_time_as_a_quoted_one(tmp_path, capsys):
+    text = ('seed = 1\n[site]\nlatitude_deg = 34.0\nlongitude_deg = 108.0\n[[sky_map]]\n'
+            'name = "a"\ntime = {t}\ngrid_step_deg = 30.0\n[[measurement]]\nname = "b"\n'
+            'start = {t}\nn = 20\n')
+    for name, t in (("bare", "2013-05-22T17:10:00+08:00"), ("quoted", '"2013-05-22T17:10:00+08:00"')):
+        (tmp_path / f"{name}.toml").write_text(text.format(t=t))
+        assert main(["generate", str(tmp_path / f"{name}.toml"), "--out",
+                     str(tmp_path / name)]) == 0
+    for f in ("a.csv", "b.csv", "manifest.json"):
+        assert (tmp_path / "bare" / f).read_bytes() == (tmp_path / "quoted" / f).read_bytes()
+    (tmp_path / "naive.toml").write_text(text.format(t="2013-05-22T17:10:00"))
+    _fails(["generate", str(tmp_path / "naive.toml"), "--out", str(tmp_path / "n")], capsys,
+           "'2013-05-22T17:10:00'", "timezone-naive")
+    assert not (tmp_path / "n").exists()
+
+
+# --------------------------------------------------------------------------- outputs vs inputs
+
+@pytest.mark.parametrize("case", ["sky_directions", "calibrate_sidecar", "compare_manifest",
+                                  "compare_sidecar", "generate_config", "series_sidecar",
+                                  "sample_sidecar"])
+def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
+    data, cfg = Path(inputs["data"]), Path(inputs["cfg"])
+    dirs = tmp_path / "in" / "d.csv"
+    dirs.write_text("elevation_deg,azimuth_deg\n10,20\n")
+    sdirs = tmp_path / "in" / "d.parquet.json"   # named like the sidecar of d.parquet
+    sdirs.write_text(dirs.read_text())
+    truth = tmp_path / "truth"
+    assert main(["generate", str(cfg), "--out", str(truth)]) == 0
+    errors = tmp_path / "in" / "x.csv.json"      # named like the sidecar of x.csv
+    errors.write_text('{"misalignment_deg": [0, 0, 0, 0, 0, 0], "transmittance": [0, 0, 0], '
+                      '"noise_V": [0, 0, 0]}')
+    cfg_in_out = truth / "m.csv"      # the data file its own entry "m" writes
+    argv, victim = {
+        "sky_directions": (["sky", *SUN, "--directions", str(dirs), "--out", str(dirs)], dirs),
+        "calibrate_sidecar": (["calibrate", str(data), "--out", f"{data}.json"],
+                              Path(f"{data}.json")),
+        "compare_manifest": (["compare", str(truth), str(truth), "--report",
+                              str(truth / "manifest.json")], truth / "manifest.json"),
+        "compare_sidecar": (["compare", str(truth / "m.csv"), str(truth / "m.csv"), "--report",
+                             str(truth / "m.csv.json")], truth / "m.csv.json"),
+        "generate_config": (["generate", str(cfg_in_out), "--out", str(truth)], cfg_in_out),
+        "series_sidecar": ([*SERIES, "--periods", "2", "--directions", str(sdirs), "--out",
+                            str(sdirs.with_name("d.parquet"))], sdirs),
+        "sample_sidecar": (["sample", "--errors", str(errors), "--out",
+                            str(errors.with_name("x.csv"))], errors),
+    }[case]
+    if case == "generate_config":
+        cfg_in_out.write_text(cfg.read_text())
+    before = victim.read_bytes()
+    capsys.readouterr()
+    line = _fails(argv, capsys, "would replace the input", str(victim))
+    assert line.count(str(victim)) == 2
+    assert victim.read_bytes() == before
+
+
+# --------------------------------------------------------------------------- reproduction folders
+
+def _interrupting_target(monkeypatch, module: str):
+    """Make ``module``'s reproduction write one file, then be interrupted (Ctrl-C)."""
+    import importlib
+    mod = importlib.import_module(f"experiments.{module}")
+    real = mod._reproduce
+
+    def interrupted(args):
+        (Path(args.out) / "table1.csv").write_text("seed,partial\n")
+        raise KeyboardInterrupt
+    monkeypatch.setattr(mod, "_reproduce", interrupted)
+    return real
+
+
+def test_reproduction_folder_is_replaced_whole(tmp_path, capsys, monkeypatch):
+    out = tmp_path / "r"
+    assert main(["reproduce", "compound-eye", "--trials", "3", "--out", str(out)]) == 0
+    full = {p.name: p.read_bytes() for p in out.iterdir()}
+    assert json.loads(full["run.json"]) == {"target": "compound-eye", "quick": False,
+                                            "trials": 3, "seed": 20140601}
+    # a quick run would replace the full one: refused, then allowed with --force
+    _fails(["reproduce", "compound-eye", "--quick", "--out", str(out)], capsys,
+           f"--out {out} holds a full run of compound-eye", "--force")
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == full
+    # another target, or a folder of other files: refused
+    _fails(["reproduce", "yang2014", "--quick", "--out", str(out)], capsys,
+           "not a run of yang2014")
+    other = tmp_path / "notes"
+    other.mkdir()
+    (other / "mine.txt").write_text("keep")
+    _fails(["reproduce", "yang2014", "--quick", "--out", str(other)], capsys,
+           f"--out {other} already holds files")
+    assert (other / "mine.txt").read_text() == "keep"
+    # an interrupted run leaves the earlier run as it was, with nothing of its own
+    _interrupting_target(monkeypatch, "compound_eye")
+    assert main(["reproduce", "compound-eye", "--trials", "2", "--seed", "5", "--out",
+                 str(out)]) == EXIT_INTERRUPTED
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == full
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["notes", "r"]   # nothing left aside
+    monkeypatch.undo()
+    # --force: the quick run replaces the folder; no file of the full run stays beside it
+    assert main(["reproduce", "compound-eye", "--quick", "--force", "--out", str(out)]) == 0
+    assert json.loads((out / "run.json").read_text())["quick"] is True
+    quick_names = {p.name for p in out.iterdir()}
+    assert quick_names <= set(full) and all(
+        (out / n).stat().st_mtime_ns >= (out / "run.json").stat().st_mtime_ns - 10**11
+        for n in quick_names)
+
+
+def test_reproduction_options_that_do_not_apply(tmp_path, capsys):
+    _fails(["reproduce", "yang2014", "--data", str(tmp_path), "--out", str(tmp_path / "o")],
+           capsys, "--data applies to real-sky-compass, not yang2014")
+    _fails(["gap-benchmark", "--real", str(tmp_path / "none"), "--out", str(tmp_path / "o")],
+           capsys, "give --real DIR")
+    assert not (tmp_path / "o").exists()
+
+
+def test_gap_benchmark_size_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
+    monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
+    _fails(["gap-benchmark", "--n", "1e6", "--out", str(tmp_path / "o")], capsys,
+           "1000000 data sets of gap-benchmark", "--n")
+    assert not (tmp_path / "o").exists()
+
+
+def test_long_runs_state_their_expected_duration(capsys):
+    from experiments._progress import announce_duration, expected_reproduction_seconds
+    assert expected_reproduction_seconds("sky-gap", False, None) == 840.0
+    assert expected_reproduction_seconds("yang2014", False, 2000) == 10 * \
+        expected_reproduction_seconds("yang2014", False, None)
+    announce_duration(5.0, "a run of five seconds")      # below 10 s: silent
+    announce_duration(840.0, "skysim reproduce sky-gap", "--quick is shorter")
+    err = capsys.readouterr().err
+    assert err == "skysim reproduce sky-gap: expected duration about 14 min; --quick is " \
+                  "shorter\n"
+
+
+def test_warnings_are_one_readable_line():
+    """A library's warning during a command: one line on stderr, no source line (run in a
+    fresh interpreter: pytest records warnings itself)."""
+    import subprocess
+    code = ("import warnings, experiments.commands as c\n"
+            "def warns(args):\n"
+            "    warnings.warn('invalid value encountered in\\n    arccos', RuntimeWarning)\n"
+            "    return 0\n"
+            "c._sky = warns\n"
+            "from experiments.cli import main\n"
+            "raise SystemExit(main(['sky', '--sun-elevation', '30', '--sun-azimuth', '10']))\n")
+    run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                         timeout=120)
+    assert run.returncode == 0, run.stderr
+    assert run.stderr == "skysim: warning: invalid value encountered in arccos " \
+                         "(RuntimeWarning)\n"
+
+
+# --------------------------------------------------------------------------- help of every option
+
+def _all_options():
+    import argparse
+    parser = build_parser()
+    sub = next(a for a in parser._actions if isinstance(a, argparse._SubParsersAction))
+    for name, p in sorted(sub.choices.items()):
+        for action in p._actions:
+            if not isinstance(action, argparse._HelpAction):
+                yield name, p, action
+
+
+@pytest.mark.parametrize("name,parser,action", list(_all_options()),
+                         ids=lambda x: x if isinstance(x, str) else getattr(x, "dest", ""))
+def test_every_option_has_help_and_no_empty_default(name, parser, action):
+    if name in ("camera",) and action.dest in ("lens", "sky"):
+        pytest.xfail("camera options owned elsewhere have no help yet")
+    assert action.help and len(action.help) > 10, (name, action.option_strings or action.dest)
+    fmt = parser._get_formatter()
+    text = fmt._expand_help(action) if action.help else ""
+    assert "default: None" not in text, (name, action.dest, text)
+    if action.required or not action.option_strings:
+        assert "(default:" not in text, (name, action.dest, text)
+    if action.choices and not isinstance(action.choices, dict):
+        usage = parser.format_help()
+        assert all(str(c) in usage for c in action.choices), (name, action.dest)
+
+
+def test_durations_read_at_a_glance():
+    from experiments._progress import format_duration
+    assert [format_duration(s) for s in (45, 840, 9000, 5.3e5)] == [
+        "45 s", "14 min", "2.5 h", "6 days"]
+
+
+@pytest.mark.skipif(not hasattr(os, "fork"), reason="needs POSIX signals")
+def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
+    """``kill`` (or a scheduler's time limit) mid-run: the earlier output folder is put back."""
+    import signal
+    import subprocess
+    import time
+    out = tmp_path / "r"
+    assert main(["reproduce", "compound-eye", "--trials", "2", "--out", str(out)]) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "reproduce", "camera",
+                             "--trials", "1000", "--out", str(out), "--force"],
+                            stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not any(p.name.startswith(".r.earlier-") for p in tmp_path.iterdir()):
+        assert time.time() < deadline and proc.poll() is None, proc.stderr.read()
+        time.sleep(0.2)
+    time.sleep(1.0)
+    proc.send_signal(signal.SIGTERM)
+    assert proc.wait(timeout=60) == 143
+    assert "terminated" in proc.stderr.read()
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+    assert [p.name for p in tmp_path.iterdir()] == ["r"]
+
+
+# --------------------------------------------------------------------------- fuzz batteries
+
+_FUZZ_BASE = {
+    "sky": ["sky", *SUN, "--grid-step", "30"],
+    "sky-series": [*SERIES, "--periods", "2", "--out", "s.parquet"],
+    "sample": ["sample", "--out", "s.csv", "--n", "20"],
+}
+_FUZZ_OPTIONS = {
+    "sky": ["--alt", "--sun-elevation", "--sun-azimuth", "--grid-step", "--dmax", "--tau",
+            "--albedo", "--wavelength-nm", "--pressure-hPa", "--delta-deg"],
+    "sky-series": ["--lat", "--lon", "--alt", "--periods", "--grid-step", "--dmax",
+                   "--max-memory-mb"],
+    "sample": ["--lat", "--lon", "--alt", "--duration", "--n", "--sweeps", "--sweep-interval",
+               "--dmax", "--seed"],
+}
+_FUZZ_VALUES = ["0", "-1", "1e30", "1e-300", "nan", "-inf", "1e400", "x"]
+
+
+@pytest.mark.parametrize("command,option", [(c, o) for c, os_ in _FUZZ_OPTIONS.items()
+                                            for o in os_])
+def test_numeric_options_fuzzed(command, option, tmp_path, capsys, monkeypatch):
+    """Zero, negative, huge, tiny, not-a-number and non-numeric values of every numeric
+    option: a result (exit 0) or one specific error line (exit 2); never a bug, a traceback
+    or a leftover file. Values that are not finite numbers are refused when parsed, naming
+    the option."""
+    monkeypatch.chdir(tmp_path)
+    for value in _FUZZ_VALUES:
+        rc = main(_FUZZ_BASE[command] + [f"{option}={value}"])   # "-inf" is not an option
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc in (0, 2), (option, value, err[-1:])
+        if value in ("nan", "-inf", "1e400", "x"):
+            assert rc == 2 and f"argument {option}" in err[-1] and repr(value) in err[-1]
+        if rc == 2:
+            assert err[-1].startswith(f"skysim {command}: error: "), (option, value, err)
+            assert "internal error" not in err[-1] and "\n" not in err[-1]
+        assert not [p for p in tmp_path.iterdir() if p.name.startswith(".tmp-")]
+        for p in tmp_path.iterdir():
+            p.unlink()
+
+
+@pytest.fixture(scope="module")
+def fuzz_inputs(tmp_path_factory):
+    root = tmp_path_factory.mktemp("fuzz")
+    assert main(["sample", "--out", str(root / "good.csv"), "--n", "40", "--sweeps", "3"]) == 0
+    cfg = root / "g.toml"
+    cfg.write_text('seed = 1\n[[sky_map]]\nname = "m"\nsun_elevation_deg = 30.0\n'
+                   'sun_azimuth_deg = 0.0\ngrid_step_deg = 30.0\n')
+    assert main(["generate", str(cfg), "--out", str(root / "truth")]) == 0
+    return root
+
+
+_BAD_CONTENT = {
+    "empty": b"",
+    "binary": bytes(range(256)) * 4,
+    "prose": b"hello world\n",
+    "semicolons": b"a;b;c\n1;2;3\n",
+    "json_list": b"[1, 2]",
+    "broken_toml": b"seed = = 1\n[[",
+    "header_only": b"time,heading_deg,U1_V,U2_V,U3_V\n",
+}
+
+
+def _file_commands(f: str, root: Path) -> dict:
+    truth = str(root / "truth" / "m.csv")
+    return {
+        "sky --directions": ["sky", *SUN, "--directions", f],
+        "sky-series --directions": [*SERIES, "--periods", "2", "--directions", f, "--out",
+                                    str(root / "o.parquet")],
+        "calibrate": ["calibrate", f],
+        "diagnose": ["diagnose", f, "--out", str(root / "dg")],
+        "compare theirs": ["compare", f, truth],
+        "compare truth": ["compare", truth, f],
+        "generate": ["generate", f, "--out", str(root / "gg")],
+        "sweep": ["sweep", f, "--out", str(root / "sw"), "--no-progress", "--no-figures"],
+        "sample --errors": ["sample", "--errors", f, "--out", str(root / "se.csv")],
+    }
+
+
+@pytest.mark.parametrize("kind", [*_BAD_CONTENT, "folder", "missing"])
+@pytest.mark.parametrize("suffix", [".csv", ".toml", ".json"])
+def test_malformed_input_files(kind, suffix, fuzz_inputs, capsys):
+    """Every file-reading command given an empty, binary, wrongly formatted, header-only,
+    missing file or a folder (a data file with a valid sidecar beside it, so that the table
+    itself is what is wrong): exit 2, one line naming the file, nothing written."""
+    root = fuzz_inputs
+    f = root / f"in_{kind}{suffix}"
+    if kind == "folder":
+        f.mkdir(exist_ok=True)
+    elif kind != "missing":
+        f.write_bytes(_BAD_CONTENT[kind])
+        if suffix == ".csv":
+            (root / f"in_{kind}.csv.json").write_bytes((root / "good.csv.json").read_bytes())
+    before = sorted(p.name for p in root.iterdir())
+    for name, argv in _file_commands(str(f), root).items():
+        capsys.readouterr()
+        rc = main(argv)
+        err = capsys.readouterr().err.strip().splitlines()
+        assert rc == 2, (name, rc, err[-1:])
+        assert err[-1].startswith("skysim ") and "internal error" not in err[-1], (name, err)
+        assert f.name in err[-1], (name, err[-1])
+        assert sorted(p.name for p in root.iterdir()) == before, name

@@ -204,7 +204,7 @@ def test_compare_rejects_incomparable_files(tmp_path, config_file):
     with pytest.raises(CompareError, match=r"missing column\(s\) \['aop_deg'\]"):
         compare_tables(theirs / "map.csv", out / "map.csv")
     truth.iloc[:-1].to_csv(theirs / "map.csv", index=False)
-    with pytest.raises(CompareError, match="rows, truth has"):
+    with pytest.raises(CompareError, match="rows, the truth has"):
         compare_tables(theirs / "map.csv", out / "map.csv")
     shifted = truth.assign(azimuth_deg=truth.azimuth_deg + 1.0)
     shifted.to_csv(theirs / "map.csv", index=False)

@@ -1,0 +1,80 @@
+"""What a long command tells its user while it runs: the expected duration before the work,
+progress bars during it (tqdm, on stderr), and warnings as one readable line each.
+
+Every command that can run longer than :data:`ANNOUNCE_AFTER_S` says so before it starts
+(:func:`announce_duration`), so that a user can stop a run that would take too long instead of
+waiting for it in silence.
+"""
+
+from __future__ import annotations
+
+import sys
+import warnings
+
+__all__ = ["ANNOUNCE_AFTER_S", "REPRODUCTION_SECONDS", "announce_duration",
+           "expected_reproduction_seconds", "format_duration", "install_warning_format"]
+
+ANNOUNCE_AFTER_S = 10.0
+"""Runs expected to take longer than this [s] print their expected duration first."""
+
+
+REPRODUCTION_SECONDS = {
+    # target: (full run [s], --quick run [s], trials of the full run or None)
+    "yang2014": (60.0, 8.0, 200),
+    "dark-current": (80.0, 16.0, 100),
+    "compound-eye": (20.0, 4.0, 50),
+    "jin2020": (73.0, 28.0, 20),
+    "sky-gap": (840.0, 114.0, None),
+    "physical-sky": (240.0, 30.0, None),
+    "camera": (53.0, 18.0, 10),
+    "real-sky-compass": (0.0, 64.0, None),
+}
+"""Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
+sky-gap (14 min), physical-sky (4 min), jin2020 (73 s) and camera (53 s), every --quick run;
+the other full runs scaled from their quick runs by the number of trials (an upper bound:
+the fixed costs are scaled too). Zero: not measured (nothing is announced)."""
+
+
+def expected_reproduction_seconds(target: str, quick: bool, trials: int | None) -> float:
+    """Expected wall time of ``skysim reproduce target`` [s] (0 when unknown); ``--trials``
+    scales the full run's time in proportion."""
+    full, short, full_trials = REPRODUCTION_SECONDS.get(target, (0.0, 0.0, None))
+    if quick:
+        return short
+    if trials and full_trials:
+        return full * trials / full_trials
+    return full
+
+
+def format_duration(seconds: float) -> str:
+    """``seconds`` [s] in words a person reads at a glance: ``45 s``, ``14 min``, ``2.5 h``,
+    ``6 days``."""
+    if seconds < 90:
+        return f"{seconds:.0f} s"
+    if seconds < 5400:
+        return f"{seconds / 60:.0f} min"
+    if seconds < 48 * 3600:
+        return f"{seconds / 3600:.1f} h"
+    return f"{seconds / 86400:.0f} days"
+
+
+def announce_duration(seconds: float, what: str, how_to_shorten: str = "") -> None:
+    """Print ``what: expected duration about ...`` to stderr when ``seconds`` [s] exceeds
+    :data:`ANNOUNCE_AFTER_S`; ``how_to_shorten`` names the option that makes it faster."""
+    if seconds <= ANNOUNCE_AFTER_S:
+        return
+    hint = f"; {how_to_shorten}" if how_to_shorten else ""
+    print(f"{what}: expected duration about {format_duration(seconds)}{hint}",
+          file=sys.stderr, flush=True)
+
+
+def _one_line(message, category, filename, lineno, line=None) -> str:
+    """A warning as ``skysim: warning: message (Category)``: no source line, no file path."""
+    text = " ".join(str(message).split())
+    return f"skysim: warning: {text} ({category.__name__})\n"
+
+
+def install_warning_format() -> None:
+    """Show every warning as one line (:func:`_one_line`); which warnings show is left to
+    Python's filters (``-W``, ``PYTHONWARNINGS``)."""
+    warnings.formatwarning = _one_line
