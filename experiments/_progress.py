@@ -25,12 +25,15 @@ REPRODUCTION_SECONDS = {
     "compound-eye": (20.0, 4.0, 50),
     "jin2020": (73.0, 28.0, 20),
     "sky-gap": (840.0, 114.0, None),
-    "physical-sky": (240.0, 30.0, None),
+    "physical-sky": (420.0, 41.0, None),
     "camera": (53.0, 18.0, 10),
-    "real-sky-compass": (0.0, 64.0, None),
+    "real-sky-compass": (1500.0, 64.0, None),
+    "moonlit-sky": (160.0, 6.0, None),
 }
 """Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
-sky-gap (14 min), physical-sky (4 min), jin2020 (73 s) and camera (53 s), every --quick run;
+sky-gap (14 min), physical-sky (7 min with its aerosol skies), jin2020 (73 s), camera (53 s),
+real-sky-compass (25 min for the 14 reference sessions) and moonlit-sky (2.7 min), every
+--quick run;
 the other full runs scaled from their quick runs by the number of trials (an upper bound:
 the fixed costs are scaled too). Zero: not measured (nothing is announced)."""
 

@@ -365,5 +365,8 @@ def _reproduce(args) -> int:
     return 0
 
 
+_reproduce.takes_data = True
+
+
 def register_reproduce(targets: dict) -> None:
     targets["moonlit-sky"] = _reproduce

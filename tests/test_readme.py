@@ -31,8 +31,9 @@ SLOW = {("reproduce", "sky-gap"), ("sky-gap",)}
 
 def _needs_data() -> dict:
     """Command prefixes that need data not shipped -> the folder they read by default."""
-    from experiments.real_compass import DEFAULT_DATA
-    return {("reproduce", "real-sky-compass"): DEFAULT_DATA}
+    from experiments import moonlit_sky, real_compass
+    return {("reproduce", "real-sky-compass"): real_compass.DEFAULT_DATA,
+            ("reproduce", "moonlit-sky"): moonlit_sky.DEFAULT_DATA}
 
 
 def _data_of(argv):
