@@ -159,11 +159,13 @@ def _camera_command(args) -> int:
 def _heading_command(args) -> int:
     from calibration.camera_heading import heading_from_image
     from sensor.camera import camera_attitude, camera_stokes
-    from sensor.camera.files import camera_from_sidecar, read_raw
+    from sensor.camera.files import camera_from_sidecar, check_sidecar, read_raw
+    from skysim.io import find_sidecar
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
     raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
+    check_sidecar(doc, find_sidecar(Path(args.image)))
     check_memory(raw.size * (HEADING_BYTES_PER_PIXEL[args.method]
                              + (HEADING_FIGURE_BYTES_PER_PIXEL if args.figure else 0)),
                  f"the heading of a {raw.shape[1]}x{raw.shape[0]} image ({args.method} "
@@ -215,7 +217,9 @@ def register(sub) -> None:
     p.add_argument("--roll", type=float, default=0.0, help="camera roll [deg]")
     p.add_argument("--width", type=int_at_least(2), default=512, help="pixels (even)")
     p.add_argument("--height", type=int_at_least(2), default=512, help="pixels (even)")
-    p.add_argument("--lens", choices=("equidistant", "equisolid"), default="equidistant")
+    p.add_argument("--lens", choices=("equidistant", "equisolid"), default="equidistant",
+                   help="fisheye projection: equidistant (r = f theta) or equisolid "
+                        "(r = 2 f sin(theta / 2))")
     p.add_argument("--fov", type=float_in(0, 360, low_open=True, high_open=True), default=180.0,
                    help="field of view [deg]")
     p.add_argument("--exposure", type=positive_float, default=None,
@@ -231,7 +235,9 @@ def register(sub) -> None:
                    help="per-pixel polarizer angle error, standard deviation [deg]")
     p.add_argument("--mosaic-rotation", type=float, default=0.0,
                    help="rotation of the whole polarizer array [deg]")
-    p.add_argument("--sky", choices=("rayleigh", "multiple", "berry"), default="rayleigh")
+    p.add_argument("--sky", choices=("rayleigh", "multiple", "berry"), default="rayleigh",
+                   help="sky model: single-scattering Rayleigh, multiple scattering (sasktran2) "
+                        "or the Berry neutral-point sky")
     p.add_argument("--dmax", type=float_in(0, 1, low_open=True), default=SKY_DMAX,
                    help="rayleigh/berry: maximum degree of polarization")
     p.add_argument("--tau", type=positive_float, default=0.1,

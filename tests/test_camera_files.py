@@ -9,7 +9,7 @@ from experiments.cli import main
 
 pytest.importorskip("tifffile", reason="camera images need the 'camera' extra (tifffile)")
 
-from sensor.camera.files import (DofpFormatError, camera_from_sidecar, read_raw,  # noqa: E402
+from sensor.camera.files import (DofpFormatError, camera_from_sidecar, check_sidecar, read_raw,  # noqa: E402
                                  write_raw)
 
 
@@ -52,8 +52,13 @@ def test_writer_is_atomic_and_reader_checks(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing half-written
     with pytest.raises(DofpFormatError, match="uint16"):
         write_raw(tmp_path / "a.tiff", raw.astype(float), {})
-    doc = {k: {} for k in ("site", "attitude", "lens", "exposure")}
-    doc.update(time="2020-01-01T00:00Z", sensor={"width": 8, "height": 4})
+    doc = {"site": {"latitude_deg": 34.0, "longitude_deg": 108.0}, "attitude": {},
+           "lens": {"focal_px": 2.0, "cx": 3.0, "cy": 2.0, "fov_deg": 180.0,
+                    "model": "equidistant"},
+           "exposure": {"exposure_s": 0.01}, "time": "2020-01-01T00:00Z",
+           "sensor": {"width": 8, "height": 4, "layout_deg": [[90, 45], [135, 0]],
+                      "full_well_e": 1e4, "read_noise_e": 2.0, "dark_current_e_s": 1.0,
+                      "adc_bits": 12, "black_level_dn": 0}}
     write_raw(tmp_path / "a.tiff", raw, doc)
     with pytest.raises(DofpFormatError, match="sidecar says"):
         read_raw(tmp_path / "a.tiff")
@@ -154,3 +159,29 @@ def test_large_frames_are_refused_before_the_work(tmp_path, capsys, monkeypatch)
     err = capsys.readouterr().err
     assert "2448x2048 camera image" in err and "--width/--height" in err
     assert not out.exists()
+
+
+@pytest.mark.parametrize("edit", [
+    lambda d: d["sensor"].pop("height"),
+    lambda d: d["lens"].pop("focal_px"),
+    lambda d: d["lens"].update(focal_px="wide"),
+    lambda d: d["sensor"].update(width=512.5),
+    lambda d: d["exposure"].pop("exposure_s"),
+    lambda d: d["site"].update(latitude_deg=None),
+    lambda d: d.update(lens=[1, 2]),
+])
+def test_incomplete_sidecar_names_the_key(tmp_path, edit):
+    """A sidecar lacking a nested key, or holding a value of the wrong kind, is a
+    DofpFormatError naming the section and key (was a KeyError: an internal error)."""
+    out = tmp_path / "sky.tiff"
+    assert main(["camera", "--lat", "34.14", "--lon", "108.55", "--time",
+                 "2013-05-22T17:10+08:00", "--width", "64", "--height", "64",
+                 "--out", str(out)]) == 0
+    side = next(p for p in tmp_path.iterdir() if p.suffix == ".json")
+    doc = json.loads(side.read_text())
+    edit(doc)
+    side.write_text(json.dumps(doc))
+    with pytest.raises(DofpFormatError) as err:   # the reader's check, or the full one
+        check_sidecar(read_raw(out)[1], side)
+    assert side.name in str(err.value)
+    assert main(["camera-heading", str(out)]) == 2

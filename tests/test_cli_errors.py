@@ -730,7 +730,7 @@ def test_reproduction_folder_is_replaced_whole(tmp_path, capsys, monkeypatch):
 
 def test_reproduction_options_that_do_not_apply(tmp_path, capsys):
     _fails(["reproduce", "yang2014", "--data", str(tmp_path), "--out", str(tmp_path / "o")],
-           capsys, "--data applies to real-sky-compass, not yang2014")
+           capsys, "--data applies to moonlit-sky, real-sky-compass, not yang2014")
     _fails(["gap-benchmark", "--real", str(tmp_path / "none"), "--out", str(tmp_path / "o")],
            capsys, "give --real DIR")
     assert not (tmp_path / "o").exists()
@@ -788,8 +788,6 @@ def _all_options():
 @pytest.mark.parametrize("name,parser,action", list(_all_options()),
                          ids=lambda x: x if isinstance(x, str) else getattr(x, "dest", ""))
 def test_every_option_has_help_and_no_empty_default(name, parser, action):
-    if name in ("camera",) and action.dest in ("lens", "sky"):
-        pytest.xfail("camera options owned elsewhere have no help yet")
     assert action.help and len(action.help) > 10, (name, action.option_strings or action.dest)
     fmt = parser._get_formatter()
     text = fmt._expand_help(action) if action.help else ""

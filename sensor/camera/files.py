@@ -46,6 +46,49 @@ __all__ = ["FLIPS", "IMAGE_SUFFIXES", "ROTATIONS_DEG", "SCHEMA", "DofpFormatErro
 
 SCHEMA = "skysim.dofp/1"
 _REQUIRED = ("site", "time", "attitude", "lens", "sensor", "exposure")
+_REQUIRED_NESTED = {
+    "site": {"latitude_deg": "number", "longitude_deg": "number"},
+    "time": None,
+    "attitude": {},
+    "lens": {"focal_px": "number", "cx": "number", "cy": "number", "fov_deg": "number",
+             "model": "text"},
+    "sensor": {"width": "integer", "height": "integer", "layout_deg": "list",
+               "full_well_e": "number", "read_noise_e": "number", "dark_current_e_s": "number",
+               "adc_bits": "integer", "black_level_dn": "number"},
+    "exposure": {"exposure_s": "number"},
+}
+"""The keys of each sidecar section a reader uses, with the kind of value each must hold."""
+
+
+def check_sidecar(doc, side) -> None:
+    """Every key a heading or calibration from the image uses is present with a value of the right kind;
+    otherwise a :class:`DofpFormatError` naming the key and the value."""
+    if not isinstance(doc, dict):
+        raise DofpFormatError(f"{side} holds a JSON {type(doc).__name__}, not an object")
+    missing = [k for k in _REQUIRED if k not in doc]
+    if missing:
+        raise DofpFormatError(f"{side} lacks {', '.join(missing)}")
+    _check_sections(doc, side, _REQUIRED_NESTED)
+
+
+def _check_sections(doc, side, spec) -> None:
+    import numbers
+    kinds = {"number": lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool)
+             and np.isfinite(v),
+             "integer": lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool),
+             "text": lambda v: isinstance(v, str), "list": lambda v: isinstance(v, list)}
+    for section, keys in spec.items():
+        if keys is None:
+            continue
+        value = doc[section]
+        if not isinstance(value, dict):
+            raise DofpFormatError(f"{side}: {section!r} must be an object; got {value!r}")
+        for key, kind in keys.items():
+            if key not in value:
+                raise DofpFormatError(f"{side}: {section!r} lacks {key!r}")
+            if not kinds[kind](value[key]):
+                raise DofpFormatError(f"{side}: {section}.{key} must be a finite {kind}; got "
+                                      f"{value[key]!r}")
 IMAGE_SUFFIXES = (".tif", ".tiff", ".png")
 """Raw image formats by file suffix (lower case)."""
 FLIPS = ("none", "horizontal", "vertical")
@@ -187,12 +230,17 @@ def read_raw(path, *, flip: str = "none", rotate_deg: int = 0) -> tuple[np.ndarr
     if side is None:
         raise DofpFormatError(f"no sidecar {sidecar_path(path).name} beside {path}: the lens "
                               "and sensor of the image are needed")
-    doc = json.loads(side.read_text())
-    if doc.get("schema") != SCHEMA:
-        raise DofpFormatError(f"{side} has schema {doc.get('schema')!r}, expected {SCHEMA!r}")
+    try:
+        doc = json.loads(side.read_text())
+    except (ValueError, UnicodeDecodeError) as exc:
+        raise DofpFormatError(f"{side} is not valid JSON: {exc}") from None
+    if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
+        got = doc.get("schema") if isinstance(doc, dict) else doc
+        raise DofpFormatError(f"{side} has schema {got!r}, expected {SCHEMA!r}")
     missing = [k for k in _REQUIRED if k not in doc]
     if missing:
         raise DofpFormatError(f"{side} lacks {', '.join(missing)}")
+    _check_sections(doc, side, {"sensor": {"width": "integer", "height": "integer"}})
     raw = np.ascontiguousarray(undo_readout(_read_image(path), flip, rotate_deg))
     sensor = doc["sensor"]
     if raw.shape != (sensor["height"], sensor["width"]) or raw.dtype != np.uint16:
