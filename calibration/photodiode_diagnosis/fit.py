@@ -272,7 +272,8 @@ def geometry_mask(fwd: Forward) -> np.ndarray:
 
 
 def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: bool = True,
-               covariance: bool = False) -> tuple[FitResult, FitResult | None]:
+               covariance: bool = False, full: bool = True
+               ) -> tuple[FitResult | None, FitResult | None]:
     """Fit in two stages so that a DoP profile the sky model lacks cannot move the geometry.
 
     1. (``geometry``) The angle of polarization alone: :attr:`Forward.dop_free` profiles the
@@ -294,8 +295,9 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
 
     Returns
     -------
-    (FitResult, FitResult or None)
-        Stage 2, and stage 1 (with its covariance when asked) or None.
+    (FitResult or None, FitResult or None)
+        Stage 2 (None with ``full=False``), and stage 1 (with its covariance when asked) or
+        None.
     """
     L = fwd.layout
     theta = np.asarray(theta0, float)
@@ -329,6 +331,8 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
         finally:
             fwd.dop_free = False
         theta = first.theta
+    if not full:            # the AoP stage is all the caller reads
+        return None, first
     return fit(fwd, theta, ~geometry_mask(fwd), sigma=sigma, max_iter=max_iter), first
 
 

@@ -758,7 +758,7 @@ def _aop_clock_fit(fe: Forward, theta_base, layout, start_s, sigma) -> float:
     t = np.zeros(fe.layout.size)
     t[:layout.size] = theta_base[:layout.size]
     t[fe.layout.effect] = start_s
-    _, aop = fit_pinned(fe, t, sigma=sigma, max_iter=EFFECT_MAX_ITER)
+    _, aop = fit_pinned(fe, t, sigma=sigma, max_iter=EFFECT_MAX_ITER, full=False)
     return float(aop.theta[fe.layout.effect][0])
 
 
