@@ -56,7 +56,7 @@ from .exceptions import InvalidParameterError
 from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, layered_stokes_cases, lru_take,
                           rayleigh_depolarization_factor, rayleigh_greek_coefficients)
 from .sky import Sky
-from .validation import check_in_range
+from .validation import check_finite, check_in_range
 
 __all__ = ["AOD_RANGE", "AerosolSky", "AerosolTable", "AerosolType", "N_AZIMUTH", "N_ZENITH",
            "RAYLEIGH_SCALE_HEIGHT_KM", "aerosol_fraction_levels", "aerosol_stokes_cases",
@@ -343,9 +343,12 @@ class AerosolSky(Sky):
         al. (1999) at ``wavelength_nm``.
     sun_step_deg : float, optional
         For many sun positions: tables only at sun elevations that are multiples of this
-        step [deg], the Stokes vector interpolated linearly between the two neighbouring
-        nodes (suns lower than one step are computed exactly). None: one engine call per
-        distinct sun elevation. Error: ``docs/physical_sky.md`` (tested).
+        step [deg] (from ``sun_node_origin_deg``; geometric near the horizon:
+        :func:`skysim.multiple.sun_bracket`), the Stokes vector interpolated linearly between
+        the two neighbouring nodes. None: one engine call per distinct sun elevation. Error:
+        ``docs/physical_sky.md`` (tested).
+    sun_node_origin_deg : float
+        One of the sun nodes [deg] (default 0).
     n_zenith, n_azimuth : int
         Table grid (:class:`AerosolTable`); the engine traces ``n_zenith * n_azimuth`` rays.
     settings : EngineSettings
@@ -366,6 +369,7 @@ class AerosolSky(Sky):
     def __init__(self, preset="continental_average", aod_550: float = 0.1, albedo: float = 0.0,
                  wavelength_nm: float = 550.0, *, pressure_hPa: float = 1013.25,
                  depolarization_ratio="bodhaine", sun_step_deg: float | None = None,
+                 sun_node_origin_deg: float = 0.0,
                  n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH,
                  settings: EngineSettings = DEFAULT_SETTINGS, n_moments: int = N_MOMENTS):
         from .multiple import _check_wavelength, bodhaine_depolarization_ratio
@@ -388,6 +392,8 @@ class AerosolSky(Sky):
         self.sun_step_deg = None if sun_step_deg is None else float(
             check_in_range("sun_step_deg", sun_step_deg, 0.0, 10.0, low_open=True,
                            hint="a few degrees at most (None: exact per sun elevation)"))
+        self.sun_node_origin_deg = float(check_finite("sun_node_origin_deg",
+                                                      sun_node_origin_deg))
         table_grid(n_zenith, n_azimuth)  # validates
         self.n_zenith, self.n_azimuth = int(n_zenith), int(n_azimuth)
         self.settings = settings
@@ -407,13 +413,25 @@ class AerosolSky(Sky):
 
     def sun_nodes_deg(self, sun_elevation_deg) -> tuple:
         """Sun elevations [deg] whose tables give the sky at this one: itself (exact), or the
-        two neighbouring multiples of ``sun_step_deg``."""
-        lo, hi, _ = _sun_interval(np.atleast_1d(float(sun_elevation_deg)), self.sun_step_deg)
+        two neighbouring sun nodes."""
+        lo, hi, _ = self._sun_interval(np.atleast_1d(float(sun_elevation_deg)))
         return (float(lo[0]),) if lo[0] == hi[0] else (float(lo[0]), float(hi[0]))
+
+    def _sun_interval(self, sun_elevation_deg):
+        """Lower and upper sun nodes [deg] and the weight of the upper one, elementwise
+        (:func:`skysim.multiple.sun_bracket`): the sun itself, weight 0, where it is exact."""
+        from .multiple import sun_bracket
+        el = np.asarray(sun_elevation_deg, dtype=float)
+        lo, hi = sun_bracket(el, self.sun_step_deg, self.sun_node_origin_deg)
+        exact = np.isnan(lo)
+        lo, hi = np.where(exact, el, lo), np.where(exact, el, hi)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            w = np.where(exact, 0.0, (el - lo) / (hi - lo))
+        return lo, hi, w
 
     def _stokes(self, vel, vaz, sel, saz):
         theta, phi = 90.0 - vel, vaz - saz
-        lo, hi, w = _sun_interval(sel, self.sun_step_deg)
+        lo, hi, w = self._sun_interval(sel)
         out = np.zeros((3,) + vel.shape)
         nodes, inverse = np.unique(np.concatenate([lo.ravel(), hi.ravel()]),
                                    return_inverse=True)
@@ -440,7 +458,8 @@ class AerosolSky(Sky):
                 "albedo": self.albedo, "wavelength_nm": self.wavelength_nm,
                 "pressure_hPa": self.pressure_hPa,
                 "depolarization_ratio": self.depolarization_ratio,
-                "sun_step_deg": self.sun_step_deg, "n_zenith": self.n_zenith,
+                "sun_step_deg": self.sun_step_deg,
+                "sun_node_origin_deg": self.sun_node_origin_deg, "n_zenith": self.n_zenith,
                 "n_azimuth": self.n_azimuth, "n_moments": self.n_moments,
                 "engine": "sasktran2", "engine_settings": self.settings.to_dict(),
                 "I_normalisation": "incident solar flux pi per unit area normal to the beam "
@@ -449,21 +468,6 @@ class AerosolSky(Sky):
 
 def _mu0(sun_elevation_deg) -> float:
     return float(np.sin(np.radians(sun_elevation_deg)))
-
-
-def _sun_interval(sun_elevation_deg, step):
-    """Lower and upper sun nodes [deg] and the weight of the upper one, elementwise: the sun
-    itself (weight 0) when ``step`` is None, the sun lies on a node or below the first node."""
-    el = np.asarray(sun_elevation_deg, dtype=float)
-    if step is None:
-        return el, el, np.zeros(el.shape)
-    lo = np.floor(el / step) * step
-    exact = (lo <= 0.0) | (lo == el)
-    hi = np.minimum(lo + step, 90.0)
-    lo, hi = np.where(exact, el, lo), np.where(exact, el, hi)
-    with np.errstate(invalid="ignore", divide="ignore"):
-        w = np.where(exact, 0.0, (el - lo) / (hi - lo))
-    return lo, hi, w
 
 
 def prefetch_tables(aods_550, sun_elevation_deg, *, albedos=None, sky: AerosolSky) -> None:
@@ -475,7 +479,6 @@ def prefetch_tables(aods_550, sun_elevation_deg, *, albedos=None, sky: AerosolSk
     aods = np.atleast_1d(np.asarray(aods_550, dtype=float))
     alb = np.full(aods.shape, sky.albedo) if albedos is None else \
         np.broadcast_to(np.asarray(albedos, float), aods.shape)
-    lo, hi, _ = _sun_interval(np.unique(np.asarray(sun_elevation_deg, float)),
-                              sky.sun_step_deg)
+    lo, hi, _ = sky._sun_interval(np.unique(np.asarray(sun_elevation_deg, float)))
     for node in np.unique(np.concatenate([lo, hi])):
         aerosol_tables_cases(aods, alb, _mu0(node), **sky._shared())

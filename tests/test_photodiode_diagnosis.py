@@ -559,3 +559,36 @@ def test_candidate_engine_streams_within_stated_bound(mu0):
     assert np.max(np.abs(dolp(fast) - dolp(ref))) <= 1e-3
     d_aop = np.abs((aop(fast) - aop(ref) + 90.0) % 180.0 - 90.0)
     assert np.max(d_aop[dolp(ref) > 0.05]) <= 0.06
+
+
+def test_candidate_sky_at_per_sample_times_matches_brute_force():
+    """A session whose sun moves 2.6 deg (per-sample times): the multiple_scattering
+    candidate's sky, interpolated between two sun nodes (the session's lowest sun and one
+    step above, :func:`skysim.multiple.session_sun_nodes`), against the same candidate
+    evaluated exactly at every sample's own sun (one engine run per sample), between tau and
+    albedo nodes. Bounds: the session step's stated error (2e-3 in I/I, 1.5e-3 in DoLP, 0.2 deg
+    in AoP where DoLP > 0.1; :data:`skysim.multiple.MAX_SESSION_STEP_DEG`). A session at one
+    time is exact (its sun is a node): to rounding."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    from calibration.photodiode_diagnosis.effects import GridMultipleSky, MultipleScattering
+    from skysim.geometry import direction_vector
+    from skysim.multiple import sun_bracket
+    sun_el = np.linspace(38.4, 41.0, 7)
+    sun_az = np.linspace(250.0, 253.0, 7)
+    sun = direction_vector(sun_el, sun_az)
+    vel, vaz = np.full((7, 32), 45.0), np.tile(np.arange(0.0, 360.0, 11.25), (7, 1))
+    p = np.array([0.15, 0.1])                     # between tau nodes and albedo nodes
+    session = MultipleScattering().sky(p, None, sun)
+    lo, hi = sun_bracket(sun_el, *MultipleScattering()._session_nodes(sun))
+    assert len(set(lo[~np.isnan(lo)]) | set(hi[~np.isnan(hi)])) <= 2
+    f = session.field(vel, vaz, sun_el[:, None], sun_az[:, None])
+    exact = GridMultipleSky(None).at(*p).field(vel, vaz, sun_el[:, None], sun_az[:, None])
+    assert np.max(np.abs(f.I / exact.I - 1.0)) < 2e-3
+    assert np.max(np.abs(f.dop - exact.dop)) < 1.5e-3
+    d_aop = np.abs((f.aop_deg - exact.aop_deg + 90.0) % 180.0 - 90.0)
+    assert np.max(d_aop[exact.dop > 0.1]) < 0.2
+    one = MultipleScattering().sky(p, None, sun[:1].repeat(7, axis=0))
+    f1 = one.field(vel, vaz, sun_el[0], sun_az[0])
+    e1 = GridMultipleSky(None).at(*p).field(vel, vaz, sun_el[0], sun_az[0])
+    np.testing.assert_allclose(f1.I, e1.I, rtol=1e-12)
+    np.testing.assert_allclose(f1.dop, e1.dop, rtol=0, atol=1e-12)

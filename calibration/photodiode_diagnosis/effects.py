@@ -299,17 +299,22 @@ class GridMultipleSky:
     Nodes: ``tau`` in :data:`TAU_NODES` (interpolated linearly in ``ln tau``), albedo 0, 0.3,
     0.6 (quadratic in albedo: the ground term ``A T / (1 - A s)`` of Chandrasekhar's
     reduction bends by less than ``A s`` ~ 0.1 over the range). The node skies are
-    :class:`skysim.multiple.MultipleScatteringSky` objects, so every engine run is cached per
-    (tau, albedo, sun elevation) and reused by every fold and every fit step.
+    :class:`skysim.multiple.MultipleScatteringSky` objects sharing the sun nodes
+    ``sun_step_deg``, ``sun_origin_deg`` (:func:`skysim.multiple.sun_bracket`), so every engine
+    run is cached per (tau, albedo, sun node) and reused by every fold and every fit step;
+    the node skies a ``(tau, albedo)`` needs at one sun node come from one engine call, and
+    their Fourier modes are mixed before they are evaluated (the field is linear in them),
+    so a sky costs one evaluation per sun node, not one per node sky.
     """
 
     TAU_NODES: ClassVar[np.ndarray] = np.array([0.02, 0.05, 0.1, 0.2, 0.4, 1.0])
     ALBEDO_NODES: ClassVar[np.ndarray] = np.array([0.0, 0.3, 0.6])
 
-    def __init__(self, sun_step_deg):
+    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0):
         from skysim.multiple import MultipleScatteringSky
         self.skies = {(i, j): MultipleScatteringSky(tau=float(t), albedo=float(a),
                                                     sun_step_deg=sun_step_deg,
+                                                    sun_node_origin_deg=sun_origin_deg,
                                                     settings=fit_engine_settings())
                       for i, t in enumerate(self.TAU_NODES)
                       for j, a in enumerate(self.ALBEDO_NODES)}
@@ -329,7 +334,9 @@ class GridMultipleSky:
                         "interpolated": "ln tau linear, albedo quadratic"}
         return _Mixed()
 
-    def stokes(self, tau, albedo, vel, vaz, sel, saz):
+    def weights(self, tau, albedo) -> dict:
+        """Weights of the node skies ``{(i_tau, j_albedo): w}`` (nonzero only) at
+        ``(tau, albedo)``."""
         lt = np.log(self.TAU_NODES)
         x = float(np.clip(np.log(tau), lt[0], lt[-1]))
         i = int(np.clip(np.searchsorted(lt, x) - 1, 0, lt.size - 2))
@@ -339,16 +346,20 @@ class GridMultipleSky:
         wa = [(A - a1) * (A - a2) / ((a0 - a1) * (a0 - a2)),
               (A - a0) * (A - a2) / ((a1 - a0) * (a1 - a2)),
               (A - a0) * (A - a1) / ((a2 - a0) * (a2 - a1))]
-        from skysim.multiple import prefetch_modes
-        out = 0.0
-        for ii, wt in ((i, 1.0 - f), (i + 1, f)):
-            used = [j for j in range(3) if wt * wa[j] != 0.0]
-            if used:   # the albedo nodes of one tau node: one engine call per sun node
-                prefetch_modes([self.skies[(ii, j)] for j in used], sel)
-            for j in used:
-                sky = self.skies[(ii, j)]
-                out = out + wt * wa[j] * np.stack(sky._stokes(vel, vaz, sel, saz))
-        return out[0], out[1], out[2]
+        return {(ii, j): wt * wa[j] for ii, wt in ((i, 1.0 - f), (i + 1, f))
+                for j in range(3) if wt * wa[j] != 0.0}
+
+    def stokes(self, tau, albedo, vel, vaz, sel, saz):
+        from skysim.multiple import interval_stokes, mix_modes, prefetch_modes
+        w = self.weights(tau, albedo)
+        skies = [self.skies[k] for k in w]
+        prefetch_modes(skies, sel)   # one engine call per sun node for all node skies
+
+        def modes_at(el):
+            return mix_modes([s.modes(el) for s in skies], list(w.values()))
+        lo, hi = skies[0]._bracket(sel)
+        out = interval_stokes(90.0 - vel, vaz - saz, sel, lo, hi, modes_at)
+        return tuple(c.reshape(vel.shape) for c in out)
 
 
 class MultipleScattering(RingEffect):
@@ -381,12 +392,16 @@ class MultipleScattering(RingEffect):
     def __init__(self):
         self._grid = None
 
+    @staticmethod
+    def _session_nodes(sun_enu):
+        """Sun-node step and origin [deg] for a session's suns (unit vectors, (n, 3)):
+        :func:`skysim.multiple.session_sun_nodes`."""
+        from skysim.multiple import session_sun_nodes
+        return session_sun_nodes(elevation_azimuth(np.asarray(sun_enu, float))[0])
+
     def sky(self, p, base_sky, sun_enu):
         if self._grid is None:
-            el = np.degrees(np.arcsin(np.clip(np.asarray(sun_enu)[..., 2], -1, 1)))
-            # exact engine runs when the session has (nearly) one sun elevation, 1-deg nodes
-            # with linear interpolation otherwise (error stated in skysim.multiple)
-            self._grid = GridMultipleSky(None if np.ptp(el) < 0.05 else 1.0)
+            self._grid = GridMultipleSky(*self._session_nodes(sun_enu))
         return self._grid.at(float(p[0]), float(p[1]))
 
 
@@ -444,11 +459,12 @@ class GridAerosolSky:
 
     AOD_NODES: ClassVar[np.ndarray] = np.array([0.03, 0.1, 0.3, 1.0])
 
-    def __init__(self, sun_step_deg):
+    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0):
         from skysim.aerosol import AerosolSky
         self.skies = [AerosolSky(AEROSOL_PRESET, aod_550=float(a), albedo=AEROSOL_ALBEDO,
                                  wavelength_nm=AEROSOL_WAVELENGTH_NM,
-                                 sun_step_deg=sun_step_deg, n_zenith=AEROSOL_GRID[0],
+                                 sun_step_deg=sun_step_deg, sun_node_origin_deg=sun_origin_deg,
+                                 n_zenith=AEROSOL_GRID[0],
                                  n_azimuth=AEROSOL_GRID[1], settings=fit_engine_settings())
                       for a in self.AOD_NODES]
 
@@ -512,8 +528,7 @@ class Aerosol(RingEffect):
 
     def sky(self, p, base_sky, sun_enu):
         if self._grid is None:
-            el = np.degrees(np.arcsin(np.clip(np.asarray(sun_enu)[..., 2], -1, 1)))
-            self._grid = GridAerosolSky(None if np.ptp(el) < 0.05 else 1.0)
+            self._grid = GridAerosolSky(*MultipleScattering._session_nodes(sun_enu))
         return self._grid.at(float(p[0]))
 
 
