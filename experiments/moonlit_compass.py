@@ -25,7 +25,7 @@ polarization camera, each with its photon and dark-current noise at night illumi
   ``dark-calibrated`` (the patent's dark-current calibration and
   :func:`calibration.dark_current.solve_combined`) and ``true-parameters`` (the same solve
   with the injected parameters: the floor of the dark-current model). At moonlight the
-  intensity ``I`` of the dark-current solve is identified only by the mean over the channels
+  intensity ``I`` of the dark-current solve is identified mainly by the mean over the channels
   of the photodiodes' dark-level mismatch (a zero-mean mismatch lies in the span of the
   polarization columns): sensors whose dark levels nearly match lose the angle too, so the
   errors mix a degree for some drawn sensors with tens of degrees for others (the table
@@ -187,8 +187,7 @@ def night_conditions(cfg: Config = Config(), site=None) -> pd.DataFrame:
 # --------------------------------------------------------------------------- three-pair
 def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool = False):
     """Heading errors [deg] (C, J) of one drawn three-pair sensor per estimator."""
-    from calibration.dark_current import ChannelModel, calibrate_dark_current, solve_combined, \
-        solve_opponent
+    from calibration.dark_current import ChannelModel, calibrate_dark_current, solve_combined
     from calibration.solve import heading_error_deg, solve_pair
     from sensor.daq import Daq
     from sensor.photodiode import PhotodiodeChannels
@@ -223,7 +222,7 @@ def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool 
         noise_mean = noise_total / np.sqrt(n)
     phi_raw, _ = solve_pair(U, (1, 2))
     dark = solve_combined(U, cal_b.model, noise_mean)
-    true = solve_opponent(U, ChannelModel.from_photodiodes(params))
+    true = solve_combined(U, ChannelModel.from_photodiodes(params), noise_mean)
     return {"three-pair raw": heading_error_deg(phi_raw, phi),
             "three-pair dark-calibrated": heading_error_deg(dark.phi_deg, phi),
             "three-pair true-parameters": heading_error_deg(true.phi_deg, phi)}
