@@ -159,10 +159,13 @@ def test_zero_noise_limits_give_the_heading(conditions):
     tp = three_pair_errors(conditions, cfg, rng, noise_free=True)
     assert np.max(np.abs(tp["three-pair true-parameters"])) < 1e-6
     assert np.max(np.abs(ring_errors(conditions, cfg, rng, window_s=np.inf))) < 1e-6
-    # the camera keeps its ADC quantisation (2.6 e- per DN at 50-100 e- per pixel) and the
-    # demosaicing's field-of-view error (0.011 deg at 128 px, docs/camera.md): 0.1 deg
-    err, expo = camera_errors(conditions, cfg, rng, night_camera(cfg), noise_free=True)
-    assert np.max(np.abs(err)) < 0.1
+    # the camera without shot and read noise keeps its ADC quantisation: with 16 bits
+    # (0.16 e- per DN, against the 12-bit default's 2.6 e- at signals of a few to tens of DN)
+    # what is left is the demosaicing's field-of-view error, 0.011 deg at 128 px
+    # (docs/camera.md) on a Rayleigh sky; 0.05 deg allowed for the saturated Moon's disk
+    cam = night_camera(cfg, adc_bits=16)
+    err, expo = camera_errors(conditions, cfg, rng, cam, noise_free=True)
+    assert np.max(np.abs(err)) < 0.05
     assert np.all(expo <= cfg.window_s)
 
 
@@ -188,7 +191,7 @@ def test_moon_below_horizon_is_a_clear_error():
         sky.field(45.0, 0.0, -3.0, 100.0)
     assert issubclass(MoonBelowHorizonError, SunBelowHorizonError)
     with pytest.raises(MoonBelowHorizonError, match="below the horizon"):
-        MoonlitSky.at("2024-01-11T05:00:00Z", PARANAL)   # new Moon: down at night
+        MoonlitSky.at("2024-06-06T05:00:00Z", PARANAL)   # new Moon: down at night
     with pytest.raises(MoonBelowHorizonError):
         moon_illuminance_lx(1e-6, -1.0)
 
@@ -208,5 +211,5 @@ def test_bad_inputs_name_the_value():
         NightPhotodiode(dark_A=-1e-12)
     from experiments.moonlit_compass import QUICK, night_conditions
     with pytest.raises(ValueError, match="no time"):
-        night_conditions(replace(QUICK, start="2024-01-11T12:00:00Z",
-                                 end="2024-01-12T12:00:00Z"))
+        night_conditions(replace(QUICK, start="2024-06-06T12:00:00Z",
+                                 end="2024-06-07T12:00:00Z"))
