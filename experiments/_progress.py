@@ -29,6 +29,7 @@ REPRODUCTION_SECONDS = {
     "camera": (53.0, 18.0, 10),
     "real-sky-compass": (1500.0, 64.0, None),
     "moonlit-sky": (160.0, 6.0, None),
+    "moonlit-compass": (13.0, 3.0, None),
 }
 """Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
 sky-gap (14 min), physical-sky (7 min with its aerosol skies), jin2020 (73 s), camera (53 s),

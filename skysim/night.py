@@ -57,7 +57,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .bands import ARCSEC2_SR, get_band, magnitude_to_radiance, solar_irradiance
-from .exceptions import InvalidParameterError
+from .exceptions import InvalidParameterError, SunBelowHorizonError
 from .geometry import angle_between_deg, direction_vector
 from .sky import Sky, SkyField
 from .validation import check_finite, check_in_range
@@ -65,10 +65,13 @@ from .validation import check_finite, check_in_range
 __all__ = [
     "ASTRONOMICAL_NIGHT_DEG",
     "KS_RADIANCE_PER_IRRADIANCE_SR",
+    "MoonBelowHorizonError",
+    "MoonlitSky",
     "NightSky",
     "TwilightError",
     "dark_sky_radiance",
     "ks_airmass",
+    "moon_band_irradiance",
     "night_sky",
     "scattered_radiance",
 ]
@@ -87,6 +90,12 @@ _DEPOLARIZED = 0.06        # K&S eq. 17: the 1.06 of (1.06 + cos^2 rho)
 class TwilightError(InvalidParameterError):
     """The Sun is in twilight (between -18 deg and the horizon), whose sky brightness skysim
     does not model. Fix: choose a time when the Sun is above the horizon or below -18 deg."""
+
+
+class MoonBelowHorizonError(SunBelowHorizonError):
+    """The Moon is at or below the horizon where moonlight is needed (a moonlit sky map, a
+    compass reading the Moon's pattern). Fix: choose a time when the Moon is up
+    (:func:`skysim.moon.moon_position` gives its elevation)."""
 
 
 def ks_airmass(zenith_deg) -> np.ndarray:
@@ -154,6 +163,35 @@ def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_de
             "depolarized": scale * _RAYLEIGH * _DEPOLARIZED * np.ones_like(cos2),
             "mie": scale * 10.0 ** (6.15 - rho / 40.0),
             "scattering_angle_deg": rho}
+
+
+def moon_band_irradiance(moon, band: str = "V"):
+    """The Moon's irradiance in ``band`` above the atmosphere and its ROLO disk reflectance.
+
+    Parameters
+    ----------
+    moon : pandas.DataFrame
+        Rows of :func:`skysim.moon.moon_position` (phase, libration, distances).
+    band : str
+        Photometric band (:data:`skysim.bands.BANDS`).
+
+    Returns
+    -------
+    irradiance : ndarray
+        Normal to the Moon's direction [W m^-2 nm^-1] (:func:`skysim.moon.lunar_irradiance`).
+    reflectance : ndarray
+        Disk-equivalent reflectance [1] (:func:`skysim.moon.lunar_disk_reflectance`).
+    """
+    from .moon import lunar_disk_reflectance, lunar_irradiance
+    b = get_band(band)
+    reflectance = lunar_disk_reflectance(
+        b.wavelength_nm, moon.phase_angle_deg.to_numpy(),
+        moon.sun_selenographic_longitude_deg.to_numpy(),
+        moon.observer_selenographic_latitude_deg.to_numpy(),
+        moon.observer_selenographic_longitude_deg.to_numpy())
+    e_moon = lunar_irradiance(reflectance, solar_irradiance(band), moon.distance_km.to_numpy(),
+                              moon.sun_distance_au.to_numpy())
+    return e_moon, reflectance
 
 
 def _source_stokes(sky: Sky, vel, vaz, src_el, src_az, irradiance, extinction):
@@ -232,7 +270,7 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
         For a view direction below the horizon, an unknown band (``ValueError``), bad
         times or site (as :func:`skysim.sun.sun_position`).
     """
-    from .moon import lunar_disk_reflectance, lunar_irradiance, moon_position
+    from .moon import moon_position
     from .sky import RayleighSky
     from .sun import sun_position
 
@@ -244,13 +282,7 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
     k = b.extinction_mag_per_airmass if extinction is None else float(
         check_in_range("extinction", extinction, 0.0, 5.0))
     moon = moon_position(times, site.latitude_deg, site.longitude_deg, site.altitude_m)
-    reflectance = lunar_disk_reflectance(
-        b.wavelength_nm, moon.phase_angle_deg.to_numpy(),
-        moon.sun_selenographic_longitude_deg.to_numpy(),
-        moon.observer_selenographic_latitude_deg.to_numpy(),
-        moon.observer_selenographic_longitude_deg.to_numpy())
-    e_moon = lunar_irradiance(reflectance, solar_irradiance(band), moon.distance_km.to_numpy(),
-                              moon.sun_distance_au.to_numpy())
+    e_moon, reflectance = moon_band_irradiance(moon, band)
     m_el, m_az = moon.elevation_deg.to_numpy(), moon.azimuth_deg.to_numpy()
     if len(moon) > 1 and np.ndim(vel) == 0:
         vel, vaz = np.broadcast_to(vel, m_el.shape), np.broadcast_to(vaz, m_el.shape)
@@ -286,3 +318,99 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
     return NightSky(SkyField(vel_b, vaz_b, I, Q, U),
                     {"moon_I": moon_I, "sun_I": sun_I, "background_I": background.copy(),
                      "moon_scattering_angle_deg": rho}, sources)
+
+
+class MoonlitSky(Sky):
+    """The moonlit night sky of one Moon as a :class:`skysim.sky.Sky`: the Moon takes the
+    Sun's place in :meth:`field`, whose ``I, Q, U`` are radiances in the band
+    [W m^-2 nm^-1 sr^-1] (K&S scattered moonlight over the dark-sky background, as
+    :func:`night_sky`, without the Sun). For sensors that image any ``Sky`` along their own
+    view directions (:mod:`sensor.camera`, :mod:`sensor.compound_eye`).
+
+    Parameters
+    ----------
+    moon_irradiance : float
+        The Moon's irradiance above the atmosphere in ``band`` [W m^-2 nm^-1]
+        (:func:`moon_band_irradiance`).
+    band : str
+        Photometric band (:data:`skysim.bands.BANDS`).
+    pattern : Sky, optional
+        Polarization pattern of the dipole-scattered light (default
+        :class:`skysim.sky.RayleighSky` with d_max = 1).
+    extinction : float, optional
+        [mag per airmass]; default the band's Paranal value.
+    dark_sky_mag_arcsec2 : float, optional
+        Dark-sky zenith brightness [mag arcsec^-2]; default the band's Paranal value.
+    """
+
+    name = "moonlit"
+    min_sun_elevation_deg = 0.0
+
+    def __init__(self, moon_irradiance: float, band: str = "V", pattern: Sky | None = None,
+                 extinction=None, dark_sky_mag_arcsec2=None):
+        from .sky import RayleighSky
+        b = get_band(band)
+        e = float(check_finite("moon_irradiance", moon_irradiance))
+        if not e > 0.0:
+            raise InvalidParameterError(f"moon_irradiance must be > 0 [W m-2 nm-1]; got {e!r}")
+        self.moon_irradiance, self.band = e, band
+        self.pattern = RayleighSky() if pattern is None else pattern
+        self.extinction = b.extinction_mag_per_airmass if extinction is None else float(
+            check_in_range("extinction", extinction, 0.0, 5.0))
+        self.dark_sky_mag_arcsec2 = (b.dark_sky_mag_arcsec2 if dark_sky_mag_arcsec2 is None
+                                     else float(check_finite("dark_sky_mag_arcsec2",
+                                                             dark_sky_mag_arcsec2)))
+
+    @classmethod
+    def at(cls, time, site, band: str = "V", pattern: Sky | None = None, **kwargs):
+        """The sky of the Moon at one ``time`` (timezone-aware) and ``site``
+        (:class:`skysim.sun.Site`); returns ``(sky, moon)`` with ``moon`` the row of
+        :func:`skysim.moon.moon_position` (elevation, azimuth, phase ...).
+
+        Raises
+        ------
+        MoonBelowHorizonError
+            If the Moon is at or below the horizon then.
+        """
+        from .moon import moon_position
+        moon = moon_position([time], site.latitude_deg, site.longitude_deg, site.altitude_m)
+        row = moon.iloc[0]
+        if not row.elevation_deg > 0.0:
+            raise MoonBelowHorizonError(
+                f"the Moon is at {row.elevation_deg:.2f} deg elevation at {moon.index[0]}: "
+                "below the horizon, no moonlit sky; choose a time when the Moon is up")
+        e_moon, _ = moon_band_irradiance(moon, band)
+        return cls(float(e_moon[0]), band, pattern, **kwargs), row
+
+    def field(self, view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
+              sun_azimuth_deg) -> SkyField:
+        """Stokes field [W m^-2 nm^-1 sr^-1] for view directions and the Moon's position
+        (``sun_*`` arguments: the Moon's elevation and azimuth [deg]).
+
+        Raises
+        ------
+        MoonBelowHorizonError
+            If a Moon elevation is at or below the horizon.
+        InvalidParameterError
+            A view direction below the horizon or a value that is not finite.
+        """
+        m_el = check_finite("moon_elevation_deg", sun_elevation_deg)
+        if np.any(m_el <= 0.0) or np.any(m_el > 90.0):
+            bad = m_el[(m_el <= 0.0) | (m_el > 90.0)].ravel()[0]
+            raise MoonBelowHorizonError(
+                f"moon elevation must be in (0, 90] deg; got {bad!r}: a Moon at or below the "
+                "horizon lights no sky in this model; choose a time when the Moon is up")
+        return super().field(view_elevation_deg, view_azimuth_deg, m_el, sun_azimuth_deg)
+
+    def _stokes(self, vel, vaz, mel, maz):
+        I, Q, U = _source_stokes(self.pattern, vel, vaz, mel, maz, self.moon_irradiance,
+                                 self.extinction)
+        I = I + dark_sky_radiance(vel, self.band, self.dark_sky_mag_arcsec2, self.extinction)
+        return I, Q, U
+
+    def describe(self) -> dict:
+        return {"model": self.name, "band": self.band,
+                "moon_irradiance_W_m2_nm": self.moon_irradiance,
+                "pattern": self.pattern.describe(), "extinction_mag_per_airmass": self.extinction,
+                "dark_sky_mag_arcsec2": self.dark_sky_mag_arcsec2,
+                "radiance_unit": "W m-2 nm-1 sr-1"}
