@@ -10,6 +10,8 @@ _EXPORTS = {
     "DarkCurrentNotIdentifiableError": ".dark_current",
     "calibrate_dark_current": ".dark_current",
     "solve_combined": ".dark_current",
+    "DiagnosisReport": ".diagnosis",
+    "diagnose": ".diagnosis",
     "solve_opponent": ".dark_current",
     "CalibrationError": ".exceptions",
     "ConvergenceError": ".exceptions",
@@ -33,6 +35,7 @@ __all__ = ["CalibrationError", "ConvergenceError", "RankDeficientError", "TooFew
            "calibrate_installation", "PAIRS", "solve_pair", "solve_pairs", "solve_pair_compensated",
            "heading_error_deg", "ChannelModel", "DarkCurrentNotIdentifiableError",
            "calibrate_dark_current", "solve_combined", "solve_opponent",
-           "NonUnitQuaternionError", "attitude_error_deg", "estimate_attitude"]
+           "NonUnitQuaternionError", "attitude_error_deg", "estimate_attitude",
+           "DiagnosisReport", "diagnose"]
 
 __getattr__, __dir__ = lazy_namespace(__name__, _EXPORTS)

@@ -1,8 +1,9 @@
 """`skysim diagnose` and `skysim gap-benchmark`: sim-to-real gap diagnosis, checked blind.
 
-``skysim diagnose DATA`` reads a measurement table ("skysim.measurement/1") or raw photodiode
-data ("skysim.photodiodes/1") with its sidecar, runs :func:`calibration.diagnosis.diagnose`
-and writes ``diagnosis.json``, ``report.md`` and figures.
+``skysim diagnose DATA`` parses its arguments, runs :func:`calibration.diagnose` on the file (a
+measurement table "skysim.measurement/1" or raw photodiode data "skysim.photodiodes/1" with
+its sidecar) and writes the report: ``diagnosis.json`` (schema "skysim.diagnosis/2"),
+``report.md`` and figures.
 
 ``skysim gap-benchmark`` generates data sets with one hidden effect (or none) at a magnitude
 drawn from the effect's documented range, diagnoses each without the label, and scores the
@@ -32,8 +33,10 @@ import pandas as pd
 from calibration.diagnosis import (
     DEFAULT_CANDIDATES,
     DiagnosisData,
+    DiagnosisReport,
     Thresholds,
     data_from_table,
+    decide,
     diagnose,
 )
 from calibration.effects import EFFECT_NAMES, Context, base_vector, forward, get_effect
@@ -113,9 +116,9 @@ def simulate_session(effect: str | None, rng: np.random.Generator, *, params=Non
     duration = float(p[0]) if effect == "sun_motion" else session.sweep_duration_s
     t_true = t0[sweep] + frac * duration
     track = Context.from_arrays(SITE, _to_times(t_true, session.utc_offset), np.zeros(n)).sun
-    _, sun_az0 = track(t0)
+    _, sun_az0 = track.elevation_azimuth(t0)
     heading = (sun_az0[sweep] - 90.0 + frac * 179.9) % 360.0
-    sun_el, _ = track(t_true)
+    sun_el, _ = track.elevation_azimuth(t_true)
     temp = (rng.uniform(*session.temperature_start_C)
             - rng.uniform(*session.cooling_K_per_h) * (t_true - t_true[0]) / 3600.0)
     lux = rng.uniform(*session.illuminance_factor) * clear_sky_illuminance_lx(sun_el)
@@ -168,24 +171,22 @@ def _one_case(i: int, label: str, seed_seq, effects, thresholds, n_folds) -> dic
     ds = simulate_session(None if label == "none" else label, rng,
                           seed={"entropy": seed_seq.entropy,
                                 "spawn_key": list(seed_seq.spawn_key)})
-    doc = diagnose(ds["data"], effects, n_folds=n_folds, seed=i, thresholds=thresholds)
-    clean = diagnose(ds["clean_data"], [], n_folds=n_folds, seed=i, thresholds=thresholds)
-    v = doc["verdict"]
-    cands = doc["candidates"]
-    loo_rows = [c for c in cands if c["effect"] != label]
-    from calibration.diagnosis import decide
-    loo, _ = decide(loo_rows, v["gap_before"], v["noise_floor"], thresholds)
-    shrink_true = 1.0 - clean["verdict"]["gap_before"] / v["gap_before"]
-    best = next((c for c in cands if c["effect"] == v["best_candidate"]), None)
-    shrink_best = best["shrink"] if best else 0.0
-    return {"case": i, "truth": label, "verdict": v["effect"], "loo_verdict": loo,
-            "gap_before_mV": v["gap_before"], "gap_after_mV": v["gap_after"],
-            "noise_floor_mV": v["noise_floor"], "gap_clean_mV": clean["verdict"]["gap_before"],
-            "gap_ratio": v["gap_before"] / v["noise_floor"],
-            "shrink_est": v["shrink"], "shrink_best_candidate": shrink_best,
-            "shrink_true": shrink_true, "shrink_se": v["shrink_se"],
+    doc = diagnose(ds["data"], effects, folds=n_folds, seed=i, thresholds=thresholds)
+    clean = diagnose(ds["clean_data"], [], folds=n_folds, seed=i, thresholds=thresholds)
+    v = doc.verdict
+    loo, _ = decide([c for c in doc.candidates if c.effect != label], v.gap_before,
+                    doc.noise_floor, thresholds)
+    shrink_true = 1.0 - clean.verdict.gap_before / v.gap_before
+    best = doc.candidate(v.best_candidate) if v.best_candidate else None
+    shrink_best = best.shrink if best else 0.0
+    return {"case": i, "truth": label, "verdict": v.effect, "loo_verdict": loo,
+            "gap_before_mV": v.gap_before, "gap_after_mV": v.gap_after,
+            "noise_floor_mV": doc.noise_floor, "gap_clean_mV": clean.verdict.gap_before,
+            "gap_ratio": v.gap_before / doc.noise_floor,
+            "shrink_est": v.shrink, "shrink_best_candidate": shrink_best,
+            "shrink_true": shrink_true, "shrink_se": v.shrink_se,
             "truth_params": json.dumps(ds["truth"]["params"]),
-            "fitted_params": json.dumps({k: p["value"] for k, p in v.get("params", {}).items()})}
+            "fitted_params": json.dumps({k: p["value"] for k, p in v.params.items()})}
 
 
 def run_benchmark(n: int = 200, seed: int = 7, effects=DEFAULT_CANDIDATES, n_folds: int = 3,
@@ -268,97 +269,49 @@ def _fmt(x, nd=3):
     return "—" if x is None or (isinstance(x, float) and not np.isfinite(x)) else f"{x:.{nd}g}"
 
 
-def diagnosis_markdown(doc: dict) -> str:
-    """Markdown report of one diagnosis document."""
-    v = doc["verdict"]
-    lines = [f"# Sim-to-real gap diagnosis: {doc['data'].get('path', '')}", "",
-             f"**Verdict: `{v['effect']}`** — {v['reason']}.", "",
-             f"- metric: {v['metric']}",
-             f"- noise floor: {v['noise_floor']:.3f} mV ({doc['noise_floor']['method']})",
-             (f"- gap before: {v['gap_before']:.3f} ± {v['gap_before_se']:.3f} mV; after "
-              f"(`{v['best_candidate']}`): {v['gap_after']:.3f} ± {v['gap_after_se']:.3f} mV; "
-              f"shrink {100 * v['shrink']:.1f} ± {100 * v['shrink_se']:.1f} %"), ""]
-    if v.get("params"):
-        lines += ["| parameter | value | standard error | unit |", "|---|---|---|---|"]
-        lines += [f"| {k} | {_fmt(p['value'], 4)} | {_fmt(p['se'], 2)} | {p['unit']} |"
-                  for k, p in v["params"].items()]
-        lines.append("")
-    lines += ["## Candidates (ranked by held-out score)", "",
-              "| rank | effect | k | held-out gap [mV] | shrink | score | explains |",
-              "|---|---|---|---|---|---|---|"]
-    for i, c in enumerate(doc["candidates"], 1):
-        if not c.get("available", True):
-            lines.append(f"| — | {c['effect']} | — | unavailable | — | — | {c['error']} |")
-            continue
-        lines.append(f"| {i} | {c['effect']} | {c['k']} | {c['gap_after']:.3f} | "
-                     f"{100 * c['shrink']:.1f} % | {c['score']:.1f} | "
-                     f"{'yes' if c['explained'] else 'no'} |")
-    w = doc["where"]
-    lines += ["", "## Where the gap lies (held-out residuals of the base model)", "",
-              f"Slices above {w['slice_limit_mV']:.3f} mV (floor + margin):", ""]
-    for s in w["carrying_gap"]:
-        if "rms_mV" in s:
-            lines.append(f"- {s['dimension']}: {s['slice']} — {s['rms_mV']:.3f} mV")
-        else:
-            lines.append(f"- harmonic {s['component']}: "
-                         f"{100 * s['fraction_of_variance']:.0f} % of the residual variance")
-    if not w["carrying_gap"]:
-        lines.append("- none: every slice is within the noise floor")
-    d = doc["data"]
-    lines += ["", "## Data and split", "",
-              (f"- {d['samples']} samples, {d['readings_used']} readings used; split: "
-               f"{d['split']['method']}, {d['split']['folds']} folds over "
-               f"{d['split']['blocks']} blocks"),
-              f"- cleaning: {json.dumps(d['cleaning'])}",
-              (f"- nuisance: heading offset {d['nuisance']['heading_offset_deg']:.3f} deg "
-               f"({d['nuisance']['note']})"), ""]
-    return "\n".join(lines)
-
-
-def plot_diagnosis(doc: dict, out: Path) -> list[Path]:
-    """Residual RMS by slice and gap before/after per candidate (PNG, matplotlib Agg)."""
+def plot_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
+    """Held-out residual RMS by slice (one panel per dimension, the noise floor and each
+    slice's limit marked) and the gap before/after per candidate (PNG, matplotlib Agg)."""
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    w = doc["where"]
-    floor = w["noise_floor_mV"]
-    fig, axes = plt.subplots(1, 5, figsize=(17, 3.6), constrained_layout=True)
-    for ax, key, title in zip(axes, ("by_channel", "by_time", "by_illuminance",
-                                     "by_sun_elevation"),
-                              ("channel", "sweep", "illuminance", "sun elevation")):
-        tab = w[key]
-        ax.bar(range(len(tab)), [s["rms_mV"] for s in tab], color="tab:blue")
-        ax.set_xticks(range(len(tab)), [s["slice"] for s in tab], rotation=45, ha="right",
-                      fontsize=7)
-        ax.axhline(floor, color="k", ls="--", lw=1, label="noise floor")
-        ax.set_title(f"by {title}")
-        ax.set_ylabel("held-out RMS [mV]")
-    harm = w["by_harmonic"]
-    axes[4].bar(range(len(harm)), [100 * h["fraction_of_variance"] for h in harm],
-                color="tab:orange")
-    axes[4].set_xticks(range(len(harm)), [h["component"] for h in harm], rotation=45,
-                       ha="right", fontsize=7)
-    axes[4].set_ylabel("% of residual variance")
-    axes[4].set_title("by harmonic")
-    axes[0].legend(fontsize=7)
+    u = report.unit
+    dims = list(dict.fromkeys(s.dimension for s in report.where))
+    fig, axes = plt.subplots(1, max(len(dims), 1), figsize=(3.4 * max(len(dims), 1), 3.6),
+                             constrained_layout=True, squeeze=False)
+    for ax, dim in zip(axes[0], dims):
+        tab = [s for s in report.where if s.dimension == dim]
+        tab.sort(key=lambda s: (s.lo if s.lo is not None else 0.0, s.label))
+        x = np.arange(len(tab))
+        ax.bar(x, [s.rms for s in tab],
+               color=["tab:red" if s.carries_gap else "tab:blue" for s in tab])
+        ax.plot(x, [s.limit for s in tab], "k_", ms=12, label="slice limit")
+        if report.noise_floor is not None:
+            ax.axhline(report.noise_floor, color="k", ls="--", lw=1, label="noise floor")
+        ax.set_xticks(x, [s.label for s in tab], rotation=45, ha="right", fontsize=7)
+        ax.set_title(f"by {dim}", fontsize=9)
+        ax.set_ylabel(f"held-out RMS [{u}]")
+    axes[0][0].legend(fontsize=7)
     p1 = out / "residuals_by_slice.png"
-    fig.savefig(p1, dpi=110)
+    atomic_write(p1, lambda q: fig.savefig(q, dpi=110, format="png"))
     plt.close(fig)
-    v = doc["verdict"]
-    rows = [c for c in doc["candidates"] if c.get("available", True)]
+    v = report.verdict
+    rows = [c for c in report.candidates if c.available]
     fig, ax = plt.subplots(figsize=(7, 3.8), constrained_layout=True)
-    names = ["base"] + [c["effect"] for c in rows]
-    gaps = [v["gap_before"]] + [c["gap_after"] for c in rows]
-    colors = ["tab:gray"] + ["tab:green" if c["effect"] == v["effect"] else "tab:blue"
-                             for c in rows]
-    ax.bar(range(len(names)), gaps, color=colors)
-    ax.axhline(v["noise_floor"], color="k", ls="--", lw=1, label="noise floor")
-    ax.set_xticks(range(len(names)), names, rotation=35, ha="right", fontsize=8)
-    ax.set_ylabel("held-out gap [mV]")
-    ax.set_title(f"gap before/after — verdict: {v['effect']}")
-    ax.legend(fontsize=8)
+    names = ["base"] + [c.effect for c in rows]
+    gaps = [v.gap_before] + [c.gap_after for c in rows]
+    if v.gap_before is not None:
+        colors = ["tab:gray"] + ["tab:green" if c.effect == v.effect else "tab:blue"
+                                 for c in rows]
+        ax.bar(range(len(names)), gaps, color=colors)
+        ax.set_xticks(range(len(names)), names, rotation=35, ha="right", fontsize=8)
+    if report.noise_floor is not None:
+        ax.axhline(report.noise_floor, color="k", ls="--", lw=1, label="noise floor")
+        ax.legend(fontsize=8)
+    ax.set_ylabel(f"held-out gap [{u}]")
+    ax.set_title(f"gap before/after — verdict: {v.effect}")
     p2 = out / "gap_before_after.png"
-    fig.savefig(p2, dpi=110)
+    atomic_write(p2, lambda q: fig.savefig(q, dpi=110, format="png"))
     plt.close(fig)
     return [p1, p2]
 
@@ -441,6 +394,7 @@ def plot_benchmark(cases: pd.DataFrame, confusion: pd.DataFrame, out: Path) -> l
 
 # --------------------------------------------------------------------------- command line
 def _effects_arg(text: str | None):
+    """Benchmark effects: all by default, else the comma-separated names (validated)."""
     if not text:
         return DEFAULT_CANDIDATES
     names = tuple(x.strip() for x in text.split(",") if x.strip())
@@ -449,74 +403,37 @@ def _effects_arg(text: str | None):
     return names
 
 
-def _write_diagnosis(args, doc, markdown, plot):
-    """Write ``diagnosis.json``, ``report.md`` and the figures; return the folder and text."""
-    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+def write_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
+    """Write ``diagnosis.json``, ``report.md`` and the figures into ``out`` (each atomically)."""
     out.mkdir(parents=True, exist_ok=True)
-    write_json_atomic(out / "diagnosis.json", doc)
-    md = markdown(doc)
+    write_json_atomic(out / "diagnosis.json", report.to_dict())
+    md = report.to_markdown()
     atomic_write(out / "report.md", lambda p: p.write_text(md))
-    plot(doc, out)
-    return out, md
-
-
-def _photodiode_instrument(path) -> bool:
-    """True for a ``skysim.photodiodes/1`` file that is not a one-unit three-pair sensor."""
-    import json
-
-    from calibration.photodiode_diagnosis import is_three_pair_sensor
-    from skysim.io import find_sidecar
-    side = find_sidecar(path)
-    if side is None:
-        return False
-    try:
-        sidecar = json.loads(side.read_text())
-    except ValueError:
-        return False
-    return (isinstance(sidecar, dict) and sidecar.get("schema") == "skysim.photodiodes/1"
-            and not is_three_pair_sensor(sidecar))
-
-
-def _diagnose_photodiodes_cmd(args) -> int:
-    from calibration.photodiode_diagnosis import RING_EFFECT_NAMES, diagnose_photodiodes
-    from calibration.photodiode_diagnosis.effects import get_ring_effect
-    from sensor.photodiodes_io import read_photodiodes
-
-    from .real_compass import photodiode_report_markdown, plot_photodiode_diagnosis
-    effects = RING_EFFECT_NAMES
-    if args.effects:
-        effects = tuple(x.strip() for x in args.effects.split(",") if x.strip())
-        for e in effects:
-            get_ring_effect(e)
-    doc = diagnose_photodiodes(read_photodiodes(args.data), effects, n_folds=args.folds,
-                               seed=args.seed, where=str(args.data))
-    out, md = _write_diagnosis(args, doc, photodiode_report_markdown, plot_photodiode_diagnosis)
-    print(md)
-    print(f"wrote {out}/diagnosis.json, report.md, residuals_by_slice.png")
-    return 0
+    return [out / "diagnosis.json", out / "report.md", *plot_diagnosis(report, out)]
 
 
 def _diagnose_cmd(args) -> int:
-    from calibration.diagnosis import load_diagnosis_data
-    if _photodiode_instrument(args.data):
-        return _diagnose_photodiodes_cmd(args)
-    data = load_diagnosis_data(args.data)   # first: a broken sidecar is the error to report
-    effects = _effects_arg(args.effects)
-    doc = diagnose(data, effects, n_folds=args.folds, seed=args.seed)
-    out, _ = _write_diagnosis(args, doc, diagnosis_markdown, plot_diagnosis)
-    v = doc["verdict"]
-    print(f"verdict: {v['effect']} ({v['reason']})")
-    print(f"gap {v['gap_before']:.3f} -> {v['gap_after']:.3f} mV (noise floor "
-          f"{v['noise_floor']:.3f} mV), shrink {100 * v['shrink']:.1f} +- "
-          f"{100 * v['shrink_se']:.1f} %")
-    print("| effect | held-out gap [mV] | score | explains |")
-    for c in doc["candidates"]:
-        if c.get("available", True):
-            print(f"| {c['effect']} | {c['gap_after']:.3f} | {c['score']:.1f} | "
-                  f"{'yes' if c['explained'] else 'no'} |")
+    from calibration import diagnose as run_diagnosis
+    names = (None if not args.effects else
+             tuple(x.strip() for x in args.effects.split(",") if x.strip()))
+    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed)
+    out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+    written = write_diagnosis(report, out)
+    v = report.verdict
+    u = report.unit
+    print(f"verdict: {v.effect} ({v.reason})")
+    if v.gap_before is not None:
+        se = "" if v.shrink_se is None else f" +- {100 * v.shrink_se:.1f}"
+        print(f"gap {v.gap_before:.4g} -> {v.gap_after:.4g} {u} (noise floor "
+              f"{report.noise_floor:.4g} {u}), shrink {100 * v.shrink:.1f}{se} %")
+    print(f"| effect | held-out gap [{u}] | score | explains |")
+    for c in report.candidates:
+        if c.available:
+            print(f"| {c.effect} | {c.gap_after:.4g} | {c.score:.1f} | "
+                  f"{'yes' if c.explained else 'no'} |")
         else:
-            print(f"| {c['effect']} | unavailable | | |")
-    print(f"wrote {out}/diagnosis.json, report.md, residuals_by_slice.png, gap_before_after.png")
+            print(f"| {c.effect} | unavailable | | |")
+    print(f"wrote {out}/" + ", ".join(p.name for p in written))
     return 0
 
 
@@ -586,7 +503,7 @@ def register(sub) -> None:
     d = sub.add_parser("diagnose", help="sim-to-real gap: where, which effect, how far",
                        description="Fit the base model on calibration sweeps, measure the "
                                    "held-out gap, locate it, refit with each candidate effect "
-                                   "and give a verdict (schema skysim.diagnosis/1).",
+                                   "and give a verdict (schema skysim.diagnosis/2).",
                        formatter_class=DefaultsHelpFormatter)
     d.add_argument("data", type=existing_file,
                    help="measurement table or photodiode data (.csv/.parquet + sidecar)")

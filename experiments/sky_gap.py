@@ -2,14 +2,14 @@
 
 For each atmosphere of the shared subset (tau in {0.02, 0.1, 0.25, 1.0}, ground albedo in
 {0, 0.25}; transmitted field, view cosines >= 0.1 as in ``skysim physical-sky``) the cases are
-the seven suns (mu0 = 0.1 ... 1.0). :func:`calibration.sky_gap.diagnose_sky` fits on the suns
+the seven suns (mu0 = 0.1 ... 1.0). :func:`calibration.diagnosis.sky.diagnose_sky` fits on the suns
 mu0 = 0.2 and 0.8 and reports on the five withheld ones: where single scattering with a fitted
 d_max misses the tables, which candidate (``multiple_scattering``, ``ground_albedo``) explains
 it, and how far the withheld gap shrinks. The tables are exact; the noise floor is the
 reproducibility of the tables by the engine (``NOISE_FLOOR``).
 
 Writes to ``results/sky-gap/`` (or ``--out``): ``diagnosis_tau<t>_A<a>.json`` (schema
-"skysim.diagnosis/1", ``level: sky``) per atmosphere, ``summary.csv``, ``summary.json``,
+"skysim.diagnosis/2", ``instrument: sky``) per atmosphere, ``summary.csv``, ``summary.json``,
 ``report.md``, ``gap_by_slice.png`` (withheld gap per slice before/after) and
 ``residual_maps.png`` (withheld residual |(dq, du)| over the sky, before/after, mu0 = 0.4).
 """
@@ -53,7 +53,7 @@ def cases_from_natraj(rows: pd.DataFrame):
     Conventions (``docs/conventions.md``, the table's README): view elevation ``asin(mu)``,
     view azimuth ``phi`` with the sun at azimuth 0; ``Q_skysim = -Q_table``, ``U = U_table``.
     """
-    from calibration.sky_gap import SkyCases
+    from calibration.diagnosis.sky import SkyCases
     mu0s = np.sort(rows.mu0.unique())
     case = np.searchsorted(mu0s, rows.mu0.to_numpy())
     el = np.degrees(np.arcsin(rows.mu.to_numpy()))
@@ -65,7 +65,7 @@ def cases_from_natraj(rows: pd.DataFrame):
 
 
 def _residuals(c, effect, params, settings):
-    from calibration.sky_gap import predict_qu
+    from calibration.diagnosis.sky import predict_qu
     q, u = predict_qu(c, effect, params, settings)
     return np.hypot(q - c.q, u - c.u)
 
@@ -87,28 +87,33 @@ def _figures(out: Path, docs: dict, maps: dict) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    dims = ["by_sun_distance", "by_view_zenith", "horizon", "neutral_points"]
+    dims = ["sun_distance_deg", "view_zenith_deg", "horizon", "neutral_points"]
     n = len(docs)
     fig, axes = plt.subplots(n, 1, figsize=(12, 3.6 * n), squeeze=False,
                              layout="constrained")
     for ax, (key, d) in zip(axes[:, 0], docs.items()):
         names, before, after = [], [], []
         for dim in dims:
-            for b, a in zip(d["where"][dim], d["where_after"][dim]):
-                names.append(b["slice"].replace(" deg from sun", " deg from the sun"))
-                before.append(b["rms"])
-                after.append(a["rms"])
+            after_of = {s.label: s.rms for s in d.where_after if s.dimension == dim}
+            rows = sorted((s for s in d.where if s.dimension == dim),
+                          key=lambda s: (s.lo if s.lo is not None else 0.0, s.label))
+            for b in rows:
+                names.append(f"{b.label} deg from the sun" if dim == "sun_distance_deg" else
+                             f"view zenith {b.label} deg" if dim == "view_zenith_deg" else
+                             b.label)
+                before.append(b.rms)
+                after.append(after_of.get(b.label, np.nan))
         x = np.arange(len(names))
         ax.bar(x - 0.2, before, 0.4, label="single scattering, fitted d_max")
         ax.bar(x + 0.2, after, 0.4,
-               label=f"after fitting {_words(d['verdict']['best_candidate'])}")
-        ax.axhline(d["verdict"]["noise_floor"], color="k", ls="--", lw=0.8,
+               label=f"after fitting {_words(d.verdict.best_candidate)}")
+        ax.axhline(d.noise_floor, color="k", ls="--", lw=0.8,
                    label="noise floor (engine vs tables)")
         ax.set_yscale("log")
         ax.set_xticks(x)
         ax.set_xticklabels(names, rotation=25, ha="right", fontsize=8)
         ax.set_ylabel("withheld RMS |(dq, du)|", fontsize=9)
-        ax.set_title(f"{_case_words(key)}: verdict {_words(d['verdict']['effect'])}",
+        ax.set_title(f"{_case_words(key)}: verdict {_words(d.verdict.effect)}",
                      fontsize=10)
         ax.legend(fontsize=8, loc="upper left", bbox_to_anchor=(1.005, 1.0))
     save_png(fig, out / "gap_by_slice.png")
@@ -148,17 +153,17 @@ def _report(summary: pd.DataFrame, docs: dict, meta: dict) -> str:
                      f"{r.gap_before:.4f} | {r.gap_after:.4f} | {r.shrink:.3f} | {r.fitted} |")
     lines += ["", "## Where (withheld cases, single scattering with fitted d_max)", ""]
     for key, d in docs.items():
-        top = d["where"]["carrying_gap"][:4]
+        top = d.carrying_gap()[:4]
         lines.append(f"- **{key}**: " + "; ".join(
-            f"{s['slice']} (rms {s['rms']:.4f}, {100 * s['share_of_squared_gap']:.0f} % of "
-            f"the squared gap)" for s in top) if top else f"- **{key}**: no slice above floor")
+            f"{s.dimension} {s.label} (rms {s.rms:.4f}, {100 * s.share:.0f} % of the excess "
+            f"squared gap)" for s in top) if top else f"- **{key}**: no slice above floor")
     lines += ["", "Figures: `gap_by_slice.png`, `residual_maps.png`."]
     return "\n".join(lines) + "\n"
 
 
 def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
     """Diagnose every atmosphere of the subset (two with ``quick``); write the outputs."""
-    from calibration.sky_gap import diagnose_sky
+    from calibration.diagnosis.sky import diagnose_sky
     from skysim.rt_sasktran import EngineSettings
 
     t0 = time.perf_counter()
@@ -174,28 +179,28 @@ def run(out: Path, reference: Path | None = None, quick: bool = False) -> dict:
         cal = [int(k) for k, m in enumerate(mu0s) if np.any(np.isclose(m, CALIBRATION_MU0))]
         d = diagnose_sky(c, cal, noise_floor=NOISE_FLOOR, settings=settings,
                          n_grid=5 if quick else 6, xatol=0.02 if quick else 0.01)
-        d["data"]["source"] = {"reference": "Natraj et al. (2009) subset", "tau": tau,
-                               "albedo": albedo, "field": "transmitted", "min_mu": 0.1}
+        d.data["source"] = {"reference": "Natraj et al. (2009) subset", "tau": tau,
+                            "albedo": albedo, "field": "transmitted", "min_mu": 0.1}
         key = f"tau{tau:g}_A{albedo:g}"
         docs[key] = d
-        write_json_atomic(out / f"diagnosis_{key}.json", d)
-        v = d["verdict"]
-        dmax = next(r for r in d["candidates"] if r["effect"] == "d_max")["params"]["d_max"]
-        rows.append({"tau": tau, "albedo": albedo, "verdict": v["effect"], "d_max": dmax,
-                     "gap_before": v["gap_before"], "gap_after": v["gap_after"],
-                     "shrink": v["shrink"],
-                     "fitted": ", ".join(f"{k} {x:.4g}" for k, x in v["params"].items()),
-                     "fit_tau": v["params"].get("tau", np.nan),
-                     "fit_albedo": v["params"].get("albedo", np.nan),
-                     "seconds": d["seconds"]})
+        write_json_atomic(out / f"diagnosis_{key}.json", d.to_dict())
+        v = d.verdict
+        values = {k: p["value"] for k, p in v.params.items()}
+        dm = {k: p["value"] for k, p in d.candidate("d_max").params.items()}
+        seconds = d.extra["seconds"]
+        rows.append({"tau": tau, "albedo": albedo, "verdict": v.effect, "d_max": dm["d_max"],
+                     "gap_before": v.gap_before, "gap_after": v.gap_after,
+                     "shrink": v.shrink,
+                     "fitted": ", ".join(f"{k} {x:.4g}" for k, x in values.items()),
+                     "fit_tau": values.get("tau", np.nan),
+                     "fit_albedo": values.get("albedo", np.nan),
+                     "seconds": seconds})
         k04 = int(np.argmin(np.abs(mu0s - MAP_MU0)))
         cm = c.subset([k04])
-        dm = next(r for r in d["candidates"] if r["effect"] == "d_max")["params"]
         maps[key] = (cm, _residuals(cm, "d_max", dm, settings),
-                     _residuals(cm, v["best_candidate"], v["params"], settings),
-                     v["best_candidate"])
-        print(f"  tau {tau:g} albedo {albedo:g}: {v['effect']} gap {v['gap_before']:.4f} -> "
-              f"{v['gap_after']:.4f} ({d['seconds']:.0f} s)", flush=True)
+                     _residuals(cm, v.best_candidate, values, settings), v.best_candidate)
+        print(f"  tau {tau:g} albedo {albedo:g}: {v.effect} gap {v.gap_before:.4f} -> "
+              f"{v.gap_after:.4f} ({seconds:.0f} s)", flush=True)
     summary = pd.DataFrame(rows)
     meta = {"schema": "skysim.skygap-summary/1", "quick": quick,
             "calibration_mu0": list(CALIBRATION_MU0), "noise_floor": NOISE_FLOOR,

@@ -1,7 +1,8 @@
 """Golden cases of the three diagnoses: small, fast data sets taken from their own tests, and
 the verdicts and held-out gaps the diagnoses gave on them when recorded.
 
-Each case is a function returning the diagnosis report of one data set; :func:`summary`
+Each case is a function returning the diagnosis report of one data set (through
+:func:`calibration.diagnosis.diagnose`, the one entry point); :func:`summary`
 keeps what must not change when the diagnosis code is reorganised: the verdict (effect name,
 best candidate), the gaps before and after, the shrink, the noise floor and every available
 candidate's held-out gap (units: mV for the three-pair sensor, DoLP units for sky fields,
@@ -26,24 +27,18 @@ GOLDEN_DIR = Path(__file__).resolve().parent / "golden"
 THREE_PAIR_SENSOR_CANDIDATES = ("tilt", "turntable_periodic", "sun_motion", "clock_offset")
 
 
-def _report_dict(report) -> dict:
-    """The report as a dict (a report object, or a dict as the diagnoses returned before)."""
-    return report if isinstance(report, dict) else report.to_dict()
-
-
 def summary(report) -> dict:
-    """What the golden test compares (see module docstring)."""
-    d = _report_dict(report)
-    v = d["verdict"]
-    cands = {c["effect"]: c["gap_after"] for c in d["candidates"]
-             if c.get("available", True)}
-    floor = v["noise_floor"]
-    return {"verdict": v["effect"], "best_candidate": v.get("best_candidate"),
-            "gap_before": v["gap_before"], "gap_after": v["gap_after"], "shrink": v["shrink"],
-            "noise_floor": None if floor is None else float(floor),
-            "candidate_gaps": {k: float(g) for k, g in cands.items()},
-            "unavailable": sorted(c["effect"] for c in d["candidates"]
-                                  if not c.get("available", True))}
+    """What the golden test compares (see module docstring), from a
+    :class:`calibration.diagnosis.DiagnosisReport` or a report dict of either schema."""
+    from calibration.diagnosis import DiagnosisReport
+    r = report if isinstance(report, DiagnosisReport) else DiagnosisReport.from_dict(report)
+    v = r.verdict
+    return {"verdict": v.effect, "best_candidate": v.best_candidate,
+            "gap_before": v.gap_before, "gap_after": v.gap_after, "shrink": v.shrink,
+            "noise_floor": None if r.noise_floor is None else float(r.noise_floor),
+            "candidate_gaps": {c.effect: float(c.gap_after) for c in r.candidates
+                               if c.available},
+            "unavailable": sorted(c.effect for c in r.candidates if not c.available)}
 
 
 # ----------------------------------------------------------------------- three-pair sensor
@@ -73,42 +68,42 @@ def three_pair_none():
 # ----------------------------------------------------------------------- sky fields
 def sky_rayleigh_none():
     """tests/test_sky_gap.py: a single-scattering field (d_max 0.7) with noise; no engine."""
-    from calibration.sky_gap import diagnose_sky
+    from calibration.diagnosis import diagnose
     from skysim.sky import RayleighSky
     from test_sky_gap import FLOOR, make_cases
     c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
-    return diagnose_sky(c, [0], candidates=("d_max",), noise_floor=FLOOR)
+    return diagnose(c, ("d_max",), calibration_cases=[0], noise_floor=FLOOR)
 
 
 def sky_multiple_scattering_named():
     """tests/test_sky_gap.py: a multiple-scattering field (tau 0.3, black ground), 8-stream
     sasktran2 (needs the ``rt`` extra)."""
-    from calibration.sky_gap import diagnose_sky
+    from calibration.diagnosis import diagnose
     from skysim.multiple import MultipleScatteringSky
     from skysim.rt_sasktran import EngineSettings
     from test_sky_gap import FLOOR, make_cases
     settings = EngineSettings(n_streams=8)
     c = make_cases(MultipleScatteringSky(tau=0.3, albedo=0.0, settings=settings),
                    np.random.default_rng(2))
-    return diagnose_sky(c, [0], candidates=("multiple_scattering",), noise_floor=FLOOR,
-                        settings=settings, n_grid=5)
+    return diagnose(c, ("multiple_scattering",), calibration_cases=[0], noise_floor=FLOOR,
+                    settings=settings, n_grid=5)
 
 
 # ----------------------------------------------------------------------- photodiode rings
 def ring_yaw_scale_named():
     """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected."""
-    from calibration.photodiode_diagnosis import diagnose_photodiodes
+    from calibration.diagnosis import diagnose
     from experiments.real_injection import inject
     from test_photodiode_diagnosis import ring_session
     data, _ = inject(ring_session(), "yaw_scale", np.random.default_rng(3))
-    return diagnose_photodiodes(data, ("yaw_scale",), n_folds=3)
+    return diagnose(data, ("yaw_scale",), folds=3)
 
 
 def ring_no_candidates():
     """The same simulated ring, noise-free counts, no candidate: its gap is left unexplained."""
-    from calibration.photodiode_diagnosis import diagnose_photodiodes
+    from calibration.diagnosis import diagnose
     from test_photodiode_diagnosis import ring_session
-    return diagnose_photodiodes(ring_session(), (), n_folds=3)
+    return diagnose(ring_session(), (), folds=3)
 
 
 CASES = {
@@ -121,6 +116,13 @@ CASES = {
               "no_candidates": ring_no_candidates},
 }
 NEEDS_ENGINE = {("sky", "multiple_scattering_named")}
+REL_TOLERANCE = {("sky", "multiple_scattering_named"): 1e-5}
+"""Cases whose gaps are compared more loosely than 1e-9 relative, and why: sasktran2 sums
+over OpenMP threads, and on a loaded machine its reductions run in another order; its Stokes
+values then differ at ~1e-12, which the Brent search in ln tau turns into other evaluation
+nodes. Measured with a second diagnosis running beside it: 6.6e-7 relative in the held-out
+gap after the fit. 1e-5 bounds that; a behaviour change (another tau node grid, another
+candidate, another score) moves the gap by more than 1e-3."""
 
 
 def record(family: str) -> Path:

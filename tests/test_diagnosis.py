@@ -14,6 +14,7 @@ from calibration import effects as E
 from calibration.diagnosis import (
     DIAGNOSIS_SCHEMA,
     AllNaNChannelError,
+    DiagnosisReport,
     InsufficientDataError,
     MissingSiteError,
     SingleHeadingError,
@@ -79,22 +80,22 @@ def test_noise_floor_from_second_differences():
 
 def test_verdict_none_on_effect_free_data(none_case):
     _, doc = none_case
-    v = doc["verdict"]
-    assert v["effect"] == "none"
-    assert v["gap_before"] <= 1.1 * v["noise_floor"]
-    assert v["shrink"] == 0.0
+    v = doc.verdict
+    assert v.effect == "none"
+    assert v.gap_before <= 1.1 * doc.noise_floor
+    assert v.shrink == 0.0
 
 
 def test_verdict_names_the_hidden_effect_and_estimates_the_shrink(tilt_case):
     ds, doc = tilt_case
-    v = doc["verdict"]
-    assert v["effect"] == "tilt"
+    v = doc.verdict
+    assert v.effect == "tilt"
     clean = diagnose(ds["clean_data"], [])
-    shrink_true = 1 - clean["verdict"]["gap_before"] / v["gap_before"]
+    shrink_true = 1 - clean.verdict.gap_before / v.gap_before
     # acceptance of the issue: shrink within +-0.20 of the truth (same data without effect)
-    assert abs(v["shrink"] - shrink_true) <= 0.20
-    assert v["gap_before"] > 2 * v["noise_floor"]
-    p = v["params"]
+    assert abs(v.shrink - shrink_true) <= 0.20
+    assert v.gap_before > 2 * doc.noise_floor
+    p = v.params
     assert abs(p["tilt_x_deg"]["value"] - 1.2) <= 4 * p["tilt_x_deg"]["se"] + 1e-3
 
 
@@ -102,23 +103,31 @@ def test_leave_one_out_gives_unexplained_and_equals_a_rerun(tilt_case):
     ds, doc = tilt_case
     others = [e for e in SENSOR_EFFECTS if e != "tilt"]
     rerun = diagnose(ds["data"], others)
-    rows = [c for c in doc["candidates"] if c["effect"] != "tilt"]
-    v = doc["verdict"]
-    assert decide(rows, v["gap_before"], v["noise_floor"])[0] == "unexplained"
-    assert rerun["verdict"]["effect"] == "unexplained"
+    rows = [c for c in doc.candidates if c.effect != "tilt"]
+    assert decide(rows, doc.verdict.gap_before, doc.noise_floor)[0] == "unexplained"
+    assert rerun.verdict.effect == "unexplained"
 
 
 def test_document_schema(tilt_case):
-    _, doc = tilt_case
-    assert doc["schema"] == DIAGNOSIS_SCHEMA
-    for key in ("effect", "gap_before", "gap_after", "shrink", "metric"):
+    _, report = tilt_case
+    doc = report.to_dict()
+    assert doc["schema"] == DIAGNOSIS_SCHEMA and doc["unit"] == "mV"
+    for key in ("effect", "gap_before", "gap_after", "shrink", "best_candidate", "params"):
         assert key in doc["verdict"]
     scores = [c["score"] for c in doc["candidates"] if c.get("available", True)]
     assert scores == sorted(scores)
-    assert {"by_channel", "by_time", "by_harmonic", "by_illuminance", "by_sun_elevation",
-            "carrying_gap", "noise_floor_mV"} <= set(doc["where"])
-    assert doc["where"]["carrying_gap"], "a strong tilt must show in some slice"
-    json.dumps(doc)  # serialisable as is
+    assert {w["dimension"] for w in doc["where"]} == {"channel", "sweep", "illuminance_lx",
+                                                      "sun_elevation_deg"}
+    for dim in ("channel", "sweep"):   # each dimension partitions the held-out readings
+        rows = [w for w in doc["where"] if w["dimension"] == dim]
+        assert sum(w["n"] for w in rows) == doc["data"]["split"]["held_out_values"]
+        assert sum(w["share"] for w in rows) == pytest.approx(1.0, abs=1e-12)
+    assert all({"lo_lx", "hi_lx"} <= set(w) for w in doc["where"]
+               if w["dimension"] == "illuminance_lx")
+    assert report.carrying_gap(), "a strong tilt must show in some slice"
+    assert len(doc["extra"]["harmonics"]) == 6
+    text = json.dumps(doc)  # serialisable as is
+    assert DiagnosisReport.from_dict(json.loads(text)).to_dict() == doc
 
 
 def test_dirty_data_is_flagged_counted_and_still_diagnosed(none_case):
@@ -134,8 +143,8 @@ def test_dirty_data_is_flagged_counted_and_still_diagnosed(none_case):
     assert c["repeated_timestamps"] == 3
     assert c["excluded_readings"] == 13
     doc = diagnose(data, ["tilt", "sun_motion"])
-    assert doc["data"]["cleaning"]["saturated_readings"] == 3
-    assert doc["verdict"]["effect"] == "none"
+    assert doc.data["cleaning"]["saturated_readings"] == 3
+    assert doc.verdict.effect == "none"
 
 
 def test_bad_input_raises_specific_errors(none_case):
@@ -218,8 +227,8 @@ def test_timezone_error_of_hours_found_by_the_half_hour_search():
     from experiments.diagnose import simulate_session
     ds = simulate_session("clock_offset", np.random.default_rng(5), params=np.array([8 * 3600.0]))
     doc = diagnose(ds["data"], ("clock_offset", "multiple_scattering", "sun_motion"))
-    assert doc["verdict"]["effect"] == "clock_offset"
-    assert abs(doc["verdict"]["params"]["clock_offset_s"]["value"] - 8 * 3600.0) < 600.0
+    assert doc.verdict.effect == "clock_offset"
+    assert abs(doc.verdict.params["clock_offset_s"]["value"] - 8 * 3600.0) < 600.0
 
 
 @pytest.mark.parametrize("range_v, rails", [

@@ -401,14 +401,14 @@ def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
     assert main(["diagnose", str(path), "--effects", "yaw_scale,occlusion", "--folds", "3",
                  "--out", str(out)]) == 0
     doc = json.loads((out / "diagnosis.json").read_text())
-    assert doc["schema"] == "skysim.diagnosis/1" and doc["instrument"] == "photodiodes"
+    assert doc["schema"] == "skysim.diagnosis/2" and doc["instrument"] == "photodiodes"
     assert {"effect", "gap_before", "gap_after", "shrink", "metric", "params"} <= set(doc["verdict"])
     assert isinstance(doc["faults"], list)
     az = [w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"]
     assert az and all({"label", "share", "n", "lo_deg", "hi_deg"} <= set(w) for w in az)
     assert {w["dimension"] for w in doc["where"]} >= {"unit", "photodiode", "sweep",
                                                        "sun_distance_deg", "motion"}
-    assert doc["heading_error"]["base_deg"] < 1.0          # noise-free compass: sub-degree
+    assert doc["extra"]["heading_error"]["base_deg"] < 1.0   # noise-free compass: sub-degree
     assert (out / "report.md").exists() and (out / "residuals_by_slice.png").exists()
     assert main(["diagnose", str(path), "--effects", "nope"]) == 2
 

@@ -59,12 +59,15 @@ def test_rayleigh_data_verdict_none_and_dmax_recovered():
     """
     c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
     d = diagnose_sky(c, [0], candidates=("d_max",), noise_floor=FLOOR)
-    assert d["schema"] == DIAGNOSIS_SCHEMA and d["level"] == "sky"
-    assert d["verdict"]["effect"] == "none"
-    assert d["verdict"]["params"]["d_max"] == pytest.approx(0.7, abs=1e-3)
+    doc = d.to_dict()
+    assert doc["schema"] == DIAGNOSIS_SCHEMA and doc["instrument"] == "sky"
+    assert d.verdict.effect == "none"
+    assert d.verdict.params["d_max"]["value"] == pytest.approx(0.7, abs=1e-3)
     # the held-out gap is the injected noise: within 10 % of sigma sqrt(2) (240 points)
-    assert d["verdict"]["gap_before"] == pytest.approx(FLOOR, rel=0.1)
-    assert d["where"]["carrying_gap"] == []
+    assert d.verdict.gap_before == pytest.approx(FLOOR, rel=0.1)
+    assert d.carrying_gap() == []
+    # one withheld case: no blocks to resample, so no standard errors rather than zeros
+    assert d.verdict.gap_before_se is None and d.verdict.shrink_se is None
 
 
 def test_albedo_decomposition_matches_direct_engine_call():
@@ -101,16 +104,16 @@ def test_multiple_scattering_data_right_effect_and_parameters(tau, albedo, effec
     c = make_cases(MultipleScatteringSky(tau=tau, albedo=albedo, settings=settings),
                    np.random.default_rng(2))
     d = diagnose_sky(c, [0], noise_floor=FLOOR, settings=settings, n_grid=5)
-    v = d["verdict"]
-    assert v["effect"] == effect, d["candidates"]
-    assert v["params"]["tau"] == pytest.approx(tau, rel=0.03)
+    v = d.verdict
+    assert v.effect == effect, d.candidates
+    assert v.params["tau"]["value"] == pytest.approx(tau, rel=0.03)
     if effect == "ground_albedo":
-        assert v["params"]["albedo"] == pytest.approx(albedo, abs=0.01)
-    assert v["gap_after"] == pytest.approx(FLOOR, rel=0.1)
-    assert v["gap_before"] > 5 * FLOOR and v["shrink"] > 0.8
-    assert d["data"]["withheld_cases"] == [1]
-    assert d["where"]["carrying_gap"], "the single-scattering gap must sit in some slice"
-    assert d["where_after"]["carrying_gap"] == []
+        assert v.params["albedo"]["value"] == pytest.approx(albedo, abs=0.01)
+    assert v.gap_after == pytest.approx(FLOOR, rel=0.1)
+    assert v.gap_before > 5 * FLOOR and v.shrink > 0.8
+    assert d.data["withheld_cases"] == [1]
+    assert d.carrying_gap(), "the single-scattering gap must sit in some slice"
+    assert d.carrying_gap(after=True) == []
 
 
 def test_slices_locate_an_injected_horizon_gap():
@@ -118,10 +121,12 @@ def test_slices_locate_an_injected_horizon_gap():
     c = make_cases(RayleighSky(), suns=(30.0,))
     dq = np.where(c.view_elevation_deg < 15.0, 0.05, 0.0)
     w = slice_residuals(c, dq, np.zeros_like(dq), noise_floor=1e-3)
-    hor = {r["slice"]: r for r in w["horizon"]}
-    assert hor["elevation < 15 deg"]["share_of_squared_gap"] == pytest.approx(1.0)
-    assert hor["elevation < 15 deg"]["rms"] == pytest.approx(0.05)
-    assert w["carrying_gap"][0]["rms"] == pytest.approx(0.05)
+    hor = {s.label: s for s in w if s.dimension == "horizon"}
+    assert hor["elevation < 15 deg"].share == pytest.approx(1.0)
+    assert hor["elevation < 15 deg"].rms == pytest.approx(0.05)
+    assert hor["elevation < 15 deg"].carries_gap
+    assert not hor["elevation >= 15 deg"].carries_gap
+    assert [s for s in w if s.carries_gap][0].rms == pytest.approx(0.05)
 
 
 def test_bad_input_specific_errors():

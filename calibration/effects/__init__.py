@@ -3,7 +3,7 @@
 Each effect is a documented physical extension of the base model of Yang et al. (2014) [1]_
 (eqs. 2-3, single-scattering Rayleigh sky with a free ``d_max``), with its own parameters,
 used both to *generate* data (:func:`forward` with known parameters plus noise) and to *fit*
-data (the same :func:`forward` inside :func:`calibration.diagnosis.fit_model`). The generator
+data (the same :func:`forward` inside :func:`calibration.diagnosis.three_pair_fit.fit_model`). The generator
 and the diagnoser share nothing else.
 
 The forward model runs in two stages, so a fit recomputes only what a parameter touches:
@@ -50,8 +50,8 @@ import pandas as pd
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiode import opponent_log_ratio, photodiode_signal
 from skysim import rayleigh
-from skysim.geometry import direction_vector, elevation_azimuth, wrap_axial_deg
-from skysim.sun import Site, as_utc_index, sun_vector
+from skysim.geometry import direction_vector, wrap_axial_deg
+from skysim.sun import Site, SunTrack, as_utc_index
 
 __all__ = [
     "BASE_NAMES",
@@ -88,33 +88,6 @@ def base_vector(misalignment_deg=(0.0,) * 6, transmittance=(0.0,) * 3,
     """Base parameter vector in :data:`BASE_NAMES` order."""
     return np.r_[np.asarray(misalignment_deg, float), np.asarray(transmittance, float),
                  float(dop_scale)]
-
-
-@dataclass(frozen=True)
-class SunTrack:
-    """Sun direction over a time span, interpolated from ephemeris knots.
-
-    Knots every ``step_s`` from :func:`skysim.sun.sun_vector` (pysolar); linear interpolation of
-    the ENU unit vector between knots 60 s apart errs by < 1e-4 deg (the sun's direction turns
-    by 0.25 deg/min and its curvature term is ``(0.25 deg)^2 / 8`` in radians).
-    """
-
-    t_s: np.ndarray
-    vectors: np.ndarray
-
-    @classmethod
-    def around(cls, site: Site, t_min_s: float, t_max_s: float, margin_s: float = 15 * 3600.0,
-               step_s: float = 60.0) -> SunTrack:
-        t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
-        times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)
-        vec, _ = sun_vector(times, site)
-        return cls(t, vec)
-
-    def __call__(self, t_s) -> tuple[np.ndarray, np.ndarray]:
-        """Sun elevation and azimuth [deg] at times ``t_s`` [s since epoch, UTC]."""
-        t_s = np.asarray(t_s, dtype=float)
-        v = np.stack([np.interp(t_s, self.t_s, self.vectors[:, c]) for c in range(3)], axis=-1)
-        return elevation_azimuth(v)
 
 
 @dataclass
@@ -158,7 +131,7 @@ class Context:
         if self.t_ref_s is None:
             self.t_ref_s = float(self.t_s.min())
         if self.sun is None:
-            self.sun = SunTrack.around(self.site, float(self.t_s.min()), float(self.t_s.max()))
+            self.sun = SunTrack(self.site, float(self.t_s.min()), float(self.t_s.max()))
 
     @classmethod
     def from_arrays(cls, site: Site, times, heading_deg, block=None, illuminance_lx=None,
@@ -221,7 +194,6 @@ class Effect(abc.ABC):
     stage = "output"
     null = np.zeros(0)
     generation_range: ClassVar[dict] = {}
-    reference = ""
 
     @property
     def k(self) -> int:
@@ -316,7 +288,7 @@ def geometry(ctx: Context, effect: Effect | None = None, p=None):
     if effect is not None:
         t = t + effect.time_shift_s(ctx, p)
         h = h + effect.heading_shift_deg(ctx, p)
-    sun_el, sun_az = ctx.sun(t)
+    sun_el, sun_az = ctx.sun.elevation_azimuth(t)
     out = None if effect is None else effect.polarization(ctx, p, h, sun_el, sun_az)
     return zenith_rayleigh(h, sun_el, sun_az) if out is None else out
 

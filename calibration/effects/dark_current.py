@@ -64,7 +64,7 @@ def scene_illuminance_lx(ctx: Context) -> np.ndarray:
     if ctx.illuminance_lx is not None:
         return ctx.illuminance_lx
     if "illuminance_model_lx" not in ctx.cache:
-        el, _ = ctx.sun(ctx.t_s)
+        el, _ = ctx.sun.elevation_azimuth(ctx.t_s)
         ctx.cache["illuminance_model_lx"] = np.maximum(clear_sky_illuminance_lx(el), 1.0)
     return ctx.cache["illuminance_model_lx"]
 

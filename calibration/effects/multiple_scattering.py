@@ -57,6 +57,7 @@ import numpy as np
 
 from skysim.geometry import wrap_axial_deg
 
+from ..diagnosis.errors import EffectUnavailableError
 from . import Effect
 
 __all__ = ["EFFECT", "TABLE_NAME", "EffectUnavailableError", "MultipleScattering",
@@ -64,10 +65,6 @@ __all__ = ["EFFECT", "TABLE_NAME", "EffectUnavailableError", "MultipleScattering
 
 TABLE_NAME = "multiple_scattering_table.npz"
 """Package-data file of :mod:`calibration.effects` holding the zenith table."""
-
-
-class EffectUnavailableError(RuntimeError):
-    """The physics an effect needs is not installed or not built yet (says what to add)."""
 
 
 @lru_cache(maxsize=8)

@@ -27,7 +27,7 @@ def table_10k():
 def test_diagnose_10k_base_only_baseline(benchmark, table_10k):
     benchmark.extra_info.update(items=10_000, baseline=True)
     doc = benchmark.pedantic(diagnose, args=(table_10k, []), rounds=2, iterations=1)
-    assert doc["verdict"]["effect"] == "unexplained"
+    assert doc.verdict.effect == "unexplained"
 
 
 @pytest.mark.benchmark(group="diagnosis 10k samples")
@@ -36,7 +36,7 @@ def test_diagnose_10k_all_candidates(benchmark, table_10k):
     benchmark.extra_info.update(items=10_000, candidates=len(DEFAULT_CANDIDATES))
     doc = benchmark.pedantic(diagnose, args=(table_10k, DEFAULT_CANDIDATES), rounds=2,
                              iterations=1)
-    assert doc["verdict"]["effect"] == "tilt"
+    assert doc.verdict.effect == "tilt"
 
 
 @pytest.mark.benchmark(group="gap benchmark")

@@ -1,0 +1,72 @@
+"""Sim-to-real gap diagnosis: where a model disagrees with data, which effect explains it, how
+far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
+
+- :mod:`.core`: folds by whole block, noise floor, held-out score, verdict, shrink with its
+  uncertainty, slices (one formula each);
+- :mod:`.protocol`: what an instrument adapter and a candidate effect implement;
+- adapters: :mod:`.three_pair` (three-pair sensor tables, with :mod:`.three_pair_data` and
+  :mod:`.three_pair_fit`), :mod:`.sky` (sky fields), :mod:`.rings` (multi-unit photodiode
+  instruments, through :mod:`calibration.photodiode_diagnosis`);
+- :mod:`.report`: :class:`DiagnosisReport` (schema ``skysim.diagnosis/2``) and its readers
+  of the earlier report dicts (:mod:`.legacy`), markdown (:mod:`.markdown`);
+- :func:`diagnose` (:mod:`.api`): the one entry point.
+"""
+
+from .core import Thresholds, assign_folds, decide, noise_floor
+from .errors import (
+    AllNaNChannelError,
+    DiagnosisError,
+    EffectUnavailableError,
+    InsufficientDataError,
+    MissingSiteError,
+    ReportFormatError,
+    SingleHeadingError,
+    UnsupportedInstrumentError,
+)
+from .fit_result import FitResult
+from .report import DIAGNOSIS_SCHEMA, LEGACY_SCHEMA, Candidate, DiagnosisReport, Slice, Verdict
+from .three_pair import DEFAULT_CANDIDATES, cross_validate, diagnose_three_pair
+from .three_pair_data import (
+    DiagnosisData,
+    _daq_saturation_V,  # noqa: F401  (tests of the DAQ rails)
+    data_from_photodiodes,
+    data_from_table,
+    load_diagnosis_data,
+)
+from .three_pair_fit import fit_model
+from .api import diagnose  # noqa: E402  (needs the adapters above)
+
+noise_floor_V = noise_floor
+"""The noise floor of three-pair residuals in volts: :func:`.core.noise_floor`."""
+
+__all__ = [
+    "DEFAULT_CANDIDATES",
+    "DIAGNOSIS_SCHEMA",
+    "LEGACY_SCHEMA",
+    "AllNaNChannelError",
+    "Candidate",
+    "DiagnosisData",
+    "DiagnosisError",
+    "DiagnosisReport",
+    "EffectUnavailableError",
+    "FitResult",
+    "InsufficientDataError",
+    "MissingSiteError",
+    "ReportFormatError",
+    "SingleHeadingError",
+    "Slice",
+    "Thresholds",
+    "UnsupportedInstrumentError",
+    "Verdict",
+    "assign_folds",
+    "cross_validate",
+    "data_from_photodiodes",
+    "data_from_table",
+    "decide",
+    "diagnose",
+    "diagnose_three_pair",
+    "fit_model",
+    "load_diagnosis_data",
+    "noise_floor",
+    "noise_floor_V",
+]

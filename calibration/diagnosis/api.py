@@ -1,0 +1,108 @@
+"""One entry point: :func:`diagnose` picks the instrument adapter for the data and runs it."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+from .report import DiagnosisReport
+from .rings import RingAdapter
+from .sky import SkyAdapter
+from .three_pair import ThreePairAdapter
+
+__all__ = ["ADAPTERS", "adapter_for", "diagnose"]
+
+ADAPTERS = (ThreePairAdapter(), RingAdapter(), SkyAdapter())
+"""Registered instrument adapters, asked in this order (:class:`.protocol.InstrumentAdapter`)."""
+
+
+def adapter_for(data, sidecar: dict | None = None):
+    """The first adapter that accepts ``data`` (or a file with ``sidecar``).
+
+    Raises
+    ------
+    UnsupportedInstrumentError
+        When none does (the message lists what is read).
+    """
+    from .errors import UnsupportedInstrumentError
+    for a in ADAPTERS:
+        if a.accepts(data, sidecar):
+            return a
+    what = (f"a file of schema {sidecar.get('schema')!r}" if sidecar is not None
+            else f"a {type(data).__name__}")
+    raise UnsupportedInstrumentError(
+        f"no diagnosis reads {what}: give a measurement table (skysim.measurement/1, a file, a "
+        "Measurement, or a DataFrame with sidecar=...), photodiode data (skysim.photodiodes/1) "
+        "or a sky field (SkyCases)")
+
+
+def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
+             **options) -> DiagnosisReport:
+    """Diagnose the sim-to-real gap of any instrument: where, which effect, how far.
+
+    Parameters
+    ----------
+    data_or_path : path, DataFrame, Measurement, PhotodiodeData, DiagnosisData, Instrument or SkyCases
+        A data file with its JSON sidecar ("skysim.measurement/1" or "skysim.photodiodes/1"),
+        a three-pair measurement table (a DataFrame needs ``sidecar=``), a photodiode session
+        (ring, dome or the one-unit three-pair sensor) or a sky field.
+    candidates : sequence of str, optional
+        Candidate effects (default: the instrument's default set).
+    folds : int
+        Held-out folds of whole sweeps (sky fields: one split, the last fold withheld).
+    seed : int
+        Seed of the bootstrap of the standard errors.
+    **options
+        Passed to the adapter: ``thresholds`` (three-pair), ``sidecar`` (DataFrame input),
+        ``noise_floor``, ``calibration_cases``, ``settings``, ``n_grid``, ``xatol`` (sky).
+
+    Returns
+    -------
+    DiagnosisReport
+
+    Raises
+    ------
+    FileNotFoundError, MeasurementFormatError
+        For a file without a readable sidecar or of another schema.
+    UnsupportedInstrumentError
+        For data no adapter reads.
+    UnknownEffectError
+        For a candidate the instrument does not know.
+    DiagnosisError
+        When the data allow no held-out diagnosis (the message says why).
+    """
+    if isinstance(data_or_path, (str, Path)):
+        from .three_pair_data import read_sidecar
+        path = Path(data_or_path)
+        sidecar = read_sidecar(path)
+        adapter = _file_adapter(path, sidecar)
+        data = adapter.load(path)
+        if isinstance(adapter, RingAdapter):
+            options.setdefault("where", str(path))
+    else:
+        data = _as_photodiodes(data_or_path, options)
+        adapter = adapter_for(data, options.get("sidecar"))
+    return adapter.diagnose(data, adapter.candidates(candidates), folds=folds, seed=seed,
+                            **options)
+
+
+def _file_adapter(path, sidecar: dict):
+    from sensor.measurement import MEASUREMENT_SCHEMA, MeasurementFormatError
+    from sensor.photodiodes_io import PHOTODIODES_SCHEMA
+    for a in ADAPTERS:
+        if a.accepts(None, sidecar):
+            return a
+    raise MeasurementFormatError(
+        f"{path}: sidecar schema {sidecar.get('schema')!r} is neither {MEASUREMENT_SCHEMA!r} "
+        f"nor {PHOTODIODES_SCHEMA!r}")
+
+
+def _as_photodiodes(data, options: dict):
+    """A DataFrame given with a "skysim.photodiodes/1" sidecar as :class:`PhotodiodeData`
+    (``sidecar`` taken out of ``options``); anything else unchanged."""
+    import pandas as pd
+
+    from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+    side = options.get("sidecar") or {}
+    if isinstance(data, pd.DataFrame) and side.get("schema") == PHOTODIODES_SCHEMA:
+        return PhotodiodeData(data, options.pop("sidecar"))
+    return data

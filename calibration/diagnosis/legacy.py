@@ -1,0 +1,139 @@
+"""Readers of the ``skysim.diagnosis/1`` report dicts into :class:`.report.DiagnosisReport`.
+
+Three diagnoses wrote that schema in three shapes: the three-pair sensor's (``where`` a dict
+of tables in mV), the sky field's (``level: sky``, ``where`` a dict of tables in DoLP units,
+parameters as bare numbers) and the photodiode instrument's (``instrument: photodiodes``,
+``where`` a list of slices). Each is read here into the one report; shares of the gap are
+recomputed from the slices' RMS and size with :func:`.core.partition_shares`, limits with
+:func:`.core.slice_limit`, so that every report means the same by them.
+"""
+
+from __future__ import annotations
+
+from . import core
+from .report import Candidate, DiagnosisReport, Slice, Verdict
+
+__all__ = ["from_legacy_dict", "from_ring_v1", "from_sky_v1", "from_three_pair_v1"]
+
+_VERDICT_KEYS = ("effect", "reason", "best_candidate", "gap_before", "gap_after", "shrink",
+                 "gap_before_se", "gap_after_se", "shrink_se", "params")
+
+
+def from_legacy_dict(d: dict) -> DiagnosisReport:
+    """Any ``skysim.diagnosis/1`` dict (module docstring)."""
+    if d.get("level") == "sky":
+        return from_sky_v1(d)
+    if d.get("instrument") == "photodiodes":
+        return from_ring_v1(d)
+    return from_three_pair_v1(d)
+
+
+def _verdict(v: dict, params=None) -> Verdict:
+    kw = {k: v.get(k) for k in _VERDICT_KEYS}
+    kw["params"] = params if params is not None else (v.get("params") or {})
+    if kw["best_candidate"] == "base":
+        kw["best_candidate"] = None
+    return Verdict(**kw)
+
+
+def _slices(rows, floor: float, margin: float, dof_per_value: int = 1) -> list[Slice]:
+    """Slices from ``(dimension, label, n, rms, lo, hi, unit)`` tuples, shares and limits
+    recomputed per dimension."""
+    out = []
+    for dim in dict.fromkeys(r[0] for r in rows):
+        part = [r for r in rows if r[0] == dim]
+        shares = core.partition_shares([r[2] for r in part], [r[3] for r in part], floor)
+        for r, share in zip(part, shares):
+            limit = float(core.slice_limit(floor, r[2] * dof_per_value, margin))
+            out.append(Slice(dim, r[1], r[2], r[3], share, r[4], r[5], r[6],
+                             bool(r[3] > limit), limit))
+    return core.sort_slices(out)
+
+
+def from_three_pair_v1(d: dict) -> DiagnosisReport:
+    """The three-pair sensor's ``skysim.diagnosis/1`` dict (gaps in mV)."""
+    w, v = d["where"], d["verdict"]
+    floor = float(v["noise_floor"])
+    margin = d.get("thresholds", {}).get("none_margin", 0.10)
+    rows = []
+    for key, dim in (("by_channel", "channel"), ("by_time", "sweep"),
+                     ("by_illuminance", "illuminance_lx"),
+                     ("by_sun_elevation", "sun_elevation_deg")):
+        for s in w.get(key, []):
+            label = s["slice"].removeprefix("sweep ")
+            rows.append((dim, label, int(s["n"]), float(s["rms_mV"]), None, None, None))
+    data = dict(d.get("data", {}))
+    nuisance = data.pop("nuisance", None)
+    extra = {"harmonics": w.get("by_harmonic", []), "base_fit": d.get("base_fit")}
+    if nuisance is not None:
+        extra["nuisance"] = nuisance
+    nf = d.get("noise_floor", {})
+    if "per_channel_mV" in nf:
+        extra["noise_floor_per_channel_mV"] = nf["per_channel_mV"]
+    return DiagnosisReport(
+        "three_pair", str(v.get("metric", "")).removesuffix(" [mV]"), "mV", _verdict(v),
+        core.rank([Candidate.from_dict(c) for c in d["candidates"]]),
+        _slices(rows, floor, margin), None, floor, nf.get("method", ""), [], data,
+        dict(d.get("thresholds", {})), d.get("seed"), extra)
+
+
+def _sky_params(p: dict) -> dict:
+    return {k: {"value": float(x), "unit": "1"} for k, x in (p or {}).items()}
+
+
+def _sky_slices(w: dict, floor: float, margin: float):
+    rows = []
+    for key, dim in (("by_sun_distance", "sun_distance_deg"), ("horizon", "horizon"),
+                     ("neutral_points", "neutral_points"), ("by_view_zenith", "view_zenith_deg")):
+        for s in w.get(key, []):
+            rows.append((dim, s["slice"], int(s["points"]), float(s["rms"]), None, None, None))
+    return _slices(rows, floor, margin, dof_per_value=2)
+
+
+def from_sky_v1(d: dict) -> DiagnosisReport:
+    """The sky field's ``skysim.diagnosis/1`` dict (``level: sky``; gaps in DoLP units)."""
+    v = d["verdict"]
+    floor = float(v["noise_floor"])
+    margin = d.get("thresholds", {}).get("none_margin", 0.10)
+    cands = []
+    for c in d["candidates"]:
+        c = dict(c)
+        if c.get("available", True):
+            c["params"] = _sky_params(c.get("params"))
+            c["k"] = int(c.get("k", 1)) - 1          # parameters added to d_max
+        cands.append(Candidate.from_dict(c))
+    wa = d.get("where_after")
+    extra = {k: d[k] for k in ("engine_settings", "seconds") if k in d}
+    return DiagnosisReport(
+        "sky", str(v.get("metric", "")).removesuffix(" [DoLP units]"), "DoLP",
+        _verdict(v, _sky_params(v.get("params"))), core.rank(cands),
+        _sky_slices(d["where"], floor, margin),
+        None if wa is None else _sky_slices(wa, floor, margin), floor,
+        "given: the RMS Stokes residual a perfect model leaves on these data", [],
+        dict(d.get("data", {})), dict(d.get("thresholds", {})), d.get("seed"), extra)
+
+
+def from_ring_v1(d: dict) -> DiagnosisReport:
+    """The photodiode instrument's ``skysim.diagnosis/1`` dict (gaps as fractions of each
+    unit's mean reading)."""
+    v = d["verdict"]
+    nf = d.get("noise_floor") or {}
+    floor = nf.get("rms")
+    margin = 0.10
+    where = []
+    if floor is not None:
+        rows = [(w["dimension"], w["label"], int(w["n"]), float(w["rms"]), w.get("lo_deg"),
+                 w.get("hi_deg"), "deg" if "lo_deg" in w else None) for w in d["where"]]
+        where = _slices(rows, float(floor), margin)
+    data = dict(d.get("data", {}))
+    split = dict(d.get("split", {}))
+    if "held_out_readings" in split:
+        split["held_out_values"] = split.pop("held_out_readings")
+    if split:
+        data["split"] = split
+    extra = {k: d[k] for k in ("heading_error", "base_fit") if d.get(k) is not None}
+    return DiagnosisReport(
+        "photodiodes", str(v.get("metric", "")), "1",
+        _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,
+        None, None if floor is None else float(floor), nf.get("method", ""),
+        list(d.get("faults", [])), data, {"none_margin": margin}, d.get("seed"), extra)

@@ -1,0 +1,74 @@
+"""What an instrument adapter and a candidate effect implement to take part in the diagnosis.
+
+An **instrument adapter** knows one kind of data (three-pair sensor tables, sky fields,
+photodiode rings): how to recognise it, its base model, how to fit the base model plus one
+candidate on calibration folds, and how to predict held-out data. It hands residuals to
+:mod:`.core` (folds, noise floor, score, verdict, shrink, slices) and returns a
+:class:`.report.DiagnosisReport`. :func:`calibration.diagnosis.diagnose` asks each
+registered adapter in turn whether it :meth:`~InstrumentAdapter.accepts` the data.
+
+An **effect** is one unmodelled physical effect: a named extension of an adapter's base model
+with its own parameters, which reduces to the base model at its null parameters.
+"""
+
+from __future__ import annotations
+
+from typing import Protocol, runtime_checkable
+
+from .report import DiagnosisReport
+
+__all__ = ["Effect", "InstrumentAdapter"]
+
+
+@runtime_checkable
+class Effect(Protocol):
+    """A candidate effect.
+
+    Attributes
+    ----------
+    name : str
+        Its name in reports and on the command line (``tilt``, ``multiple_scattering``).
+    parameter_names : tuple of str
+    units : tuple of str
+        Unit of each parameter (``deg``, ``s``, ``1`` for dimensionless).
+    k : int
+        Parameters it adds to the base model (the complexity penalty of the score).
+    """
+
+    name: str
+    parameter_names: tuple
+    units: tuple
+
+    @property
+    def k(self) -> int: ...
+
+    def available(self) -> str | None:
+        """None when the effect can run here, else why not (a missing optional engine or
+        table); the diagnosis then lists it as unavailable instead of failing."""
+
+
+@runtime_checkable
+class InstrumentAdapter(Protocol):
+    """An instrument known to the diagnosis.
+
+    Attributes
+    ----------
+    name : str
+        ``DiagnosisReport.instrument`` of its reports.
+    """
+
+    name: str
+
+    def accepts(self, data, sidecar: dict | None = None) -> bool:
+        """True for data this adapter diagnoses (an object, or a file's sidecar)."""
+
+    def load(self, path) -> object:
+        """Read a file this adapter accepts into its data object."""
+
+    def candidates(self, names=None) -> tuple:
+        """Validated candidate names (``None``: the default set); raises
+        :class:`calibration.effects.UnknownEffectError` for an unknown one."""
+
+    def diagnose(self, data, candidates, *, folds: int, seed: int,
+                 **options) -> DiagnosisReport:
+        """Fit, score and judge (:mod:`.core`) and return the report."""

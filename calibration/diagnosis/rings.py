@@ -1,0 +1,121 @@
+"""Adapter of multi-unit photodiode instruments (rings, domes): runs
+:func:`calibration.photodiode_diagnosis.diagnose_instrument` and reads its result into the
+shared :class:`.report.DiagnosisReport`.
+
+The ring diagnosis keeps its own fit, score and verdict rule (a candidate is named when it
+removes part of the excess variance consistently over the held-out sweeps, since a real sky
+is never reproduced to the noise floor by one effect; see
+:data:`calibration.photodiode_diagnosis.run.EXCESS_FRACTION`); this adapter adds the shared
+slice limits (:func:`.core.slice_limit`) and the notes on what pins a clock offset.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .legacy import from_ring_v1
+from .report import DiagnosisReport
+
+__all__ = ["clock_notes", "diagnose_rings", "ring_candidates"]
+
+
+def ring_candidates(names=None) -> tuple:
+    """Validated candidate names of the ring diagnosis (default: its default set).
+
+    Raises
+    ------
+    UnknownEffectError
+        For a name the ring diagnosis does not know (the message lists the valid ones).
+    """
+    from ..photodiode_diagnosis import RING_EFFECT_NAMES, get_ring_effect
+    if names is None:
+        return RING_EFFECT_NAMES
+    names = tuple(names)
+    for n in names:
+        get_ring_effect(n)
+    return names
+
+
+def clock_notes(report: DiagnosisReport) -> list[str]:
+    """What pins the clock-offset candidate's fit, in words (empty without one)."""
+    c = report.candidate("clock_offset")
+    sens = None if c is None else c.details.get("sensitivity")
+    if sens is None:
+        return []
+    per_deg = sens["s_per_deg_of_sun_elevation"]
+    notes = [f"The clock offset is read from {sens['read_from']}; the sun's elevation changes "
+             f"{sens['sun_elevation_rate_deg_per_h']:+.2f} deg/h here, so "
+             + (f"each degree of misfit between the sky model and the sky in the sun's "
+                f"apparent elevation moves the fitted clock by {per_deg / 60:.1f} min."
+                if per_deg is not None else "the data cannot pin the clock.")]
+    shift = sens.get("sun_elevation_shift_deg")
+    if shift is not None and np.isfinite(shift) and not sens.get("absolute_yaw", False):
+        notes.append(f"The fitted clock offset moves the sun's elevation by {shift:+.2f} deg: "
+                     "a clock error, or a sky whose sun appears that much "
+                     f"{'higher' if shift >= 0 else 'lower'} than the ephemeris's, which "
+                     "these data cannot tell apart.")
+    return notes
+
+
+def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
+                   where: str = "photodiode data") -> DiagnosisReport:
+    """Diagnose a photodiode instrument.
+
+    Parameters
+    ----------
+    data : PhotodiodeData or Instrument
+        A ``skysim.photodiodes/1`` file's data, or the ring diagnosis's instrument.
+    effects : sequence of str, optional
+        Candidates (default :data:`calibration.photodiode_diagnosis.RING_EFFECT_NAMES`).
+    folds, seed : int
+    where : str
+        Name of the data in messages and in ``data.path``.
+
+    Returns
+    -------
+    DiagnosisReport
+        Gaps as fractions of each unit's mean reading; heading error [deg] in
+        ``extra["heading_error"]``.
+
+    Raises
+    ------
+    SunTooLowError, InstrumentDataError, InsufficientDataError, UnknownEffectError
+        As :func:`calibration.photodiode_diagnosis.diagnose_instrument`.
+    """
+    from ..photodiode_diagnosis import diagnose_instrument, instrument_from_photodiodes
+    from ..photodiode_diagnosis.instrument import Instrument
+    inst = data if isinstance(data, Instrument) else instrument_from_photodiodes(data, where)
+    doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed)
+    report = from_ring_v1(doc)
+    report.data.setdefault("path", where)
+    report.notes += clock_notes(report)
+    return report
+
+
+class RingAdapter:
+    """Multi-unit photodiode instruments as an instrument of
+    :func:`calibration.diagnosis.diagnose` (:class:`.protocol.InstrumentAdapter`):
+    "skysim.photodiodes/1" data that are not the one-unit three-pair sensor."""
+
+    name = "photodiodes"
+
+    def accepts(self, data, sidecar: dict | None = None) -> bool:
+        from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+
+        from ..photodiode_diagnosis import is_three_pair_sensor
+        from ..photodiode_diagnosis.instrument import Instrument
+        if isinstance(data, Instrument):
+            return True
+        side = data.sidecar if isinstance(data, PhotodiodeData) else (sidecar or {})
+        return side.get("schema") == PHOTODIODES_SCHEMA and not is_three_pair_sensor(side)
+
+    def load(self, path):
+        from sensor.photodiodes_io import read_photodiodes
+        return read_photodiodes(path)
+
+    def candidates(self, names=None) -> tuple:
+        return ring_candidates(names)
+
+    def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
+                 where: str = "photodiode data") -> DiagnosisReport:
+        return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where)

@@ -1,0 +1,319 @@
+"""Adapter of the three-pair polarization sensor: held-out gap, where, which, how far.
+
+1. **Gap.** The base model (:mod:`.three_pair_fit`: eqs. 2-3 of Yang et al. 2014 [1]_ with
+   the LSM's mounting errors, transmittance terms and ``d_max``) is fitted on calibration
+   folds of whole sweeps and predicts the held-out sweeps (:func:`.core.assign_folds`); the
+   gap is the held-out RMS of the channel residuals [mV].
+2. **Noise floor.** :func:`.core.noise_floor` of the base-fit residuals along each sweep.
+3. **Where.** Held-out base residuals by channel, sweep, illuminance and sun elevation
+   (:func:`.core.partition_slices`), and the amplitudes of the harmonics of ``2 phi`` and of
+   the turntable angle (``extra["harmonics"]``).
+4. **Which.** Each candidate effect of :mod:`calibration.effects` is added to the base model
+   and refitted fold by fold, scored by :func:`.core.held_out_score`.
+5. **Verdict and how far.** :func:`.core.decide`; gaps before and after, the shrink with
+   block-bootstrap standard errors (:func:`.core.shrink_uncertainty`) and the effect's
+   parameters fitted on all data with their covariance.
+
+References
+----------
+.. [1] J. Yang, N. Zhou, Y. Huang, X. Liu, Opt. Precision Eng. 22(6):1424 (2014),
+   doi:10.3788/OPE.20142206.1424, eqs. (2)-(3), (10)-(14).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..effects import EFFECT_NAMES, all_effects, geometry
+from . import core
+from .core import Thresholds
+from .errors import InsufficientDataError, SingleHeadingError
+from .report import Candidate, DiagnosisReport, Verdict
+from .three_pair_data import MIN_SUN_ELEVATION_DEG, DiagnosisData
+from .three_pair_fit import base_parameters, effect_parameters, fit_model, predict
+
+__all__ = ["DEFAULT_CANDIDATES", "METRIC", "cross_validate", "diagnose_three_pair",
+           "harmonics", "where_slices"]
+
+DEFAULT_CANDIDATES = EFFECT_NAMES
+"""Candidates tried unless others are named: every effect (``multiple_scattering`` reads a
+precomputed zenith table, no radiative-transfer run; it is listed as unavailable when the
+table is missing)."""
+METRIC = "held-out RMS of U1..U3 residuals"
+NOISE_METHOD = ("second differences of the base-fit residuals along each sweep "
+                "(von Neumann 1941)")
+MIN_READINGS_PER_CHANNEL = 20
+MIN_HEADING_SPAN_DEG = 10.0
+
+
+def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
+    """Held-out residuals (n, 3) [V] of the base model and of each candidate.
+
+    Returns
+    -------
+    residuals : dict
+        ``name -> ndarray (n, 3)`` (``base`` and each effect; NaN where not valid).
+    fits : dict
+        ``name -> list of FitResult``, one per fold; every candidate of a fold starts from
+        that fold's base fit.
+    """
+    res = {"base": np.full(data.U.shape, np.nan)}
+    res.update({e.name: np.full(data.U.shape, np.nan) for e in effects})
+    fits = {name: [] for name in res}
+    for f in np.unique(folds):
+        cal, ho = folds != f, folds == f
+        cctx, hctx = data.ctx.subset(cal), data.ctx.subset(ho)
+        base = fit_model(cctx, data.U[cal], data.valid[cal], sigma_V=sigma_V)
+        fits["base"].append(base)
+        res["base"][ho] = predict(hctx, base, None) - data.U[ho]
+        for e in effects:
+            fit = fit_model(cctx, data.U[cal], data.valid[cal], e, base0=base.base,
+                            sigma_V=sigma_V)
+            fits[e.name].append(fit)
+            res[e.name][ho] = predict(hctx, fit, e) - data.U[ho]
+    for r in res.values():
+        r[~data.valid] = np.nan
+    return res, fits
+
+
+def _terciles(x):
+    """Labels 0..2 of the quantile terciles of ``x`` and their ``(lo, hi)`` edges."""
+    edges = np.quantile(x, np.linspace(0, 1, 4))
+    lab = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, 2)
+    return lab, list(zip(edges[:-1], edges[1:]))
+
+
+def where_slices(data: DiagnosisData, residual_mV, floor_mV: float, sun_el_deg,
+                 illuminance_lx, margin: float) -> list:
+    """Held-out residuals [mV] by channel, sweep, illuminance and sun elevation (each a
+    partition of the readings, :func:`.core.partition_slices`), largest share first."""
+    r2 = np.square(residual_mV)
+    full = np.ones(r2.shape, bool)
+    out = core.partition_slices("channel", [full & (np.arange(3) == c) for c in range(3)],
+                                [f"U{c + 1}_V" for c in range(3)], r2, floor_mV, margin)
+    blocks = np.unique(data.ctx.block)
+    out += core.partition_slices("sweep", [full & (data.ctx.block == b)[:, None]
+                                           for b in blocks], [str(b) for b in blocks],
+                                 r2, floor_mV, margin)
+    for dim, x, unit in (("illuminance_lx", illuminance_lx, "lx"),
+                         ("sun_elevation_deg", sun_el_deg, "deg")):
+        lab, bounds = _terciles(x)
+        out += core.partition_slices(dim, [full & (lab == k)[:, None] for k in range(3)],
+                                     [f"{a:.4g}..{b:.4g}" for a, b in bounds], r2, floor_mV,
+                                     margin, bounds=bounds, bound_unit=unit)
+    return core.sort_slices(out)
+
+
+def harmonics(data: DiagnosisData, residual_V, phi_deg) -> list[dict]:
+    """Least-squares amplitudes [mV] per channel of ``cos/sin(m 2 phi)`` (m = 0..3, the
+    polarization period and its overtones; m = 0 is the mean) and of ``cos/sin(n h)``
+    (n = 1, 2, once/twice per turntable revolution), each fitted alone (they are not
+    orthogonal over a half-turn sweep), with the fraction of the residual sum of squares it
+    removes."""
+    r = residual_V
+    p2 = np.radians(2.0 * phi_deg)
+    h = np.radians(data.ctx.heading_deg)
+    basis = {"mean (2phi m=0)": [np.ones_like(p2)]}
+    for m in (1, 2, 3):
+        basis[f"2phi m={m}"] = [np.cos(m * p2), np.sin(m * p2)]
+    for n in (1, 2):
+        basis[f"turntable n={n}/rev"] = [np.cos(n * h), np.sin(n * h)]
+    total = np.nansum(r ** 2)
+    out = []
+    for name, cols in basis.items():
+        amp = np.zeros(3)
+        explained = 0.0
+        for c in range(3):
+            ok = np.isfinite(r[:, c])
+            X = np.stack([col[ok] for col in cols], axis=1)
+            coef, *_ = np.linalg.lstsq(X, r[ok, c], rcond=None)
+            fit = X @ coef
+            explained += float(np.sum(r[ok, c] ** 2) - np.sum((r[ok, c] - fit) ** 2))
+            amp[c] = np.hypot(*coef) if len(cols) == 2 else abs(coef[0])
+        out.append({"component": name, "amplitude_mV": (1e3 * amp).tolist(),
+                    "fraction_of_variance": explained / total if total > 0 else 0.0})
+    return out
+
+
+def _fold_params(fits, effect) -> dict:
+    P = np.array([f.params for f in fits])
+    se = P.std(axis=0, ddof=1) / np.sqrt(len(P)) if len(P) > 1 else np.full(P.shape[1], np.nan)
+    return {n: {"value": float(v), "se": float(s), "unit": u}
+            for n, v, s, u in zip(effect.parameter_names, P.mean(axis=0), se, effect.units)}
+
+
+def _check(data: DiagnosisData) -> None:
+    """Raise when no held-out diagnosis is possible (no usable reading, one heading)."""
+    ctx = data.ctx
+    used = data.valid.any(axis=1)
+    if not used.any():
+        sun_el, _ = ctx.sun.elevation_azimuth(ctx.t_s)
+        raise InsufficientDataError(
+            f"no usable reading in {ctx.n} samples ({data.cleaning.get('sun_below_horizon_samples', 0)}"
+            f" with the sun below {MIN_SUN_ELEVATION_DEG:g} deg at the recorded time, sun "
+            f"elevation {float(np.min(sun_el)):.1f} .. {float(np.max(sun_el)):.1f} deg): check "
+            "the times' UTC offset, the saturation level and the channels")
+    heading_span = np.ptp(np.mod(ctx.heading_deg[used] - ctx.heading_deg[used][0] + 180, 360))
+    if heading_span < MIN_HEADING_SPAN_DEG:
+        raise SingleHeadingError(
+            f"the headings span only {heading_span:.2f} deg: the mounting errors and the "
+            "polarization azimuth cannot be separated; rotate the sensor over at least "
+            "90 deg (ideally 180) per sweep")
+
+
+def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, folds: int = 3,
+                        seed: int = 0, thresholds: Thresholds = Thresholds()
+                        ) -> DiagnosisReport:
+    """Diagnose a three-pair sensor data set (module docstring).
+
+    Parameters
+    ----------
+    data : DiagnosisData
+    effects : sequence of str
+        Candidate effects (:data:`calibration.effects.EFFECT_NAMES`).
+    folds : int
+        Held-out folds of whole sweeps, 2 .. number of sweeps.
+    seed : int
+        Seed of the block bootstrap.
+    thresholds : Thresholds
+
+    Returns
+    -------
+    DiagnosisReport
+        Gaps in mV.
+
+    Raises
+    ------
+    UnknownEffectError
+        For an effect name that is not registered.
+    InsufficientDataError, SingleHeadingError
+        When no held-out split or no heading spread is possible.
+    """
+    cands = all_effects(effects)
+    ctx = data.ctx
+    _check(data)
+    fold_of = core.assign_folds(ctx.block, folds)
+    if data.valid.sum(axis=0).min() < MIN_READINGS_PER_CHANNEL:
+        raise InsufficientDataError(
+            f"only {int(data.valid.sum(axis=0).min())} usable readings in one channel; "
+            f"at least {MIN_READINGS_PER_CHANNEL} per channel are needed")
+    unavailable = {e.name: e.available() for e in cands if e.available()}
+    cands = [e for e in cands if e.name not in unavailable]
+    full_base = fit_model(ctx, data.U, data.valid, sigma_V=5e-4)
+    r_full = predict(ctx, full_base, None) - data.U
+    floor, floor_c = core.noise_floor(r_full, data.valid, ctx.block)
+    sigma = max(floor, 1e-5)
+    res, fold_fits = cross_validate(data, fold_of, cands, sigma)
+    N = int(np.isfinite(res["base"]).sum())
+    n_cal = int(data.valid.sum() * (1 - 1 / np.unique(fold_of).size))
+    G0 = core.rms(res["base"])
+    rows = []
+    for e in cands:
+        Gc = core.rms(res[e.name])
+        rows.append(Candidate(
+            e.name, k=e.k, gap_after=1e3 * Gc, shrink=1 - Gc / G0,
+            score=core.held_out_score(Gc, G0, floor, N, e.k, n_cal),
+            explained=core.explains(Gc, G0, floor, thresholds),
+            converged=bool(all(f.converged for f in fold_fits[e.name])),
+            params=_fold_params(fold_fits[e.name], e),
+            details={"params_from": "mean over calibration folds (se: fold spread)"}))
+    rows = core.rank(rows)
+    if rows:  # the best candidate's parameters from one fit on all data, with covariance
+        e = next(c for c in cands if c.name == rows[0].effect)
+        full = fit_model(ctx, data.U, data.valid, e, base0=full_base.base,
+                         effect0=np.mean([f.params for f in fold_fits[e.name]], axis=0),
+                         sigma_V=sigma)
+        rows[0].params = effect_parameters(full, e)
+        rows[0].converged = bool(full.converged and rows[0].converged)
+        rows[0].details["params_from"] = "all data (se: Gauss-Newton covariance)"
+    rows += [Candidate.unavailable(name, msg) for name, msg in unavailable.items()]
+    effect, reason = core.decide(rows, 1e3 * G0, 1e3 * floor, thresholds)
+    best = rows[0] if rows and rows[0].available else None
+    after = best.effect if best is not None else "base"
+    se = core.shrink_uncertainty(res["base"], res[after], ctx.block,
+                                 np.random.default_rng(seed))
+    G1 = core.rms(res[after]) if effect != "none" else G0
+    verdict = Verdict(effect, reason, best.effect if best else None, 1e3 * G0, 1e3 * G1,
+                      1 - G1 / G0, 1e3 * se["gap_before_se"],
+                      1e3 * (se["gap_after_se"] if effect != "none" else se["gap_before_se"]),
+                      se["shrink_se"] if effect != "none" else 0.0,
+                      best.params if effect not in ("none", "unexplained") else {})
+    phi, _ = geometry(ctx)
+    sun_el, _ = ctx.sun.elevation_azimuth(ctx.t_s)
+    from ..effects.dark_current import scene_illuminance_lx
+    lux = scene_illuminance_lx(ctx)
+    margin = thresholds.none_margin
+    where = where_slices(data, 1e3 * res["base"], 1e3 * floor, sun_el, lux, margin)
+    where_after = (where_slices(data, 1e3 * res[after], 1e3 * floor, sun_el, lux, margin)
+                   if best is not None else None)
+    return DiagnosisReport(
+        instrument="three_pair", metric=METRIC, unit="mV", verdict=verdict,
+        candidates=rows, where=where, where_after=where_after, noise_floor=1e3 * floor,
+        noise_floor_method=NOISE_METHOD, faults=[],
+        data={**data.source, "samples": int(ctx.n), "readings_used": int(data.valid.sum()),
+              "cleaning": data.cleaning,
+              "split": {"method": "whole sweeps/time blocks, round-robin in time order",
+                        "folds": int(np.unique(fold_of).size),
+                        "blocks": int(np.unique(ctx.block).size), "held_out_values": N,
+                        "calibration_values": n_cal}},
+        thresholds=thresholds.to_dict(), seed=seed,
+        extra={"noise_floor_per_channel_mV": (1e3 * floor_c).tolist(),
+               "harmonics": harmonics(data, res["base"], phi),
+               "base_fit": {"parameters": base_parameters(full_base),
+                            "converged": full_base.converged},
+               "nuisance": {"heading_offset_deg": float(np.mean(full_base.base[:6])),
+                            "note": "a constant heading offset (unknown absolute heading) "
+                                    "is absorbed by the common part of the six mounting "
+                                    "errors; its estimate is their mean"}})
+
+
+class ThreePairAdapter:
+    """The three-pair sensor as an instrument of :func:`calibration.diagnosis.diagnose`
+    (:class:`.protocol.InstrumentAdapter`): measurement tables ("skysim.measurement/1", a
+    :class:`sensor.measurement.Measurement`, or a DataFrame with its ``sidecar``), one-unit
+    photodiode data with the three orthogonal pairs, or :class:`DiagnosisData`."""
+
+    name = "three_pair"
+
+    def accepts(self, data, sidecar: dict | None = None) -> bool:
+        from sensor.measurement import MEASUREMENT_SCHEMA, Measurement
+        from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+
+        from ..photodiode_diagnosis import is_three_pair_sensor
+        if isinstance(data, (DiagnosisData, Measurement)):
+            return True
+        if isinstance(data, PhotodiodeData):
+            return is_three_pair_sensor(data.sidecar)
+        side = sidecar if sidecar is not None else {}
+        if side.get("schema") == MEASUREMENT_SCHEMA:
+            return True
+        return side.get("schema") == PHOTODIODES_SCHEMA and is_three_pair_sensor(side)
+
+    def load(self, path) -> DiagnosisData:
+        from .three_pair_data import load_diagnosis_data
+        return load_diagnosis_data(path)
+
+    def candidates(self, names=None) -> tuple:
+        if names is None:
+            return DEFAULT_CANDIDATES
+        names = tuple(names)
+        all_effects(names)      # UnknownEffectError lists the valid names
+        return names
+
+    def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
+                 thresholds: Thresholds = Thresholds(), sidecar: dict | None = None
+                 ) -> DiagnosisReport:
+        import pandas as pd
+
+        from sensor.measurement import Measurement
+        from sensor.photodiodes_io import PhotodiodeData
+
+        from .three_pair_data import data_from_photodiodes, data_from_table
+        if isinstance(data, Measurement):
+            data = data_from_table(data.table, data.sidecar)
+        elif isinstance(data, PhotodiodeData):
+            data = data_from_photodiodes(data)
+        elif isinstance(data, pd.DataFrame):
+            data = data_from_table(data, sidecar or {})
+        return diagnose_three_pair(data, self.candidates(candidates), folds=folds, seed=seed,
+                                   thresholds=thresholds)
