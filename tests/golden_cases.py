@@ -68,9 +68,10 @@ def three_pair_none():
 # ----------------------------------------------------------------------- sky fields
 def sky_rayleigh_none():
     """tests/test_sky_gap.py: a single-scattering field (d_max 0.7) with noise; no engine."""
+    from test_sky_gap import FLOOR, make_cases
+
     from calibration.diagnosis import diagnose
     from skysim.sky import RayleighSky
-    from test_sky_gap import FLOOR, make_cases
     c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
     return diagnose(c, ("d_max",), calibration_cases=[0], noise_floor=FLOOR)
 
@@ -78,10 +79,11 @@ def sky_rayleigh_none():
 def sky_multiple_scattering_named():
     """tests/test_sky_gap.py: a multiple-scattering field (tau 0.3, black ground), 8-stream
     sasktran2 (needs the ``rt`` extra)."""
+    from test_sky_gap import FLOOR, make_cases
+
     from calibration.diagnosis import diagnose
     from skysim.multiple import MultipleScatteringSky
     from skysim.rt_sasktran import EngineSettings
-    from test_sky_gap import FLOOR, make_cases
     settings = EngineSettings(n_streams=8)
     c = make_cases(MultipleScatteringSky(tau=0.3, albedo=0.0, settings=settings),
                    np.random.default_rng(2))
@@ -92,17 +94,19 @@ def sky_multiple_scattering_named():
 # ----------------------------------------------------------------------- photodiode rings
 def ring_yaw_scale_named():
     """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected."""
+    from test_photodiode_diagnosis import ring_session
+
     from calibration.diagnosis import diagnose
     from experiments.real_injection import inject
-    from test_photodiode_diagnosis import ring_session
     data, _ = inject(ring_session(), "yaw_scale", np.random.default_rng(3))
     return diagnose(data, ("yaw_scale",), folds=3)
 
 
 def ring_no_candidates():
     """The same simulated ring, noise-free counts, no candidate: its gap is left unexplained."""
-    from calibration.diagnosis import diagnose
     from test_photodiode_diagnosis import ring_session
+
+    from calibration.diagnosis import diagnose
     return diagnose(ring_session(), (), folds=3)
 
 

@@ -16,7 +16,6 @@ through a threaded radiative-transfer engine has a looser, stated tolerance
 import json
 
 import pytest
-
 from golden_cases import CASES, GOLDEN_DIR, NEEDS_ENGINE, REL_TOLERANCE, summary
 
 REL = 1e-9

@@ -126,7 +126,7 @@ def test_slices_locate_an_injected_horizon_gap():
     assert hor["elevation < 15 deg"].rms == pytest.approx(0.05)
     assert hor["elevation < 15 deg"].carries_gap
     assert not hor["elevation >= 15 deg"].carries_gap
-    assert [s for s in w if s.carries_gap][0].rms == pytest.approx(0.05)
+    assert next(s for s in w if s.carries_gap).rms == pytest.approx(0.05)
 
 
 def test_bad_input_specific_errors():

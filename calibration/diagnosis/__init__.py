@@ -12,6 +12,7 @@ far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
 - :func:`diagnose` (:mod:`.api`): the one entry point.
 """
 
+from .api import diagnose
 from .core import Thresholds, assign_folds, decide, noise_floor
 from .errors import (
     AllNaNChannelError,
@@ -24,17 +25,25 @@ from .errors import (
     UnsupportedInstrumentError,
 )
 from .fit_result import FitResult
-from .report import DIAGNOSIS_SCHEMA, LEGACY_SCHEMA, Candidate, DiagnosisReport, Slice, Verdict
+from .report import (
+    DIAGNOSIS_SCHEMA,
+    LEGACY_SCHEMA,
+    Candidate,
+    DiagnosisReport,
+    Slice,
+    Verdict,
+)
 from .three_pair import DEFAULT_CANDIDATES, cross_validate, diagnose_three_pair
 from .three_pair_data import (
     DiagnosisData,
-    _daq_saturation_V,  # noqa: F401  (tests of the DAQ rails)
     data_from_photodiodes,
     data_from_table,
     load_diagnosis_data,
 )
+from .three_pair_data import (
+    _daq_saturation_V as _daq_saturation_V,  # the DAQ rails, tested on their own
+)
 from .three_pair_fit import fit_model
-from .api import diagnose  # noqa: E402  (needs the adapters above)
 
 noise_floor_V = noise_floor
 """The noise floor of three-pair residuals in volts: :func:`.core.noise_floor`."""

@@ -202,7 +202,7 @@ def rank(candidates: list[Candidate]) -> list[Candidate]:
 
 
 def decide(candidates, gap_before: float, floor: float,
-           thresholds: Thresholds = Thresholds()) -> tuple[str, str]:
+           thresholds: Thresholds | None = None) -> tuple[str, str]:
     """Verdict ``(effect, reason)`` (module docstring, step 4).
 
     Parameters
@@ -212,6 +212,7 @@ def decide(candidates, gap_before: float, floor: float,
     gap_before, floor : float
         Base held-out gap and noise floor [the candidates' unit].
     """
+    thresholds = thresholds or Thresholds()
     if gap_before <= floor * (1 + thresholds.none_margin):
         return "none", "held-out gap within the noise floor"
     rows = rank([c for c in candidates if c.available])
@@ -307,7 +308,7 @@ def partition_slices(dimension: str, masks, labels, r2, floor: float, margin: fl
     out = []
     for (label, n, r, lo, hi), share in zip(rows, shares):
         limit = float(slice_limit(floor, n * dof_per_value, margin))
-        out.append(Slice(dimension, label, n, r, share, lo, hi,
+        out.append(Slice(dimension, label, n, r, float(share), lo, hi,
                          None if lo is None else bound_unit, bool(r > limit), limit))
     return out
 

@@ -45,7 +45,7 @@ def _slices(rows, floor: float, margin: float, dof_per_value: int = 1) -> list[S
         shares = core.partition_shares([r[2] for r in part], [r[3] for r in part], floor)
         for r, share in zip(part, shares):
             limit = float(core.slice_limit(floor, r[2] * dof_per_value, margin))
-            out.append(Slice(dim, r[1], r[2], r[3], share, r[4], r[5], r[6],
+            out.append(Slice(dim, r[1], r[2], r[3], float(share), r[4], r[5], r[6],
                              bool(r[3] > limit), limit))
     return core.sort_slices(out)
 
@@ -60,7 +60,7 @@ def from_three_pair_v1(d: dict) -> DiagnosisReport:
                      ("by_illuminance", "illuminance_lx"),
                      ("by_sun_elevation", "sun_elevation_deg")):
         for s in w.get(key, []):
-            label = s["slice"].removeprefix("sweep ")
+            label = s["slice"].removeprefix("sweep ").removesuffix(" lx").removesuffix(" deg")
             rows.append((dim, label, int(s["n"]), float(s["rms_mV"]), None, None, None))
     data = dict(d.get("data", {}))
     nuisance = data.pop("nuisance", None)

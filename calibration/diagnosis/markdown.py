@@ -66,9 +66,9 @@ def report_markdown(r) -> str:
                      f"{100 * c.shrink:.1f} % | {c.score:.1f} | "
                      f"{'yes' if c.explained else 'no'} |")
     lines += ["", "## Where the gap lies (held-out residuals of the base model)", "",
-              "Share: of the excess squared gap over the noise floor within each dimension; "
-              "a slice carries the gap when its RMS exceeds what white noise at the floor "
-              "reaches in 99 % of slices of its size.", "",
+              ("Share: of the excess squared gap over the noise floor within each dimension; "
+               "a slice carries the gap when its RMS exceeds what white noise at the floor "
+               "reaches in 99 % of slices of its size."), "",
               f"| dimension | slice | n | RMS [{u}] | share | carries the gap |",
               "|---|---|---|---|---|---|"]
     for s in r.where[:MAX_SLICES]:

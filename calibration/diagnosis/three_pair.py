@@ -22,6 +22,8 @@ References
 
 from __future__ import annotations
 
+from itertools import pairwise
+
 import numpy as np
 
 from ..effects import EFFECT_NAMES, all_effects, geometry
@@ -42,6 +44,7 @@ table is missing)."""
 METRIC = "held-out RMS of U1..U3 residuals"
 NOISE_METHOD = ("second differences of the base-fit residuals along each sweep "
                 "(von Neumann 1941)")
+DEFAULT_THRESHOLDS = Thresholds()
 MIN_READINGS_PER_CHANNEL = 20
 MIN_HEADING_SPAN_DEG = 10.0
 
@@ -80,7 +83,7 @@ def _terciles(x):
     """Labels 0..2 of the quantile terciles of ``x`` and their ``(lo, hi)`` edges."""
     edges = np.quantile(x, np.linspace(0, 1, 4))
     lab = np.clip(np.searchsorted(edges, x, side="right") - 1, 0, 2)
-    return lab, list(zip(edges[:-1], edges[1:]))
+    return lab, list(pairwise(edges))
 
 
 def where_slices(data: DiagnosisData, residual_mV, floor_mV: float, sun_el_deg,
@@ -162,7 +165,7 @@ def _check(data: DiagnosisData) -> None:
 
 
 def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, folds: int = 3,
-                        seed: int = 0, thresholds: Thresholds = Thresholds()
+                        seed: int = 0, thresholds: Thresholds = DEFAULT_THRESHOLDS
                         ) -> DiagnosisReport:
     """Diagnose a three-pair sensor data set (module docstring).
 
@@ -301,7 +304,7 @@ class ThreePairAdapter:
         return names
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
-                 thresholds: Thresholds = Thresholds(), sidecar: dict | None = None
+                 thresholds: Thresholds = DEFAULT_THRESHOLDS, sidecar: dict | None = None
                  ) -> DiagnosisReport:
         import pandas as pd
 

@@ -46,7 +46,7 @@ class ClockOffset(Effect):
         six mounting errors keeps the sensed angle), so that a timezone error of hours is
         found before a local refinement (a fit started at 0 stops in a local minimum)."""
         t_mid = float(np.mean(ctx.t_s))
-        el0, az0 = ctx.sun.elevation_azimuth(np.array([t_mid]))
+        _, az0 = ctx.sun.elevation_azimuth(np.array([t_mid]))
         out = []
         for dt in self.COARSE_S:
             el, az = ctx.sun.elevation_azimuth(np.array([t_mid + dt]))

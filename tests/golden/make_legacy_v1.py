@@ -1,0 +1,67 @@
+"""Write tests/golden/legacy_*_v1.json: "skysim.diagnosis/1" report dicts as the three separate
+diagnoses wrote them before they shared one package (read by tests/test_diagnosis_report.py).
+
+They can only be made with that code, from the commit before the package (8e225c7)::
+
+    git worktree add /tmp/old 8e225c7
+    cd /tmp/old && PYTHONPATH=/tmp/old python /path/to/checkout/tests/golden/make_legacy_v1.py
+
+Data: the three-pair ``tilt`` session of tests/test_diagnosis.py (seed 21), the noisy
+single-scattering field of tests/test_sky_gap.py and a small simulated ring session of
+tests/test_photodiode_diagnosis.py.
+"""
+
+import json
+import sys
+from pathlib import Path
+
+import numpy as np
+
+OUT = Path(__file__).resolve().parent
+
+
+def _plain(x):
+    if isinstance(x, dict):
+        return {str(k): _plain(v) for k, v in x.items()}
+    if isinstance(x, (list, tuple)):
+        return [_plain(v) for v in x]
+    if isinstance(x, np.ndarray):
+        return _plain(x.tolist())
+    if isinstance(x, np.bool_):
+        return bool(x)
+    if isinstance(x, np.integer):
+        return int(x)
+    if isinstance(x, np.floating):
+        return float(x)
+    return x
+
+
+def main() -> None:
+    sys.path.insert(0, "tests")
+    import calibration
+    if not (Path(calibration.__file__).parent / "diagnosis.py").is_file():
+        raise SystemExit("run in a checkout of the commit before the diagnosis package")
+    from test_photodiode_diagnosis import ring_session
+    from test_sky_gap import FLOOR, make_cases
+
+    from calibration.diagnosis import diagnose
+    from calibration.photodiode_diagnosis import diagnose_photodiodes
+    from calibration.sky_gap import diagnose_sky
+    from experiments.diagnose import simulate_session
+    from skysim.sky import RayleighSky
+
+    ds = simulate_session("tilt", np.random.default_rng(21), params=[1.2, -0.8])
+    c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
+    sky = diagnose_sky(c, [0], candidates=("d_max",), noise_floor=FLOOR)
+    sky.pop("seconds")
+    out = {"three_pair": diagnose(ds["data"], ("tilt", "sun_motion")), "sky": sky,
+           "rings": diagnose_photodiodes(ring_session(n_sweeps=2, per_sweep=60),
+                                         ("yaw_scale",), n_folds=2)}
+    for k, v in out.items():
+        path = OUT / f"legacy_{k}_v1.json"
+        path.write_text(json.dumps(_plain(v), indent=1, sort_keys=True) + "\n")
+        print("wrote", path)
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,269 @@
+"""The shared diagnosis core, report and entry point: each formula against an independent
+form (closed form, a second implementation, a Monte-Carlo rate), the report's round trips,
+the readers of the earlier report dicts, the sun track, and the dispatch of
+:func:`calibration.diagnose`.
+"""
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.stats import chi2
+
+from calibration import DiagnosisReport, diagnose
+from calibration.diagnosis import (
+    DIAGNOSIS_SCHEMA,
+    Candidate,
+    InsufficientDataError,
+    ReportFormatError,
+    Thresholds,
+    UnsupportedInstrumentError,
+    assign_folds,
+    core,
+    decide,
+    noise_floor,
+)
+from calibration.effects import UnknownEffectError
+from skysim.sun import Site, SunTrack, sun_vector
+
+GOLDEN = Path(__file__).resolve().parent / "golden"
+
+
+# ------------------------------------------------------------------------------ core
+def test_folds_hold_out_whole_blocks_round_robin():
+    block = np.repeat([3, 5, 8, 9, 12], [4, 2, 3, 5, 1])
+    f = assign_folds(block, 2)
+    for b in np.unique(block):                      # a block never straddles the split
+        assert np.unique(f[block == b]).size == 1
+    assert [int(f[block == b][0]) for b in (3, 5, 8, 9, 12)] == [0, 1, 0, 1, 0]
+    with pytest.raises(InsufficientDataError, match="at least 2"):
+        assign_folds(np.zeros(10, int), 2)
+    with pytest.raises(InsufficientDataError, match="folds=6"):
+        assign_folds(block, 6)
+
+
+def test_noise_floor_skips_excluded_readings_without_bias():
+    """White noise: E[(r_{k+1} - 2 r_k + r_{k-1})^2] = 6 sigma^2 exactly, also when excluded
+    readings are skipped (the skipped-over values are as independent as neighbours). 6000
+    readings in 3 channels, a third of them excluded: ~12,000 squared differences with lag
+    correlations -2/3 and 1/6, relative SE of the RMS ~1.1 %; 5 % is more than 4 SE."""
+    rng = np.random.default_rng(4)
+    sigma = np.array([1.0, 2.0, 0.5])
+    r = rng.standard_normal((6000, 3)) * sigma
+    usable = rng.random(r.shape) > 1 / 3
+    r[~usable] = 1e6                                 # excluded readings never enter
+    block = np.repeat(np.arange(6), 1000)
+    pooled, per = noise_floor(r, usable, block)
+    np.testing.assert_allclose(per, sigma, rtol=0.05)
+    assert pooled == pytest.approx(np.sqrt(np.mean(sigma ** 2)), rel=0.05)
+    # a channel without three consecutive usable readings has no floor (NaN, not 0)
+    usable[:, 2] = False
+    usable[:2, 2] = True
+    assert np.isnan(noise_floor(r, usable, block)[1][2])
+
+
+def test_held_out_score_is_the_bic_difference():
+    """Gaps above the floor: the score equals BIC_c - BIC_0 of Gaussian residuals,
+    ``n ln(RSS/n) + k ln n_cal``, written out here from the residual sums of squares."""
+    n, n_cal, k0, kc = 900, 600, 10, 12
+    rss0, rssc = n * 2.0 ** 2, n * 1.5 ** 2
+    bic0 = n * np.log(rss0 / n) + k0 * np.log(n_cal)
+    bicc = n * np.log(rssc / n) + kc * np.log(n_cal)
+    got = core.held_out_score(1.5, 2.0, 0.5, n, kc - k0, n_cal)
+    assert got == pytest.approx(bicc - bic0, rel=1e-12)
+    # both below the floor: only the complexity remains (the simpler model wins)
+    assert core.held_out_score(0.4, 0.45, 0.5, n, 2, n_cal) == pytest.approx(2 * np.log(n_cal))
+
+
+def _cand(effect, gap, score, explained=True, available=True):
+    if not available:
+        return Candidate.unavailable(effect, "missing engine")
+    return Candidate(effect, gap_after=gap, shrink=0.0, score=score, explained=explained)
+
+
+def test_verdict_rule_branches():
+    t = Thresholds()
+    floor = 1.0
+    rows = [_cand("a", 1.05, -50.0), _cand("b", 1.02, -40.0), _cand("c", 0.9, 0.0,
+                                                                       available=False)]
+    assert decide(rows, 1.09, floor, t)[0] == "none"                 # within 1.1 x floor
+    assert decide(rows, 3.0, floor, t)[0] == "a"                     # best score, explains
+    assert decide(rows[1:], 3.0, floor, t)[0] == "b"                 # a withheld
+    assert decide([_cand("a", 2.5, -50.0, explained=False)], 3.0, floor, t)[0] == \
+        "unexplained"
+    assert decide([_cand("a", 1.0, 5.0)], 3.0, floor, t)[0] == "unexplained"   # score >= 0
+    assert decide(rows[2:], 3.0, floor, t) == ("unexplained",
+                                               "no candidate effects were available")
+    # explains: at the floor, or all but 2 % of the excess variance removed
+    assert core.explains(1.07, 3.0, floor, t) and not core.explains(1.08, 1.2, floor, t)
+    assert core.explains(np.sqrt(1 + 0.02 * 8.0), 3.0, floor, t)
+    # ties in score go to the smaller held-out gap; unavailable rows last
+    ranked = core.rank([_cand("x", 1.2, -3.0), _cand("y", 1.1, -3.0), rows[2]])
+    assert [c.effect for c in ranked] == ["y", "x", "c"]
+
+
+def test_shrink_uncertainty_equals_a_direct_block_bootstrap():
+    """Against a second implementation (a loop over resamples) with the same generator."""
+    rng = np.random.default_rng(0)
+    block = np.repeat(np.arange(7), 30)
+    r0 = rng.standard_normal((210, 3)) * 2.0
+    r1 = rng.standard_normal((210, 3))
+    r0[5, 1] = np.nan
+    r1[5, 1] = np.nan
+    got = core.shrink_uncertainty(r0, r1, block, np.random.default_rng(9), n_boot=300)
+    pick = np.random.default_rng(9).integers(0, 7, (300, 7))
+    g0, g1 = [], []
+    for row in pick:
+        m = np.concatenate([np.flatnonzero(block == b) for b in row])
+        g0.append(np.sqrt(np.nanmean(r0[m] ** 2)))
+        g1.append(np.sqrt(np.nanmean(r1[m] ** 2)))
+    g0, g1 = np.array(g0), np.array(g1)
+    assert got["gap_before_se"] == pytest.approx(np.std(g0), rel=1e-12)
+    assert got["gap_after_se"] == pytest.approx(np.std(g1), rel=1e-12)
+    assert got["shrink_se"] == pytest.approx(np.std(1 - g1 / g0), rel=1e-12)
+    assert core.shrink_uncertainty(r0, r1, np.zeros(210), rng) is None
+
+
+def test_slice_limit_is_exceeded_by_white_noise_in_one_percent_of_slices():
+    """Monte Carlo: 20,000 slices of 40 white-noise values at the floor, margin 0. The
+    fraction above the limit is 1 % by construction (chi-square quantile); its binomial SE is
+    0.07 %, so 0.6 %..1.4 % is more than 5 SE either side."""
+    rng = np.random.default_rng(1)
+    floor, n = 0.3, 40
+    r = rng.normal(0.0, floor, (20_000, n))
+    rms = np.sqrt(np.mean(r ** 2, axis=1))
+    frac = np.mean(rms > core.slice_limit(floor, n, 0.0))
+    assert 0.006 < frac < 0.014
+    assert core.slice_limit(floor, n, 0.0) == pytest.approx(
+        floor * np.sqrt(chi2.ppf(0.99, n) / n), rel=1e-12)
+
+
+def test_partition_slices_shares_add_to_one_and_locate_the_excess():
+    floor = 1.0
+    r2 = np.ones((100, 2))
+    r2[:50, 1] = 25.0                                  # channel 1, first half: rms 5
+    masks = [np.arange(2)[None, :] == c for c in range(2)]
+    rows = core.partition_slices("channel", [np.broadcast_to(m, r2.shape) for m in masks],
+                                 ["c0", "c1"], r2, floor, 0.1)
+    by = {s.label: s for s in rows}
+    assert sum(s.share for s in rows) == pytest.approx(1.0)
+    assert by["c1"].share == pytest.approx(1.0) and by["c1"].carries_gap
+    assert by["c0"].share == 0.0 and not by["c0"].carries_gap
+    assert by["c1"].rms == pytest.approx(np.sqrt((50 * 25 + 50) / 100))
+    # below the floor everywhere: shares of the sum of squares
+    quiet = core.partition_slices("channel", [np.broadcast_to(m, r2.shape) for m in masks],
+                                  ["c0", "c1"], 0.25 * np.ones((100, 2)), floor, 0.1)
+    assert [s.share for s in quiet] == [0.5, 0.5]
+
+
+# ------------------------------------------------------------------------------ report
+@pytest.mark.parametrize("family,instrument,unit", [("three_pair", "three_pair", "mV"),
+                                                     ("sky", "sky", "DoLP"),
+                                                     ("rings", "photodiodes", "1")])
+def test_reads_the_earlier_report_dicts(family, instrument, unit):
+    """The ``skysim.diagnosis/1`` dicts as each diagnosis wrote them (made by
+    tests/golden/make_legacy_v1.py from that code) read into one report: verdict and gaps
+    as written, slices as one list with shares adding to 1 per dimension, a v2 round trip."""
+    d = json.loads((GOLDEN / f"legacy_{family}_v1.json").read_text())
+    r = DiagnosisReport.from_dict(d)
+    assert (r.instrument, r.unit) == (instrument, unit)
+    v = d["verdict"]
+    assert r.verdict.effect == v["effect"]
+    assert r.verdict.gap_before == v["gap_before"] and r.verdict.gap_after == v["gap_after"]
+    assert r.noise_floor == pytest.approx(v["noise_floor"], rel=0)
+    avail = [c for c in d["candidates"] if c.get("available", True)]
+    assert sorted(c.effect for c in r.candidates) == sorted(c["effect"] for c in avail)
+    for c in avail:
+        assert r.candidate(c["effect"]).gap_after == c["gap_after"]
+    for dim in {s.dimension for s in r.where}:
+        assert sum(s.share for s in r.where if s.dimension == dim) == pytest.approx(1.0)
+    doc = json.loads(json.dumps(r.to_dict()))
+    assert doc["schema"] == DIAGNOSIS_SCHEMA
+    assert DiagnosisReport.from_dict(doc).to_dict() == doc
+    assert r.to_markdown().startswith("# Sim-to-real gap diagnosis")
+
+
+def test_ring_where_keeps_its_angular_bounds():
+    d = json.loads((GOLDEN / "legacy_rings_v1.json").read_text())
+    r = DiagnosisReport.from_dict(d)
+    az = [s for s in r.where if s.dimension == "sky_azimuth_deg"]
+    assert az and all(s.bound_unit == "deg" and s.hi - s.lo == 30.0 for s in az)
+    assert all({"lo_deg", "hi_deg"} <= set(s.to_dict()) for s in az)
+    # shares as the ring diagnosis computed them (the same rule, recomputed here)
+    written = {(w["dimension"], w["label"]): w["share"] for w in d["where"]}
+    for s in r.where:
+        assert s.share == pytest.approx(written[(s.dimension, s.label)], rel=1e-9, abs=1e-15)
+
+
+def test_unknown_report_schema_refused():
+    with pytest.raises(ReportFormatError, match="skysim.diagnosis/9"):
+        DiagnosisReport.from_dict({"schema": "skysim.diagnosis/9"})
+    with pytest.raises(ReportFormatError, match="verdict"):
+        DiagnosisReport.from_dict({"schema": DIAGNOSIS_SCHEMA, "unit": "mV",
+                                   "instrument": "sky", "metric": "m"})
+
+
+# ------------------------------------------------------------------------------ sun track
+def test_sun_track_within_its_stated_error_of_the_ephemeris():
+    """Off-knot times (30 s after each knot, the worst place) over a day: within 1e-4 deg
+    of :func:`skysim.sun.sun_vector` (the sagitta bound in the class docstring)."""
+    site = Site(34.14, 108.55, 400.0)
+    t0 = pd.Timestamp("2013-05-22T00:00:00Z").value / 1e9
+    track = SunTrack(site, t0, t0 + 86400.0, margin_s=0.0)
+    t = t0 + 30.0 + 60.0 * np.arange(0, 1440, 7)
+    exact, _ = sun_vector(pd.to_datetime(np.round(t * 1e9).astype(np.int64), utc=True), site)
+    cosang = np.clip(np.sum(track(t) * exact, axis=1), -1.0, 1.0)
+    assert np.degrees(np.arccos(cosang)).max() < 1e-4
+    el, _ = track.elevation_azimuth(t)
+    assert el.max() > 70.0 and el.min() < -20.0        # the whole day was sampled
+
+
+# ------------------------------------------------------------------------------ entry point
+@pytest.fixture(scope="module")
+def tilt_measurement():
+    from experiments.diagnose import simulate_session
+    return simulate_session("tilt", np.random.default_rng(21), params=[1.2, -0.8])
+
+
+def test_one_entry_point_for_a_path_a_table_and_a_dataframe(tilt_measurement, tmp_path):
+    m = tilt_measurement["measurement"]
+    path = m.write(tmp_path / "tilted.csv")
+    by_path = diagnose(path, ("tilt", "sun_motion"), folds=3, seed=1)
+    by_table = diagnose(m, ("tilt", "sun_motion"), folds=3, seed=1)
+    by_frame = diagnose(m.table, ("tilt", "sun_motion"), folds=3, seed=1, sidecar=m.sidecar)
+    assert by_path.instrument == "three_pair" and by_path.verdict.effect == "tilt"
+    # the CSV round trip rounds the readings: same verdict, gaps within 1e-6 relative
+    for r in (by_table, by_frame):
+        assert r.verdict.effect == "tilt"
+        assert r.verdict.gap_before == pytest.approx(by_path.verdict.gap_before, rel=1e-6)
+    assert by_table.to_dict()["verdict"] == by_frame.to_dict()["verdict"]
+    assert by_path.data["path"] == str(path)
+
+
+def test_entry_point_refuses_what_it_cannot_read(tilt_measurement, tmp_path):
+    m = tilt_measurement["measurement"]
+    with pytest.raises(UnknownEffectError, match="valid"):
+        diagnose(m, ("gremlins",))
+    with pytest.raises(UnsupportedInstrumentError, match="SkyCases"):
+        diagnose(np.zeros(3))
+    path = m.write(tmp_path / "other.csv")
+    side = path.with_name("other.csv.json")
+    side = side if side.exists() else path.with_suffix(".json")
+    side.write_text(json.dumps(dict(m.sidecar, schema="skysim.something/1")))
+    with pytest.raises(ValueError, match="skysim.something/1' is neither"):
+        diagnose(path)
+
+
+def test_sky_field_through_the_entry_point_splits_by_fold():
+    """Two suns, two folds: the second sun is withheld (the golden sky case gives it
+    explicitly); a sky field needs its noise floor."""
+    from test_sky_gap import FLOOR, make_cases
+
+    from skysim.sky import RayleighSky
+    c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
+    r = diagnose(c, ("d_max",), folds=2, noise_floor=FLOOR)
+    assert r.data["withheld_cases"] == [1] and r.verdict.effect == "none"
+    with pytest.raises(ValueError, match="noise_floor"):
+        diagnose(c, ("d_max",))
