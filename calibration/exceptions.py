@@ -1,10 +1,12 @@
 """Errors raised by estimators. A fit either succeeds or raises one of these: never a NaN."""
 
+from skysim.exceptions import SkysimError
+
 __all__ = ["CalibrationError", "TooFewSamplesError", "RankDeficientError", "ConvergenceError"]
 
 
-class CalibrationError(RuntimeError):
-    """Base class of estimation failures."""
+class CalibrationError(SkysimError, RuntimeError):
+    """Base class of estimation failures (a :class:`skysim.exceptions.SkysimError`)."""
 
 
 class TooFewSamplesError(CalibrationError, ValueError):

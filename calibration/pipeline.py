@@ -14,6 +14,7 @@ import numpy as np
 
 from sensor.measurement import Measurement
 from sensor.opponent import zenith_polarization
+from skysim.exceptions import SkysimError
 from skysim.sky import RayleighSky, Sky
 
 from .lsq import PairCalibration, fit_pair
@@ -28,7 +29,7 @@ channel swings by ~0.1-1 V over a 180-deg sweep (eq. 2 at d = 0.3-0.8); 1 uV is 
 one 16-bit LSB on +/-10 V."""
 
 
-class DeadChannelError(ValueError):
+class DeadChannelError(SkysimError, ValueError):
     """A channel's outputs do not change over the table (dead, stuck or disconnected)."""
 
 

@@ -48,9 +48,14 @@ from sensor.opponent import OpponentSensor
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from .argtypes import (DefaultsHelpFormatter, existing_file, int_at_least, output_dir,
-                       positive_int, seed)
-
+from .argtypes import (
+    DefaultsHelpFormatter,
+    existing_file,
+    int_at_least,
+    output_dir,
+    positive_int,
+    seed,
+)
 from .yang2014 import ERROR_MODEL, SITE
 
 __all__ = [

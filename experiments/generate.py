@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skysim.exceptions import InvalidParameterError
+from skysim.exceptions import InvalidParameterError, SkysimError
 
 from .argtypes import existing_file, output_dir, output_file
 
@@ -79,7 +79,7 @@ class GenerateConfigError(InvalidParameterError):
     """A ground-truth configuration is invalid (the message names the entry and key)."""
 
 
-class CompareError(ValueError):
+class CompareError(SkysimError, ValueError):
     """Two files cannot be compared (schema, columns, rows or grid differ)."""
 
 

@@ -54,7 +54,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skysim.exceptions import InvalidParameterError
+from skysim.exceptions import InvalidParameterError, SkysimError
 
 from .argtypes import existing_file, output_dir, positive_int
 from .figures import pyplot, save_png
@@ -80,7 +80,7 @@ class SweepMemoryError(SweepConfigError):
     ``stops``."""
 
 
-class SweepStateError(RuntimeError):
+class SweepStateError(SkysimError, RuntimeError):
     """The output folder holds a different sweep (its configuration digest differs)."""
 
 

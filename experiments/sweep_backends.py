@@ -20,12 +20,14 @@ from __future__ import annotations
 import os
 from typing import Callable, Sequence
 
+from skysim.exceptions import SkysimError
+
 __all__ = ["BACKENDS", "SchedulerUnreachableError", "run_tasks", "default_workers"]
 
 BACKENDS = ("local", "dask")
 
 
-class SchedulerUnreachableError(RuntimeError):
+class SchedulerUnreachableError(SkysimError, RuntimeError):
     """No dask scheduler answers at the given address."""
 
 

@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.exceptions import SkysimError
 from skysim.sun import Site
 
 from .tables import format_iso_times, read_table_and_sidecar, write_table_and_sidecar
@@ -28,7 +29,7 @@ _OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d|:\d\d(?:\.\d+)?[+-]\d\d)$"
 the time of day (so that the day of a bare date, ``2013-05-22``, is not read as an offset)."""
 
 
-class MeasurementFormatError(ValueError):
+class MeasurementFormatError(SkysimError, ValueError):
     """A measurement file or table does not follow its schema (message says what and where)."""
 
 

@@ -1,14 +1,22 @@
-"""Exceptions raised by the sky layer.
+"""Exceptions of skysim: the root :class:`SkysimError` and those of the sky layer.
 
-Every exception names the offending value and says how to fix the problem. All of them
-subclass :class:`ValueError` so callers that only guard against bad input keep working.
+Every skysim exception derives from :class:`SkysimError` (``except SkysimError`` catches
+anything skysim raises on purpose) and keeps a built-in base that says what kind of failure
+it is: :class:`ValueError` for bad input (every exception of this module),
+:class:`RuntimeError` for an estimation that failed (:class:`calibration.exceptions.CalibrationError`),
+:class:`OSError` for files, :class:`ImportError` for a missing optional engine. Every
+exception names the offending value and says how to fix the problem.
 """
 
-__all__ = ["NaiveDatetimeError", "SunBelowHorizonError", "InvalidParameterError",
-           "InvalidTimeError", "BroadcastError"]
+__all__ = ["SkysimError", "NaiveDatetimeError", "SunBelowHorizonError",
+           "InvalidParameterError", "InvalidTimeError", "BroadcastError"]
 
 
-class InvalidParameterError(ValueError):
+class SkysimError(Exception):
+    """Root of every exception skysim raises on purpose (subclasses add a built-in base)."""
+
+
+class InvalidParameterError(SkysimError, ValueError):
     """A physical parameter is outside its valid range (latitude, d_max, tau, albedo, ...)."""
 
 

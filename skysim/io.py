@@ -20,6 +20,8 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
+from .exceptions import SkysimError
+
 __all__ = ["OutputPathError", "WriteError", "atomic_write", "atomic_write_many",
            "check_free_space", "check_output_dir", "check_output_file", "find_sidecar",
            "legacy_sidecar_path", "sidecar_path", "write_json_atomic"]
@@ -29,12 +31,12 @@ FREE_SPACE_MARGIN = 1.1
 error and for the file system's own blocks."""
 
 
-class OutputPathError(OSError):
+class OutputPathError(SkysimError, OSError):
     """An output path cannot be written: it is a folder, lies under a file, or its folder is
     not writable. The message names the path and what to give instead."""
 
 
-class WriteError(OSError):
+class WriteError(SkysimError, OSError):
     """Writing a file failed part-way (a full disk, a quota, a lost network share): the message
     names the destination and the reason; the destination is left as it was."""
 

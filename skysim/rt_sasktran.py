@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .exceptions import InvalidParameterError
+from .exceptions import InvalidParameterError, SkysimError
 from .validation import check_in_range
 
 __all__ = [
@@ -135,7 +135,7 @@ def tau_check(tau: float) -> str:
     return "tables" if TABLE_TAU_RANGE[0] <= tau <= TABLE_TAU_RANGE[1] else "convergence"
 
 
-class SasktranUnavailableError(ImportError):
+class SasktranUnavailableError(SkysimError, ImportError):
     """The optional radiative-transfer engine sasktran2 is not installed.
 
     Fix: install the ``rt`` extra from the skysim checkout,

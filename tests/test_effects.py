@@ -173,7 +173,7 @@ def test_analytic_base_jacobian_matches_finite_differences(ctx, name):
     eff = None if name is None else E.get_effect(name)
     p = None if eff is None else eff.draw(np.random.default_rng(5))
     phi, shape = E.geometry(ctx, eff, p)
-    J = E.base_jacobian(ctx, phi, shape, BASE, eff, p)
+    J, _ = E.jacobians(ctx, phi, shape, BASE, eff, p)
     h = np.r_[np.full(6, 1e-5), np.full(3, 1e-7), 1e-7]
     for j in range(10):
         up, dn = BASE.copy(), BASE.copy()

@@ -17,7 +17,6 @@ photodiodes``) into the same report.
 
 from __future__ import annotations
 
-import json
 from dataclasses import asdict, dataclass, field, fields
 
 import numpy as np
@@ -206,11 +205,6 @@ class Verdict:
     shrink_se: float | None = None
     params: dict = field(default_factory=dict)
 
-    @property
-    def named(self) -> bool:
-        """True when the verdict names an effect."""
-        return self.effect not in ("none", "unexplained")
-
 
 @dataclass
 class DiagnosisReport:
@@ -286,9 +280,6 @@ class DiagnosisReport:
              "faults": self.faults, "data": self.data, "thresholds": self.thresholds,
              "seed": self.seed, "extra": self.extra, "notes": self.notes}
         return _jsonable(d)
-
-    def to_json(self) -> str:
-        return json.dumps(self.to_dict(), indent=1)
 
     @classmethod
     def from_dict(cls, d: dict) -> DiagnosisReport:

@@ -50,6 +50,7 @@ import pandas as pd
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiode import opponent_log_ratio, photodiode_signal
 from skysim import rayleigh
+from skysim.exceptions import SkysimError
 from skysim.geometry import direction_vector, wrap_axial_deg
 from skysim.sun import Site, SunTrack, as_utc_index
 
@@ -61,7 +62,6 @@ __all__ = [
     "SunTrack",
     "UnknownEffectError",
     "all_effects",
-    "base_jacobian",
     "base_vector",
     "forward",
     "geometry",
@@ -79,7 +79,7 @@ BASE_NAMES = ("dtheta_1_deg", "dtheta_2_deg", "dtheta_3_deg", "dtheta_4_deg", "d
 """Base-model parameters in the order of the parameter vector."""
 
 
-class UnknownEffectError(ValueError):
+class UnknownEffectError(SkysimError, ValueError):
     """An effect name that is not in :data:`EFFECT_NAMES` (the message lists the valid ones)."""
 
 
@@ -370,12 +370,6 @@ def jacobians(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = No
                  "log_ratio": log_ratio}
         Je = effect.output_jacobian(ctx, p, parts)
     return J, Je
-
-
-def base_jacobian(ctx: Context, phi_deg, dop_shape, base, effect: Effect | None = None,
-                  p=None, gain: float = GAIN) -> np.ndarray:
-    """Base block (n, 3, 10) of :func:`jacobians`."""
-    return jacobians(ctx, phi_deg, dop_shape, base, effect, p, gain)[0]
 
 
 def forward(ctx: Context, base, effect: Effect | None = None, p=None,

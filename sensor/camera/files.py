@@ -35,6 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skysim.exceptions import SkysimError
 from skysim.io import atomic_write_many, find_sidecar, sidecar_path
 
 from .lens import FisheyeLens
@@ -97,7 +98,7 @@ ROTATIONS_DEG = (0, 90, 180, 270)
 """Readout rotations [deg, counter-clockwise as displayed] :func:`undo_readout` undoes."""
 
 
-class DofpFormatError(ValueError):
+class DofpFormatError(SkysimError, ValueError):
     """A raw camera file or its sidecar does not follow ``skysim.dofp/1``."""
 
 
