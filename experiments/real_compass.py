@@ -17,7 +17,7 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 
 __all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
-           "run_real_benchmark", "photodiode_report_markdown", "plot_photodiode_diagnosis"]
+           "run_real_benchmark"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
 DEFAULT_SEED = 2023
@@ -50,33 +50,32 @@ def session_files(folder, option: str = "--data") -> list[Path]:
     return out
 
 
-def session_row(name: str, doc: dict) -> dict:
-    """One row of the per-session table."""
-    v, he = doc["verdict"], doc.get("heading_error") or {}
-    best = next((c for c in doc["candidates"] if c.get("effect") == v.get("best_candidate")),
-                {})
-    sun = doc.get("data", {}).get("sun_elevation_deg", [np.nan, np.nan])
-    clock = next((c for c in doc["candidates"] if c.get("effect") == "clock_offset"
-                  and c.get("available", True)), {})
-    clock_p = clock.get("params", {}).get("clock_offset_s", {})
-    elev = [x for x in ((doc.get("base_fit") or {}).get("elevation_offset_deg") or {}).values()
-            if x is not None]
+def session_row(name: str, report) -> dict:
+    """One row of the per-session table from a :class:`calibration.DiagnosisReport`."""
+    v = report.verdict
+    he = report.extra.get("heading_error") or {}
+    best = report.candidate(v.best_candidate) if v.best_candidate else None
+    sun = report.data.get("sun_elevation_deg", [np.nan, np.nan])
+    clock = report.candidate("clock_offset")
+    clock_p = (clock.params.get("clock_offset_s", {}) if clock is not None and clock.available
+               else {})
+    base_fit = report.extra.get("base_fit") or {}
+    elev = [x for x in (base_fit.get("elevation_offset_deg") or {}).values() if x is not None]
     return {"session": name, "sun_elevation_deg": float(np.mean(sun)),
-            "faults": len(doc["faults"]),
-            "faulty": ", ".join(f"{f['channel']}:{f['kind']}" for f in doc["faults"]),
-            "gap_base": v.get("gap_before"), "verdict": v["effect"],
-            "best": v.get("best_candidate"), "gap_best": best.get("gap_after"),
-            "shrink": best.get("shrink"),
-            "params": _params_text(best.get("params", {})),
+            "faults": len(report.faults),
+            "faulty": ", ".join(f"{f['channel']}:{f['kind']}" for f in report.faults),
+            "gap_base": v.gap_before, "verdict": v.effect,
+            "best": v.best_candidate, "gap_best": best.gap_after if best else None,
+            "shrink": best.shrink if best else None,
+            "params": _params_text(best.params if best else {}),
             "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
-            "unit_elevation_offset_deg": (doc.get("base_fit") or {}).get(
-                "elevation_offset_mean_deg"),
+            "unit_elevation_offset_deg": base_fit.get("elevation_offset_mean_deg"),
             "unit_elevation_offset_min_deg": min(elev) if elev else None,
             "unit_elevation_offset_max_deg": max(elev) if elev else None,
             "clock_offset_s": clock_p.get("value"),
             "clock_uncertainty_s": clock_p.get("uncertainty"),
-            "top_where": "; ".join(f"{w['dimension']}={w['label']} ({100 * w['share']:.0f}%)"
-                                   for w in doc["where"][:3])}
+            "top_where": "; ".join(f"{w.dimension}={w.label} ({100 * w.share:.0f}%)"
+                                   for w in report.where[:3])}
 
 
 def _params_text(params: dict) -> str:
@@ -89,31 +88,26 @@ def _params_text(params: dict) -> str:
     return "; ".join(rest)
 
 
-def _diagnose_file(path, effects, folds, seed):
-    from calibration.photodiode_diagnosis import diagnose_photodiodes
-    from sensor.photodiodes_io import read_photodiodes
-    return diagnose_photodiodes(read_photodiodes(path), effects, n_folds=folds, seed=seed,
-                                where=str(path))
-
-
 def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_SEED):
     """Diagnose every session; write per-session reports, the table and the figures."""
-    from calibration.diagnosis import DiagnosisError
     from tqdm import tqdm
+
+    from calibration import diagnose
+    from calibration.diagnosis import DiagnosisError
     rows = []
     for f in tqdm(files, desc="sessions", unit="session"):
         sub = out / Path(f).stem
         t0 = time.perf_counter()
         try:
-            doc = _diagnose_file(f, effects, folds, seed)
+            report = diagnose(f, effects, folds=folds, seed=seed)
         except DiagnosisError as exc:
             rows.append({"session": Path(f).name, "verdict": "error", "faulty": str(exc)})
             continue
         sub.mkdir(parents=True, exist_ok=True)
-        write_json_atomic(sub / "diagnosis.json", doc)
-        rows.append(dict(session_row(Path(f).name, doc), wall_s=time.perf_counter() - t0))
+        write_json_atomic(sub / "diagnosis.json", report.to_dict())
+        rows.append(dict(session_row(Path(f).name, report), wall_s=time.perf_counter() - t0))
         if "canopy" in Path(f).name or len(files) == 1:
-            plot_residual_over_azimuth(doc, sub / "residual_by_sky_azimuth.png")
+            plot_residual_over_azimuth(report, sub / "residual_by_sky_azimuth.png")
     table = pd.DataFrame(rows)
     atomic_write(out / "sessions.csv", lambda p: table.to_csv(p, index=False))
     atomic_write(out / "sessions.md", lambda p: p.write_text(_table_md(table)))
@@ -169,15 +163,15 @@ def plot_day(table: pd.DataFrame, path: Path) -> None:
     plt.close(fig)
 
 
-def plot_residual_over_azimuth(doc: dict, path: Path) -> None:
+def plot_residual_over_azimuth(report, path: Path) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
-    rows = sorted((w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"),
-                  key=lambda w: w["lo_deg"])
+    rows = sorted((w for w in report.where if w.dimension == "sky_azimuth_deg"),
+                  key=lambda w: w.lo)
     fig, ax = plt.subplots(figsize=(6, 3.5), constrained_layout=True)
     if rows:
-        ax.bar([0.5 * (w["lo_deg"] + w["hi_deg"]) for w in rows], [100 * w["rms"] for w in rows],
+        ax.bar([0.5 * (w.lo + w.hi) for w in rows], [100 * w.rms for w in rows],
                width=28)
     ax.set_xlabel("sky azimuth of the unit's view [deg, clockwise from north]")
     ax.set_ylabel("held-out residual RMS [%]")
@@ -186,79 +180,13 @@ def plot_residual_over_azimuth(doc: dict, path: Path) -> None:
     plt.close(fig)
 
 
-def photodiode_report_markdown(doc: dict) -> str:
-    """``report.md`` of a photodiode diagnosis."""
-    v = doc["verdict"]
-    lines = [f"# Diagnosis: {v['effect']}", "", v["reason"], ""]
-    if v.get("gap_before") is not None:
-        lines += [f"- held-out gap {100 * v['gap_before']:.2f} % -> {100 * v['gap_after']:.2f} % "
-                  f"of the unit mean reading (noise floor {100 * v['noise_floor']:.2f} %)"]
-        he = doc.get("heading_error") or {}
-        if he.get("base_deg") is not None:
-            lines += [f"- heading error (RMS): base {he['base_deg']:.2f} deg"
-                      + (f", best {he['best_deg']:.2f} deg" if he.get("best_deg") else "")]
-    lines += ["", "## Faults", ""]
-    lines += [f"- {f['channel']}: {f['kind']} {f['evidence']}" for f in doc["faults"]] or ["none"]
-    lines += ["", "## Where (share of the excess held-out variance)", ""]
-    lines += [f"- {w['dimension']} {w['label']}: {100 * w['share']:.1f} % (n={w['n']})"
-              for w in doc["where"][:12]]
-    lines += ["", "## Candidates", "", "| effect | held-out gap [%] | shrink | score |",
-              "|---|---|---|---|"]
-    for c in doc["candidates"]:
-        if c.get("available", True):
-            lines.append(f"| {c['effect']} | {100 * c['gap_after']:.3f} | "
-                         f"{100 * c['shrink']:.1f} % | {c['score']:.0f} |")
-        else:
-            lines.append(f"| {c['effect']} | unavailable: {c['error']} | | |")
-    sens = next((c["sensitivity"] for c in doc["candidates"] if "sensitivity" in c), None)
-    if sens is not None:
-        per_deg = sens["s_per_deg_of_sun_elevation"]
-        lines += ["", f"The clock offset is read from {sens['read_from']}; the sun's elevation "
-                      f"changes {sens['sun_elevation_rate_deg_per_h']:+.2f} deg/h here, so "
-                  + (f"each degree of misfit between the sky model and the sky in the sun's "
-                     f"apparent elevation moves the fitted clock by {per_deg / 60:.1f} min."
-                     if per_deg is not None else "the data cannot pin the clock.")]
-        shift = sens.get("sun_elevation_shift_deg")
-        if shift is not None and np.isfinite(shift) and not sens.get("absolute_yaw", False):
-            lines += ["", f"The fitted clock offset moves the sun's elevation by {shift:+.2f} deg: "
-                          "a clock error, or a sky whose sun appears that much "
-                          f"{'higher' if shift >= 0 else 'lower'} than the ephemeris's, "
-                          "which these data cannot tell apart."]
-    return "\n".join(lines) + "\n"
-
-
-def plot_photodiode_diagnosis(doc: dict, out: Path) -> list[Path]:
-    """Where (top slices) and the candidates' held-out gaps."""
-    import matplotlib
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-    fig, ax = plt.subplots(1, 2, figsize=(11, 4), constrained_layout=True)
-    top = doc["where"][:10]
-    ax[0].barh([f"{w['dimension']} {w['label']}" for w in top][::-1],
-               [100 * w["share"] for w in top][::-1])
-    ax[0].set_xlabel("share of the excess held-out variance [%]")
-    ax[0].set_title("Where the base model misses")
-    cands = [c for c in doc["candidates"] if c.get("available", True)]
-    gb = doc["verdict"].get("gap_before")
-    names = ["base"] + [c["effect"] for c in cands]
-    gaps = [gb] + [c["gap_after"] for c in cands]
-    if gb is not None:
-        ax[1].bar(names, [100 * g for g in gaps])
-        ax[1].tick_params(axis="x", rotation=30)
-    ax[1].set_ylabel("held-out gap [% of unit mean reading]")
-    ax[1].set_title("Which effect closes the gap")
-    p = out / "residuals_by_slice.png"
-    atomic_write(p, lambda q: fig.savefig(q, dpi=110, format="png"))
-    plt.close(fig)
-    return [p]
-
-
 def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessions: int,
                        seed: int, folds: int = 3) -> pd.DataFrame:
     """Inject each effect into real sessions and score where / which / how far."""
-    from calibration.photodiode_diagnosis import diagnose_photodiodes
-    from sensor.photodiodes_io import read_photodiodes
     from tqdm import tqdm
+
+    from calibration import diagnose
+    from sensor.photodiodes_io import read_photodiodes
 
     from .real_injection import inject
     files = session_files(folder, "--real")[:n_sessions]
@@ -267,8 +195,8 @@ def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessi
     jobs = [(f, e) for f in files for e in effects_to_inject]
     for f, e in tqdm(jobs, desc="injected sessions", unit="case"):
         data, truth = inject(read_photodiodes(f), e, rng)
-        doc = diagnose_photodiodes(data, candidates, n_folds=folds, seed=seed, where=str(f))
-        rows.append(_score_case(Path(f).name, truth, doc))
+        report = diagnose(data, candidates, folds=folds, seed=seed, where=str(f))
+        rows.append(_score_case(Path(f).name, truth, report))
     table = pd.DataFrame(rows)
     out.mkdir(parents=True, exist_ok=True)
     atomic_write(out / "real_cases.csv", lambda p: table.to_csv(p, index=False))
@@ -279,21 +207,20 @@ def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessi
     return table
 
 
-def _score_case(name, truth, doc) -> dict:
+def _score_case(name, truth, report) -> dict:
     e = truth["effect"]
-    v = doc["verdict"]
-    row = {"session": name, "effect": e, "verdict": v["effect"], "truth": str(truth)}
+    v = report.verdict
+    row = {"session": name, "effect": e, "verdict": v.effect, "truth": str(truth)}
     if e == "stuck":
         row["named"] = any(f["channel"] == truth["channel"] and f["kind"] in ("stuck", "dead")
-                           for f in doc["faults"])
+                           for f in report.faults)
         row["parameter_ok"] = row["named"]
         return row
-    row["named"] = v["effect"] == e
-    cand = next((c for c in doc["candidates"] if c.get("effect") == e), {})
-    row["excess_removed"] = cand.get("excess_removed")
-    row["rank"] = next((i + 1 for i, c in enumerate(doc["candidates"]) if c.get("effect") == e),
-                       None)
-    p = cand.get("params", {})
+    row["named"] = v.effect == e
+    cand = report.candidate(e)
+    row["excess_removed"] = cand.details.get("excess_removed") if cand else None
+    row["rank"] = next((i + 1 for i, c in enumerate(report.candidates) if c.effect == e), None)
+    p = cand.params if cand is not None and cand.available else {}
     if e == "clock_offset" and p:
         row["error"] = abs(p["clock_offset_s"]["value"] - truth["clock_offset_s"])
         row["parameter_ok"] = row["error"] <= 600.0
@@ -301,13 +228,13 @@ def _score_case(name, truth, doc) -> dict:
         row["error"] = abs(p["factor"]["value"] / truth["factor"] - 1.0)
         row["parameter_ok"] = row["error"] <= 0.015
     elif e == "occlusion":
-        offs = doc["base_fit"]["heading_offset_deg"]
+        offs = report.extra["base_fit"]["heading_offset_deg"]
         shift = float(np.degrees(np.angle(np.mean(np.exp(1j * np.radians(offs))))))
         c = (truth["center_deg"] + shift) % 360.0
-        top = [w for w in doc["where"] if w["dimension"] == "sky_azimuth_deg"][:3]
+        top = [w for w in report.where if w.dimension == "sky_azimuth_deg"][:3]
         hw = 0.5 * truth["width_deg"]
-        row["parameter_ok"] = any(abs(((0.5 * (w["lo_deg"] + w["hi_deg"]) - c + 180) % 360)
-                                      - 180) <= hw + 15 for w in top)
+        row["parameter_ok"] = any(abs(((0.5 * (w.lo + w.hi) - c + 180) % 360) - 180)
+                                  <= hw + 15 for w in top)
     else:
         row["parameter_ok"] = False
     return row

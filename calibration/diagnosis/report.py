@@ -17,9 +17,10 @@ photodiodes``) into the same report.
 
 from __future__ import annotations
 
+import json
 from dataclasses import asdict, dataclass, field, fields
 
-import numpy as np
+from skysim.io import _json_default
 
 from .errors import ReportFormatError
 
@@ -34,19 +35,7 @@ LEGACY_SCHEMA = "skysim.diagnosis/1"
 
 def _jsonable(x):
     """Plain Python numbers and containers (numpy scalars and arrays converted)."""
-    if isinstance(x, dict):
-        return {str(k): _jsonable(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_jsonable(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _jsonable(x.tolist())
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating):
-        return float(x)
-    return x
+    return json.loads(json.dumps(x, default=_json_default))
 
 
 @dataclass(frozen=True)

@@ -11,29 +11,14 @@ single-scattering field of tests/test_sky_gap.py and a small simulated ring sess
 tests/test_photodiode_diagnosis.py.
 """
 
-import json
 import sys
 from pathlib import Path
 
 import numpy as np
 
+from skysim.io import write_json_atomic
+
 OUT = Path(__file__).resolve().parent
-
-
-def _plain(x):
-    if isinstance(x, dict):
-        return {str(k): _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    if isinstance(x, np.ndarray):
-        return _plain(x.tolist())
-    if isinstance(x, np.bool_):
-        return bool(x)
-    if isinstance(x, np.integer):
-        return int(x)
-    if isinstance(x, np.floating):
-        return float(x)
-    return x
 
 
 def main() -> None:
@@ -59,7 +44,7 @@ def main() -> None:
                                          ("yaw_scale",), n_folds=2)}
     for k, v in out.items():
         path = OUT / f"legacy_{k}_v1.json"
-        path.write_text(json.dumps(_plain(v), indent=1, sort_keys=True) + "\n")
+        write_json_atomic(path, v)
         print("wrote", path)
 
 
