@@ -267,3 +267,19 @@ def test_sky_field_through_the_entry_point_splits_by_fold():
     assert r.data["withheld_cases"] == [1] and r.verdict.effect == "none"
     with pytest.raises(ValueError, match="noise_floor"):
         diagnose(c, ("d_max",))
+
+
+def test_adapters_and_effects_implement_the_protocol():
+    from calibration.diagnosis.api import ADAPTERS
+    from calibration.diagnosis.protocol import Effect, InstrumentAdapter
+    from calibration.diagnosis.sky import SKY_EFFECTS
+    from calibration.effects import EFFECT_NAMES, get_effect
+    assert [a.name for a in ADAPTERS] == ["three_pair", "photodiodes", "sky"]
+    assert all(isinstance(a, InstrumentAdapter) for a in ADAPTERS)
+    for e in [get_effect(n) for n in EFFECT_NAMES] + list(SKY_EFFECTS.values()):
+        assert isinstance(e, Effect), e.name
+    # k counts the parameters added to the base: all of a three-pair effect's; a sky model
+    # that trades d_max for tau adds none
+    assert all(get_effect(n).k == len(get_effect(n).parameter_names) for n in EFFECT_NAMES)
+    assert {n: e.k for n, e in SKY_EFFECTS.items()} == {"d_max": 0, "multiple_scattering": 0,
+                                                        "ground_albedo": 1}

@@ -1,4 +1,4 @@
-"""Sky-level gap diagnosis (calibration/sky_gap.py): round trips with known injected skies.
+"""Sky-level gap diagnosis (calibration/diagnosis/sky.py): round trips with known injected skies.
 
 Engine tests use sasktran2 with 8 streams: data are generated and fitted with the same engine
 set-up (a closed loop), so the stream count changes neither side's consistency, only the cost
