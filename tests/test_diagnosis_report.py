@@ -179,6 +179,7 @@ def test_reads_the_earlier_report_dicts(family, instrument, unit):
         assert r.candidate(c["effect"]).gap_after == c["gap_after"]
     for dim in {s.dimension for s in r.where}:
         assert sum(s.share for s in r.where if s.dimension == dim) == pytest.approx(1.0)
+    assert r.data["split"]["held_out_values"] > 0        # the split named as in v2
     doc = json.loads(json.dumps(r.to_dict()))
     assert doc["schema"] == DIAGNOSIS_SCHEMA
     assert DiagnosisReport.from_dict(doc).to_dict() == doc

@@ -38,11 +38,13 @@ def test_reproduce_one_real_session(reference_dir, tmp_path, capsys):
     doc = json.loads((out / SESSION / "diagnosis.json").read_text())
     excluded = {f["channel"] for f in doc["faults"] if f["kind"] == "too_few"}
     assert excluded, "the reference ring has units the screen leaves with too few photodiodes"
-    el = doc["base_fit"]["elevation_offset_deg"]
+    assert doc["schema"] == "skysim.diagnosis/2" and doc["instrument"] == "photodiodes"
+    base_fit = doc["extra"]["base_fit"]
+    el = base_fit["elevation_offset_deg"]
     for unit, value in el.items():
         # a unit the screen excluded was never fitted: reported as null, not as 0
         assert (value is None) == (unit in excluded), (unit, value)
     fitted = [v for v in el.values() if v is not None]
-    assert doc["base_fit"]["elevation_offset_mean_deg"] == pytest.approx(np.mean(fitted), rel=1e-12)
-    gains = doc["base_fit"]["gain"]
+    assert base_fit["elevation_offset_mean_deg"] == pytest.approx(np.mean(fitted), rel=1e-12)
+    gains = base_fit["gain"]
     assert all(gains[c] is None for c in gains if c.split("_")[0] in excluded)

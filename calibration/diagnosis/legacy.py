@@ -36,6 +36,17 @@ def _verdict(v: dict, params=None) -> Verdict:
     return Verdict(**kw)
 
 
+def _with_split(data: dict, split: dict | None) -> dict:
+    """``data`` with the split under ``data["split"]``, its count named as in v2."""
+    data = dict(data)
+    split = dict(split if split is not None else data.get("split", {}))
+    if "held_out_readings" in split:
+        split["held_out_values"] = split.pop("held_out_readings")
+    if split:
+        data["split"] = split
+    return data
+
+
 def _slices(rows, floor: float, margin: float, dof_per_value: int = 1) -> list[Slice]:
     """Slices from ``(dimension, label, n, rms, lo, hi, unit)`` tuples, shares and limits
     recomputed per dimension."""
@@ -62,7 +73,7 @@ def from_three_pair_v1(d: dict) -> DiagnosisReport:
         for s in w.get(key, []):
             label = s["slice"].removeprefix("sweep ").removesuffix(" lx").removesuffix(" deg")
             rows.append((dim, label, int(s["n"]), float(s["rms_mV"]), None, None, None))
-    data = dict(d.get("data", {}))
+    data = _with_split(d.get("data", {}), None)
     nuisance = data.pop("nuisance", None)
     extra = {"harmonics": w.get("by_harmonic", []), "base_fit": d.get("base_fit")}
     if nuisance is not None:
@@ -110,7 +121,17 @@ def from_sky_v1(d: dict) -> DiagnosisReport:
         _sky_slices(d["where"], floor, margin),
         None if wa is None else _sky_slices(wa, floor, margin), floor,
         "given: the RMS Stokes residual a perfect model leaves on these data", [],
-        dict(d.get("data", {})), dict(d.get("thresholds", {})), d.get("seed"), extra)
+        _sky_data(d.get("data", {})), dict(d.get("thresholds", {})), d.get("seed"), extra)
+
+
+def _sky_data(data: dict) -> dict:
+    data = dict(data)
+    split = {"method": "given calibration cases; the others withheld"}
+    for old, new in (("held_out_points", "held_out_values"),
+                     ("calibration_points", "calibration_values")):
+        if old in data:
+            split[new] = data.pop(old)
+    return _with_split(data, split)
 
 
 def from_ring_v1(d: dict) -> DiagnosisReport:
@@ -125,12 +146,7 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
         rows = [(w["dimension"], w["label"], int(w["n"]), float(w["rms"]), w.get("lo_deg"),
                  w.get("hi_deg"), "deg" if "lo_deg" in w else None) for w in d["where"]]
         where = _slices(rows, float(floor), margin)
-    data = dict(d.get("data", {}))
-    split = dict(d.get("split", {}))
-    if "held_out_readings" in split:
-        split["held_out_values"] = split.pop("held_out_readings")
-    if split:
-        data["split"] = split
+    data = _with_split(d.get("data", {}), d.get("split"))
     extra = {k: d[k] for k in ("heading_error", "base_fit") if d.get(k) is not None}
     return DiagnosisReport(
         "photodiodes", str(v.get("metric", "")), "1",

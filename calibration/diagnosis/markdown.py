@@ -78,6 +78,11 @@ def report_markdown(r) -> str:
         lines.append("| — | no held-out residuals | | | | |")
     elif not r.carrying_gap():
         lines += ["", "No slice exceeds its noise limit."]
+    harm = [h for h in r.extra.get("harmonics", []) if h["fraction_of_variance"] > 0.1]
+    if harm and r.carrying_gap():
+        lines += ["", "Harmonics holding more than 10 % of the residual variance: "
+                  + "; ".join(f"{h['component']} ({100 * h['fraction_of_variance']:.0f} %)"
+                              for h in harm) + "."]
     if r.faults:
         lines += ["", "## Faults", ""]
         lines += [f"- {f['channel']}: {f['kind']} {f.get('evidence', '')}" for f in r.faults]
