@@ -197,6 +197,7 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
     return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
 
 
+
 def _fit_effect(fe: Forward, starts, sigma):
     """Fit from each start (:func:`fit_pinned`: a geometric effect on the angle of
     polarization first); the lowest cost wins, judged on the stage that fixes the effect (the
@@ -219,6 +220,22 @@ def _fit_effect(fe: Forward, starts, sigma):
                                                         - np.asarray(fe.effect.null)))))
 
 
+def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
+    """``t`` with its DoP scale set so that the candidate's sky, seen by the instrument,
+    carries the polarized fraction the base fit found: ``s' = s m_0 / m_c``, with ``m_0`` and
+    ``m_c`` the median DoP the units see under the base sky (``base_dop``) and under the
+    candidate's sky (``obs``, its observation at ``t``), kept within the scale's bounds. A sky whose DoP is everywhere lower (an aerosol load, many
+    orders of scattering) then starts where the base model's polarized radiance is, instead of
+    a misfit its fit must first climb out of (from AOD 0.15 with the base scale, an aerosol fit
+    on a real ring session started at 90 times the cost it ended at)."""
+    L = fwd.layout
+    m0, mc = base_dop, float(np.median(obs.dop))
+    out = t.copy()
+    if mc > 0.0 and m0 > 0.0:
+        out[L.scale] = np.clip(t[L.scale] * m0 / mc, 1e-3, 1.0)
+    return out
+
+
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
     list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
@@ -229,16 +246,21 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         # whole hours apart, skies differ in DoP as much as in AoP, so the coarse search
         # scores the full model; the refinement reads the AoP alone (fit_pinned)
         return _clock_starts(fwd, theta_base, fwd_base, effect)
-    if len(starts) == 1:
+    own_sky = _has_sky(effect)
+    base_dop = float(np.median(fwd_base.observe(theta_base).dop)) if own_sky else None
+    if len(starts) == 1 and not own_sky:
         return _extend(theta_base, fwd_base, fwd, starts[0])
-    resamples = effect.observes or type(effect).sky is not RingEffect.sky   # a sky of its own
+    resamples = effect.observes or own_sky
     obs0 = None if resamples else fwd_base.observe(theta_base)
     sun = fwd.sun(fwd.inst.t_s)
     scored = []
     for p in starts:
         t = _extend(theta_base, fwd_base, fwd, p)
-        o = effect.modify(obs0, p, sun) if obs0 is not None else None
-        scored.append((float(np.sum(fwd.residual(t, o) ** 2)), t))
+        # a sky of its own starts with the base fit's DoP scale or with the scale carried
+        # over to its DoP, whichever fits better
+        o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
+        for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
+            scored.append((float(np.sum(fwd.residual(tt, o) ** 2)), tt))
     scored.sort(key=lambda x: x[0])
     n_fits = getattr(effect, "n_fits", 1)
     if n_fits == 1:
