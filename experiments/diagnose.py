@@ -478,7 +478,8 @@ def _photodiode_instrument(path) -> bool:
 
 
 def _diagnose_photodiodes_cmd(args) -> int:
-    from calibration.photodiode_diagnosis import RING_EFFECT_NAMES, diagnose_photodiodes
+    from calibration.photodiode_diagnosis import (RING_EFFECT_NAMES, calibrated_pointing,
+                                                  diagnose_photodiodes)
     from calibration.photodiode_diagnosis.effects import get_ring_effect
     from sensor.photodiodes_io import read_photodiodes
 
@@ -488,8 +489,13 @@ def _diagnose_photodiodes_cmd(args) -> int:
         effects = tuple(x.strip() for x in args.effects.split(",") if x.strip())
         for e in effects:
             get_ring_effect(e)
-    doc = diagnose_photodiodes(read_photodiodes(args.data), effects, n_folds=args.folds,
-                               seed=args.seed, where=str(args.data))
+    data = read_photodiodes(args.data)
+    pointing = None
+    if args.pointing_from:
+        reports = [x.strip() for x in args.pointing_from.split(",") if x.strip()]
+        pointing = calibrated_pointing(reports, n_units=len(data.sidecar["units"]))
+    doc = diagnose_photodiodes(data, effects, n_folds=args.folds, seed=args.seed,
+                               where=str(args.data), pointing=pointing)
     out, md = _write_diagnosis(args, doc, photodiode_report_markdown, plot_photodiode_diagnosis)
     print(md)
     print(f"wrote {out}/diagnosis.json, report.md, residuals_by_slice.png")
@@ -500,6 +506,11 @@ def _diagnose_cmd(args) -> int:
     from calibration.diagnosis import load_diagnosis_data
     if _photodiode_instrument(args.data):
         return _diagnose_photodiodes_cmd(args)
+    if getattr(args, "pointing_from", None):
+        from calibration.photodiode_diagnosis import PointingCalibrationError
+        raise PointingCalibrationError(
+            f"--pointing-from applies to photodiode instruments with several units; "
+            f"{args.data} is a measurement table")
     data = load_diagnosis_data(args.data)   # first: a broken sidecar is the error to report
     effects = _effects_arg(args.effects)
     doc = diagnose(data, effects, n_folds=args.folds, seed=args.seed)
@@ -600,6 +611,11 @@ def register(sub) -> None:
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
     d.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps), 2 .. number of sweeps")
+    d.add_argument("--pointing-from", metavar="REPORTS",
+                   help="photodiode instruments: comma-separated diagnosis.json files of other "
+                        "sessions of the same instrument whose clocks are right; their fitted "
+                        "unit pointing (median per unit) is held, so that a clock error is "
+                        "not taken up by a common tilt of the units")
     d.set_defaults(func=_diagnose_cmd)
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)

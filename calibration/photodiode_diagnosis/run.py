@@ -988,6 +988,6 @@ def _checked_pointing(pointing, n_units: int) -> np.ndarray:
         i = int(np.flatnonzero(bad)[0])
         kind = "elevation" if i < n_units else "azimuth"
         raise PointingCalibrationError(
-            f"calibrated {kind} offset of unit {i % n_units} is {p[i]!r} deg: expected an angle "
-            f"within +-{POINTING_LIMIT_DEG:g} deg (NaN: not calibrated, fitted)")
+            f"calibrated {kind} offset of unit {i % n_units} is {float(p[i])!r} deg: expected an "
+            f"angle within +-{POINTING_LIMIT_DEG:g} deg (NaN: not calibrated, fitted)")
     return p
