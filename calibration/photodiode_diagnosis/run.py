@@ -225,11 +225,22 @@ def _fit_effect(fe: Forward, starts, sigma):
     """Fit from each start (:func:`fit_pinned`: a geometric effect on the angle of
     polarization first); the lowest cost wins, judged on the stage that fixes the effect (the
     AoP fit for a geometric one). For the clock offset, ties (:data:`CLOCK_TIE`) go to the
-    start nearest the effect's null (the smaller offset). Returns ``(fit, aop_fit)``."""
+    start nearest the effect's null (the smaller offset). A start whose model leaves its
+    valid range is dropped; :class:`InvalidParameterError` when every start does. Returns
+    ``(fit, aop_fit)``."""
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
-    fits = [fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER, geometry=geometric,
-                       covariance=geometric) for s in starts]
+    fits, failed = [], None
+    for s in starts:
+        try:
+            fits.append(fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
+                                   geometry=geometric, covariance=geometric))
+        except InvalidParameterError as exc:
+            # a start outside the model's valid range (the recorded clock putting the sun
+            # below the twilight limit, while a start hours away holds): the others decide
+            failed = exc
+    if not fits:
+        raise failed
 
     def cost(f):
         return (f[1] if geometric else f[0]).cost
@@ -694,9 +705,12 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             try:
                 start = _start_effect(fe, btr.theta, ftr, e, sigma)
                 fr, fr_aop = _fit_effect(fe, start, sigma)
+                feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
+                teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             except InvalidParameterError as exc:
-                # a fit that leaves the model's valid range makes the candidate not
-                # applicable to this session; it never ends the diagnosis
+                # a fit that leaves the model's valid range (on the training or the held-out
+                # sweeps) makes the candidate not applicable to this session; it never ends
+                # the diagnosis
                 unavailable[e.name] = f"not applicable here: its fit left the valid range ({exc})"
                 continue
             if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
@@ -708,8 +722,6 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                                                                      fe.layout.effect.stop)])
             fold_params[e.name].append(fr.theta[fe.layout.effect])
             fold_converged[e.name].append(bool(fr.converged))
-            feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
-            teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             res[e.name][ho] = re
             heads[e.name][ho] = feho.headings(teho)
             decoders.setdefault(e.name, []).append((e, teho, ho))
