@@ -421,7 +421,11 @@ def _diagnose_cmd(args) -> int:
     from calibration import diagnose as run_diagnosis
     names = (None if not args.effects else
              tuple(x.strip() for x in args.effects.split(",") if x.strip()))
-    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed)
+    options = {}
+    if getattr(args, "pointing_from", None):
+        options["pointing_from"] = [x.strip() for x in args.pointing_from.split(",")
+                                    if x.strip()]
+    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
     written = write_diagnosis(report, out)
     v = report.verdict
@@ -522,6 +526,11 @@ def register(sub) -> None:
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
     d.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps), 2 .. number of sweeps")
+    d.add_argument("--pointing-from", metavar="REPORTS",
+                   help="photodiode instruments: comma-separated diagnosis.json files of other "
+                        "sessions of the same instrument whose clocks are right; their fitted "
+                        "unit pointing (median per unit) is held, so that a clock error is "
+                        "not taken up by a common tilt of the units")
     d.set_defaults(func=_diagnose_cmd)
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)

@@ -94,7 +94,7 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
 
     from calibration import diagnose
     from calibration.diagnosis import DiagnosisError
-    rows = []
+    rows, reports = [], {}
     for f in tqdm(files, desc="sessions", unit="session"):
         sub = out / Path(f).stem
         t0 = time.perf_counter()
@@ -103,6 +103,7 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
         except DiagnosisError as exc:
             rows.append({"session": Path(f).name, "verdict": "error", "faulty": str(exc)})
             continue
+        reports[f] = report
         sub.mkdir(parents=True, exist_ok=True)
         write_json_atomic(sub / "diagnosis.json", report.to_dict())
         rows.append(dict(session_row(Path(f).name, report), wall_s=time.perf_counter() - t0))
@@ -112,14 +113,73 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
     atomic_write(out / "sessions.csv", lambda p: table.to_csv(p, index=False))
     atomic_write(out / "sessions.md", lambda p: p.write_text(_table_md(table)))
     plot_day(table, out / "gap_and_heading_over_day.png")
+    return table, reports
+
+
+CLOCK_CHECK_ERRORS_S = (7200.0, -7200.0)
+"""Clock errors injected into the day's earliest and latest open-sky session [s, recorded
+minus true time]: a logger 2 h fast or slow (a timezone or daylight-saving slip)."""
+
+CLOCK_CHECK_TOLERANCE_S = 600.0
+"""A clock error counts as found when the fitted offset is within 10 min of it (the sun's
+azimuth moves about 2.5 deg in 10 min, the heading error a wrong clock leaves)."""
+
+
+def clock_check(files, reports: dict, out: Path, effects, folds: int = 3,
+                seed: int = DEFAULT_SEED) -> pd.DataFrame:
+    """Inject clock errors (:data:`CLOCK_CHECK_ERRORS_S`) into the earliest and the latest
+    open-sky session and diagnose them with the unit pointing calibrated on the day's other
+    sessions (:func:`calibration.photodiode_diagnosis.calibrated_pointing`, leave one out).
+
+    ``reports`` maps each session file to its diagnosis (sessions without one are skipped).
+    Writes ``clock_check.csv`` and returns the table: per case the verdict, the fitted clock
+    offset and its uncertainty, the error against the injected one and whether it was found.
+    """
+    from calibration import diagnose
+    from calibration.diagnosis import DiagnosisError
+    from calibration.diagnosis.rings import pointing_from_reports
+    from sensor.photodiodes_io import PhotodiodeData, read_photodiodes
+    open_sky = [f for f in files if "canopy" not in Path(f).name and f in reports]
+    if len(open_sky) < 3:
+        return pd.DataFrame()
+    rows = []
+    for f in (open_sky[0], open_sky[-1]):
+        pointing = pointing_from_reports([reports[g] for g in open_sky if g != f])
+        data = read_photodiodes(f)
+        for err in CLOCK_CHECK_ERRORS_S:
+            t = data.table.copy()
+            t["time"] = pd.to_datetime(t["time"]) + pd.to_timedelta(err, unit="s")
+            t0 = time.perf_counter()
+            row = {"session": Path(f).name, "clock_error_s": err}
+            try:
+                report = diagnose(PhotodiodeData(t, dict(data.sidecar)), effects, folds=folds,
+                                  seed=seed, pointing=pointing,
+                                  where=f"{Path(f).name} with its clock {err:+.0f} s")
+            except DiagnosisError as exc:
+                rows.append(dict(row, verdict="error", note=str(exc)))
+                continue
+            c = report.candidate("clock_offset")
+            ok = c is not None and c.available
+            value = c.params.get("clock_offset_s", {}).get("value") if ok else None
+            found = value is not None and abs(value + err) <= CLOCK_CHECK_TOLERANCE_S
+            rows.append(dict(row, verdict=report.verdict.effect, fitted_offset_s=value,
+                             uncertainty_s=c.details.get("uncertainty_s") if ok else None,
+                             error_s=None if value is None else value + err,
+                             named=report.verdict.effect == "clock_offset",
+                             within_10_min=bool(found),
+                             wall_s=time.perf_counter() - t0))
+    table = pd.DataFrame(rows)
+    atomic_write(out / "clock_check.csv", lambda p: table.to_csv(p, index=False))
     return table
 
 
-def _table_md(table: pd.DataFrame) -> str:
-    cols = ["session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best", "gap_best",
-            "shrink", "params", "heading_rms_base_deg", "heading_rms_best_deg",
-            "unit_elevation_offset_deg"]
-    cols = [c for c in cols if c in table.columns]
+SESSION_COLUMNS = ("session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best",
+                   "gap_best", "shrink", "params", "heading_rms_base_deg",
+                   "heading_rms_best_deg", "unit_elevation_offset_deg")
+
+
+def _table_md(table: pd.DataFrame, columns=SESSION_COLUMNS) -> str:
+    cols = [c for c in columns if c in table.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
     for _, r in table.iterrows():
         cells = []
@@ -243,23 +303,33 @@ def _score_case(name, truth, report) -> dict:
 # --------------------------------------------------------------------------- command line
 def _reproduce(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
+    from calibration.photodiode_diagnosis.effects import OPTIONAL_EFFECT_NAMES
     folder = Path(getattr(args, "data", None) or DEFAULT_DATA)
     files = session_files(folder)
-    effects = RING_EFFECT_NAMES
+    # the day is where the aerosol sky is weighed against the real DoP profile
+    effects = RING_EFFECT_NAMES + OPTIONAL_EFFECT_NAMES
     if args.quick:
         files, effects = files[:1], QUICK_EFFECTS
     out = Path(args.out or "results/real_sky_compass")
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
-    table = run_sessions(files, effects, out, seed=args.seed)
+    table, reports = run_sessions(files, effects, out, seed=args.seed)
+    elapsed = time.perf_counter() - t0
+    clocks = clock_check(files, reports, out, RING_EFFECT_NAMES, seed=args.seed)
     write_json_atomic(out / "summary.json", {
         "sessions": len(table), "effects": list(effects), "data": str(folder),
-        "seed": args.seed, "elapsed_s": time.perf_counter() - t0,
-        "rows": table.to_dict(orient="records")})
+        "seed": args.seed, "elapsed_s": elapsed, "rows": table.to_dict(orient="records"),
+        "clock_check": clocks.to_dict(orient="records"),
+        "clock_check_s": time.perf_counter() - t0 - elapsed})
     print(_table_md(table))
-    print(f"wall time {time.perf_counter() - t0:.0f} s for {len(table)} sessions")
-    print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png "
-          "and one diagnosis.json per session")
+    print(f"wall time {elapsed:.0f} s for {len(table)} sessions")
+    if len(clocks):
+        print("clock errors injected into the first and last open-sky session, unit pointing "
+              "held at the other sessions' (median):")
+        print(_table_md(clocks, tuple(clocks.columns)))
+        print(f"wall time of the clock check {time.perf_counter() - t0 - elapsed:.0f} s")
+    print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png"
+          f"{', clock_check.csv' if len(clocks) else ''} and one diagnosis.json per session")
     return 0
 
 

@@ -284,3 +284,20 @@ def test_adapters_and_effects_implement_the_protocol():
     assert all(get_effect(n).k == len(get_effect(n).parameter_names) for n in EFFECT_NAMES)
     assert {n: e.k for n, e in SKY_EFFECTS.items()} == {"d_max": 0, "multiple_scattering": 0,
                                                         "ground_albedo": 1}
+
+
+def test_pointing_calibration_reads_reports_of_either_schema(tmp_path, tilt_measurement):
+    """The unit pointing held by ``--pointing-from`` is the same whether the calibration
+    sessions' reports are the ring diagnosis's own dicts, the v2 dicts ``skysim diagnose``
+    writes, their files or report objects; a three-pair table refuses it with the reason."""
+    from calibration.diagnosis.rings import pointing_from_reports
+    from calibration.photodiode_diagnosis import PointingCalibrationError, calibrated_pointing
+    v1 = json.loads((GOLDEN / "legacy_rings_v1.json").read_text())
+    want = calibrated_pointing([v1], n_units=8)
+    report = DiagnosisReport.from_dict(v1)
+    path = tmp_path / "diagnosis.json"
+    path.write_text(json.dumps(report.to_dict()))
+    for item in (v1, report, report.to_dict(), path, str(path)):
+        np.testing.assert_array_equal(pointing_from_reports([item], n_units=8), want)
+    with pytest.raises(PointingCalibrationError, match="applies to photodiode instruments"):
+        diagnose(tilt_measurement["measurement"], ("tilt",), pointing_from=[path])

@@ -15,6 +15,9 @@ from .report import Candidate, DiagnosisReport, Slice, Verdict
 
 __all__ = ["from_legacy_dict", "from_ring_v1", "from_sky_v1", "from_three_pair_v1"]
 
+_RING_KEYS = {"schema", "instrument", "verdict", "candidates", "where", "faults",
+              "noise_floor", "data", "split", "seed"}
+"""Keys of the photodiode diagnosis's dict that the report holds in its own fields."""
 _VERDICT_KEYS = ("effect", "reason", "best_candidate", "gap_before", "gap_after", "shrink",
                  "gap_before_se", "gap_after_se", "shrink_se", "params")
 
@@ -147,7 +150,8 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
                  w.get("hi_deg"), "deg" if "lo_deg" in w else None) for w in d["where"]]
         where = _slices(rows, float(floor), margin)
     data = _with_split(d.get("data", {}), d.get("split"))
-    extra = {k: d[k] for k in ("heading_error", "base_fit") if d.get(k) is not None}
+    # everything else the ring diagnosis reports (heading error, base fit, ...) is kept
+    extra = {k: v for k, v in d.items() if k not in _RING_KEYS and v is not None}
     return DiagnosisReport(
         "photodiodes", str(v.get("metric", "")), "1",
         _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,

@@ -16,7 +16,8 @@ import numpy as np
 from .legacy import from_ring_v1
 from .report import DiagnosisReport
 
-__all__ = ["clock_notes", "diagnose_rings", "ring_candidates"]
+__all__ = ["RingAdapter", "clock_notes", "diagnose_rings", "pointing_from_reports",
+           "ring_candidates"]
 
 
 def ring_candidates(names=None) -> tuple:
@@ -57,8 +58,44 @@ def clock_notes(report: DiagnosisReport) -> list[str]:
     return notes
 
 
+def pointing_from_reports(reports, n_units: int | None = None):
+    """Unit pointing [deg] calibrated on earlier diagnoses of the same instrument
+    (:func:`calibration.photodiode_diagnosis.calibrated_pointing`) from reports of either
+    schema: :class:`.report.DiagnosisReport` objects, their dicts, or ``diagnosis.json``
+    paths (a path that is not a readable report is handed on as it is, so that the error
+    names it).
+
+    Raises
+    ------
+    PointingCalibrationError
+        As :func:`calibration.photodiode_diagnosis.calibrated_pointing`.
+    """
+    import json
+    from pathlib import Path
+
+    from ..photodiode_diagnosis import calibrated_pointing
+    from .report import DIAGNOSIS_SCHEMA
+
+    def base_fit_of(item):
+        if isinstance(item, DiagnosisReport):
+            return {"base_fit": item.extra.get("base_fit")}
+        doc = item
+        if isinstance(item, (str, Path)):
+            try:
+                doc = json.loads(Path(item).read_text())
+            except (OSError, ValueError):
+                return item
+        if isinstance(doc, dict) and doc.get("schema") == DIAGNOSIS_SCHEMA and "unit" in doc:
+            return {"base_fit": (doc.get("extra") or {}).get("base_fit")}
+        return doc
+
+    items = [reports] if isinstance(reports, (str, Path, dict, DiagnosisReport)) else reports
+    return calibrated_pointing([base_fit_of(r) for r in items], n_units=n_units)
+
+
 def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
-                   where: str = "photodiode data") -> DiagnosisReport:
+                   where: str = "photodiode data", pointing=None,
+                   pointing_from=None) -> DiagnosisReport:
     """Diagnose a photodiode instrument.
 
     Parameters
@@ -70,6 +107,11 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     folds, seed : int
     where : str
         Name of the data in messages and in ``data.path``.
+    pointing : ndarray (2 U,), optional
+        Unit elevation then azimuth offsets [deg] to hold (calibrated on other sessions).
+    pointing_from : sequence, optional
+        Reports (objects, dicts or paths) of other sessions of this instrument to calibrate
+        ``pointing`` from (:func:`pointing_from_reports`).
 
     Returns
     -------
@@ -85,7 +127,10 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     from ..photodiode_diagnosis import diagnose_instrument, instrument_from_photodiodes
     from ..photodiode_diagnosis.instrument import Instrument
     inst = data if isinstance(data, Instrument) else instrument_from_photodiodes(data, where)
-    doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed)
+    if pointing_from is not None:
+        pointing = pointing_from_reports(pointing_from, n_units=inst.n_units)
+    doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
+                              pointing=pointing)
     report = from_ring_v1(doc)
     report.data.setdefault("path", where)
     report.notes += clock_notes(report)
@@ -117,5 +162,7 @@ class RingAdapter:
         return ring_candidates(names)
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
-                 where: str = "photodiode data") -> DiagnosisReport:
-        return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where)
+                 where: str = "photodiode data", pointing=None,
+                 pointing_from=None) -> DiagnosisReport:
+        return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where,
+                              pointing=pointing, pointing_from=pointing_from)

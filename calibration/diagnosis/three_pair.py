@@ -304,9 +304,16 @@ class ThreePairAdapter:
         return names
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
-                 thresholds: Thresholds = DEFAULT_THRESHOLDS, sidecar: dict | None = None
-                 ) -> DiagnosisReport:
+                 thresholds: Thresholds = DEFAULT_THRESHOLDS, sidecar: dict | None = None,
+                 pointing=None, pointing_from=None) -> DiagnosisReport:
         import pandas as pd
+        if pointing is not None or pointing_from is not None:
+            from ..photodiode_diagnosis import PointingCalibrationError
+            where = (data.source.get("path", "the data") if isinstance(data, DiagnosisData)
+                     else "the data")
+            raise PointingCalibrationError(
+                f"--pointing-from applies to photodiode instruments with several units; "
+                f"{where} is a three-pair sensor's measurement table")
 
         from sensor.measurement import Measurement
         from sensor.photodiodes_io import PhotodiodeData

@@ -3,20 +3,23 @@
 One file one idea: :mod:`.instrument` (adapter from the file), :mod:`.faults` (dead, stuck,
 saturated, zero, duplicated and non-Malus channels), :mod:`.forward` (compound-eye sensor
 under a sky, Malus's law, profiled radiance), :mod:`.fit` (grouped-Jacobian
-Levenberg-Marquardt), :mod:`.effects` (multiple scattering, field of view, occlusion, yaw
+Levenberg-Marquardt), :mod:`.pointing` (unit pointing calibrated on other sessions),
+:mod:`.effects` (multiple scattering, field of view, occlusion, yaw
 scale, clock offset, tilt) and :mod:`.run` (held-out gap, where, which, how far, heading
 error). Method and report: ``docs/diagnosis.md``.
 """
 
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
-from .errors import (InstrumentDataError, NoUsableChannelsError, SunTooLowError,
-                     YawInRadiansWarning)
+from .errors import (InstrumentDataError, NoUsableChannelsError, PointingCalibrationError,
+                     SunTooLowError, YawInRadiansWarning)
 from .faults import screen
 from .instrument import Instrument, instrument_from_photodiodes
+from .pointing import calibrated_pointing
 from .run import diagnose_instrument, diagnose_photodiodes
 
 __all__ = ["RING_EFFECT_NAMES", "EffectUnavailableError", "Instrument", "InstrumentDataError",
-           "NoUsableChannelsError", "SunTooLowError", "diagnose_instrument",
+           "NoUsableChannelsError", "PointingCalibrationError", "SunTooLowError",
+           "calibrated_pointing", "diagnose_instrument",
            "diagnose_photodiodes", "get_ring_effect", "instrument_from_photodiodes",
            "is_three_pair_sensor", "screen", "YawInRadiansWarning"]
 

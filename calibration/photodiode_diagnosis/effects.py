@@ -518,7 +518,9 @@ class Aerosol(RingEffect):
         return np.array([0.15])
 
     def starts(self, ctx) -> list:
-        return [np.array([0.15])]
+        # one start per bracket of the AOD nodes: the held radiance and DoP scale make the
+        # cost of the AOD far from quadratic, and a fit from one start can stall at a bound
+        return [np.array([a]) for a in (0.05, 0.15, 0.5)]
 
     def __init__(self):
         self._grid = None

@@ -5,6 +5,7 @@ from __future__ import annotations
 from ..diagnosis import DiagnosisError, InsufficientDataError
 
 __all__ = ["InstrumentDataError", "InsufficientDataError", "NoUsableChannelsError",
+           "PointingCalibrationError",
            "SunTooLowError", "YawInRadiansWarning"]
 
 
@@ -23,3 +24,8 @@ class SunTooLowError(DiagnosisError, ValueError):
 class YawInRadiansWarning(UserWarning):
     """Every yaw lies within +-pi (or [0, 2 pi]) while the yaw spans more than 3: the
     ``yaw_deg`` column looks like radians (a full turn then reads as 6.3 deg)."""
+
+
+class PointingCalibrationError(DiagnosisError, ValueError):
+    """A pointing calibration that cannot be used: not a diagnosis report of a photodiode
+    instrument, a report without a fitted pointing, or units that do not match."""

@@ -189,7 +189,8 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     ----------
     fwd : Forward
     theta0 : ndarray
-        Start (and value of the fixed parameters).
+        Start (and value of the fixed parameters). The pointing is held whatever ``free``
+        says when the instrument's pointing is calibrated (:attr:`Instrument.pointing_deg`).
     sigma : float
         Noise level of the relative residuals, weighting the data against the prior.
 
@@ -200,7 +201,9 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     """
     theta = np.asarray(theta0, float).copy()
     L = fwd.layout
-    free = np.ones(L.size, bool) if free is None else np.asarray(free, bool)
+    free = np.ones(L.size, bool) if free is None else np.asarray(free, bool).copy()
+    if fwd.inst.pointing_deg is not None:   # calibrated on other sessions: held
+        free[np.arange(L.size)[L.pointing][np.isfinite(fwd.inst.pointing_deg)]] = False
     pri = priors or Priors.for_model(fwd, theta)
     theta = np.clip(theta, pri.lower, pri.upper)
     usable_idx = np.flatnonzero(fwd.usable.ravel())

@@ -229,8 +229,11 @@ class Forward:
 
     def pointed_sensor(self, theta):
         """The sensor with every unit's axis at its nominal elevation and azimuth plus the
-        fitted pointing offsets (a hand-built ring's mounting angles differ from nominal)."""
+        fitted pointing offsets (a hand-built ring's mounting angles differ from nominal) and
+        the instrument's calibrated ones (:attr:`Instrument.pointing_deg`), if any."""
         p = theta[self.layout.pointing]
+        if self.inst.pointing_deg is not None:
+            p = p + np.nan_to_num(self.inst.pointing_deg)
         if not np.any(p):
             return self.inst.sensor
         U = self.layout.n_units

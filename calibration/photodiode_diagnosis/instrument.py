@@ -12,7 +12,7 @@ because the turn, the sweeps and the noise floor are read along the sample seque
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -76,6 +76,11 @@ class Instrument:
     held : ndarray (n, P) bool, optional
         The held readings among ``flagged`` (:func:`held_readings`): excluded from fits, but
         part of what the instrument outputs at a sample, so heading decoding uses them.
+    pointing_deg : ndarray (2 U,), optional
+        Calibrated pointing of the units [deg]: elevation offsets from nominal, then azimuth
+        offsets, from other diagnoses of the same instrument
+        (:func:`calibration.photodiode_diagnosis.calibrated_pointing`). Every fit then holds
+        the pointing there (NaN: a unit not calibrated, fitted); ``None`` (default) fits all.
     """
 
     sensor: CompoundEyeSensor
@@ -94,6 +99,7 @@ class Instrument:
     absolute_yaw: bool
     source: dict = field(default_factory=dict)
     held: np.ndarray | None = None
+    pointing_deg: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -111,11 +117,11 @@ class Instrument:
         """The same instrument on a subset of samples (sweeps renumbered 0..S'-1)."""
         rows = np.asarray(rows)
         _, sweep = np.unique(self.sweep[rows], return_inverse=True)
-        return Instrument(self.sensor, self.site, self.t_s[rows], self.yaw_deg[rows], sweep,
-                          self.rotating[rows], self.pitch_deg[rows], self.roll_deg[rows],
-                          self.readings[rows], self.pd_unit, self.pd_angle_deg, self.columns,
-                          self.flagged[rows], self.absolute_yaw, self.source,
-                          None if self.held is None else self.held[rows])
+        return replace(self, t_s=self.t_s[rows], yaw_deg=self.yaw_deg[rows], sweep=sweep,
+                       rotating=self.rotating[rows], pitch_deg=self.pitch_deg[rows],
+                       roll_deg=self.roll_deg[rows], readings=self.readings[rows],
+                       flagged=self.flagged[rows],
+                       held=None if self.held is None else self.held[rows])
 
     def with_readings(self, readings) -> "Instrument":
         """The same instrument and samples with other readings (same shape)."""
@@ -123,10 +129,7 @@ class Instrument:
         if readings.shape != self.readings.shape:
             raise ValueError(f"readings must have shape {self.readings.shape}; "
                              f"got {readings.shape}")
-        return Instrument(self.sensor, self.site, self.t_s, self.yaw_deg, self.sweep,
-                          self.rotating, self.pitch_deg, self.roll_deg, readings, self.pd_unit,
-                          self.pd_angle_deg, self.columns, self.flagged, self.absolute_yaw,
-                          self.source, self.held)
+        return replace(self, readings=readings)
 
 
 def _sweeps(table, t_s: np.ndarray, rows: np.ndarray, where: str) -> np.ndarray:

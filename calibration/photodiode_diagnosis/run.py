@@ -15,9 +15,10 @@ from skysim.exceptions import InvalidParameterError
 from skysim.sky import RayleighSky
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
-from ..diagnosis import DIAGNOSIS_SCHEMA, InsufficientDataError
+from ..diagnosis import DIAGNOSIS_SCHEMA, DiagnosisError, InsufficientDataError
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
-from .errors import InstrumentDataError, NoUsableChannelsError, SunTooLowError
+from .errors import (InstrumentDataError, NoUsableChannelsError, PointingCalibrationError,
+                     SunTooLowError)
 from .faults import bright_glare, malus_outliers, screen
 from .fit import Priors, coarse_headings, fit, fit_headings, fit_pinned
 from .forward import Forward, SunTrack
@@ -194,18 +195,52 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
         nominal[L.scale] = NOMINAL_DOP_SCALE
         scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
     scored.sort(key=lambda x: x[0])
-    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
+    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [
+        _rebased(fwd, t, float(t[L.effect][0])) for _, t in scored[:2]]
+
+
+def _rebased(fwd: Forward, t, offset_s: float) -> np.ndarray:
+    """``t`` with the instrument fitted afresh at the clock ``offset_s`` (polarizer sense and
+    offset from :func:`orient`, then the plain fit): a base fitted under a clock hours off
+    carries polarizer offsets and headings from another minimum, and an AoP fit of the clock
+    started there stays near it (on a real session with its clock 2 h off, the clock stopped
+    at 2.75 h from the carried start; from a fresh one it found the minimum the session has
+    at its own time)."""
+    L = fwd.layout
+    shifted = Forward(replace(fwd.inst, t_s=fwd.inst.t_s + offset_s), sun=fwd.sun)
+    theta = np.zeros(shifted.layout.size)
+    theta[shifted.layout.scale] = t[L.scale]
+    sign, theta = orient(shifted, theta)
+    if sign != fwd.polarizer_sign:      # the sense is the session's; keep the base's
+        return t
+    first = fit(shifted, theta, sigma=0.02, max_iter=EFFECT_MAX_ITER)
+    out = t.copy()
+    out[:L.n_base] = first.theta[:L.n_base]
+    out[L.effect] = offset_s
+    return out
+
 
 
 def _fit_effect(fe: Forward, starts, sigma):
     """Fit from each start (:func:`fit_pinned`: a geometric effect on the angle of
     polarization first); the lowest cost wins, judged on the stage that fixes the effect (the
     AoP fit for a geometric one). For the clock offset, ties (:data:`CLOCK_TIE`) go to the
-    start nearest the effect's null (the smaller offset). Returns ``(fit, aop_fit)``."""
+    start nearest the effect's null (the smaller offset). A start whose model leaves its
+    valid range is dropped; :class:`InvalidParameterError` when every start does. Returns
+    ``(fit, aop_fit)``."""
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
-    fits = [fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER, geometry=geometric,
-                       covariance=geometric) for s in starts]
+    fits, failed = [], None
+    for s in starts:
+        try:
+            fits.append(fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
+                                   geometry=geometric, covariance=geometric))
+        except InvalidParameterError as exc:
+            # a start outside the model's valid range (the recorded clock putting the sun
+            # below the twilight limit, while a start hours away holds): the others decide
+            failed = exc
+    if not fits:
+        raise failed
 
     def cost(f):
         return (f[1] if geometric else f[0]).cost
@@ -219,6 +254,22 @@ def _fit_effect(fe: Forward, starts, sigma):
                                                         - np.asarray(fe.effect.null)))))
 
 
+def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
+    """``t`` with its DoP scale set so that the candidate's sky, seen by the instrument,
+    carries the polarized fraction the base fit found: ``s' = s m_0 / m_c``, with ``m_0`` and
+    ``m_c`` the median DoP the units see under the base sky (``base_dop``) and under the
+    candidate's sky (``obs``, its observation at ``t``), kept within the scale's bounds. A sky whose DoP is everywhere lower (an aerosol load, many
+    orders of scattering) then starts where the base model's polarized radiance is, instead of
+    a misfit its fit must first climb out of (from AOD 0.15 with the base scale, an aerosol fit
+    on a real ring session started at 90 times the cost it ended at)."""
+    L = fwd.layout
+    m0, mc = base_dop, float(np.median(obs.dop))
+    out = t.copy()
+    if mc > 0.0 and m0 > 0.0:
+        out[L.scale] = np.clip(t[L.scale] * m0 / mc, 1e-3, 1.0)
+    return out
+
+
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
     list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
@@ -229,16 +280,21 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         # whole hours apart, skies differ in DoP as much as in AoP, so the coarse search
         # scores the full model; the refinement reads the AoP alone (fit_pinned)
         return _clock_starts(fwd, theta_base, fwd_base, effect)
-    if len(starts) == 1:
+    own_sky = _has_sky(effect)
+    base_dop = float(np.median(fwd_base.observe(theta_base).dop)) if own_sky else None
+    if len(starts) == 1 and not own_sky:
         return _extend(theta_base, fwd_base, fwd, starts[0])
-    resamples = effect.observes or type(effect).sky is not RingEffect.sky   # a sky of its own
+    resamples = effect.observes or own_sky
     obs0 = None if resamples else fwd_base.observe(theta_base)
     sun = fwd.sun(fwd.inst.t_s)
     scored = []
     for p in starts:
         t = _extend(theta_base, fwd_base, fwd, p)
-        o = effect.modify(obs0, p, sun) if obs0 is not None else None
-        scored.append((float(np.sum(fwd.residual(t, o) ** 2)), t))
+        # a sky of its own starts with the base fit's DoP scale or with the scale carried
+        # over to its DoP, whichever fits better
+        o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
+        for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
+            scored.append((float(np.sum(fwd.residual(tt, o) ** 2)), tt))
     scored.sort(key=lambda x: x[0])
     n_fits = getattr(effect, "n_fits", 1)
     if n_fits == 1:
@@ -481,12 +537,73 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
     return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
 
 
+CLOCK_REFINE_S = 900.0
+"""A significant clock offset larger than this [s] is refined (:func:`_refine_clock`)."""
+
+CLOCK_PASSES = 3
+"""Most refinement passes of a clock offset; they stop once a pass moves it by less than a
+third of :data:`CLOCK_REFINE_S`."""
+
+
+def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
+                  max_iter: int) -> None:
+    """Refine a large clock offset by diagnosing the session again at the corrected times
+    (clock candidate alone) and adding the offset that pass finds, until a pass moves it by
+    less than ``CLOCK_REFINE_S / 3``; updates ``row`` (value, uncertainty, ``significant``,
+    ``refinement``).
+
+    Under a clock hours off, everything read from the base fit's residuals is read wrong: the
+    glare screen finds no brightness at which the residuals grow (they are large everywhere)
+    and keeps the unit-samples the sun's glare spoils, the noise floor grows (on a real
+    session 2 h off, 0.016 against 0.0044) and the instrument's parameters come from another
+    minimum. A fit of the clock alone from there stopped 22 min to 42 min from the truth; a
+    pass at the corrected times screens and fits as on a session with a right clock.
+    """
+    param = row["params"]["clock_offset_s"]
+    total, passes = float(param["value"]), []
+    for _ in range(CLOCK_PASSES):
+        shifted = replace(inst, t_s=inst.t_s + total)
+        try:
+            doc = diagnose_instrument(shifted, ("clock_offset",), n_folds=n_folds, seed=seed,
+                                      max_iter=max_iter, refine_clock=False)
+        except (DiagnosisError, InvalidParameterError) as exc:
+            row["refinement_error"] = str(exc)
+            break
+        c = next((r for r in doc["candidates"] if r["effect"] == "clock_offset"), None)
+        if c is None or not c.get("available", True):
+            row["refinement_error"] = (c or {}).get("error", "no clock fit at the corrected "
+                                                             "times")
+            break
+        step = float(c["params"]["clock_offset_s"]["value"])
+        total += step
+        param["uncertainty"] = float(c["uncertainty_s"])
+        passes.append({"offset_s": step, "uncertainty_s": float(c["uncertainty_s"]),
+                       "by_sky": c["by_sky"]})
+        if abs(step) < CLOCK_REFINE_S / 3.0:
+            break
+    if passes:
+        row["refinement"] = {"first_fit_s": float(param["value"]), "passes": passes,
+                             "method": "session diagnosed again at the corrected times "
+                                       "(screen, base fit, clock candidate)"}
+        param["value"] = total
+        row["uncertainty_s"] = param["uncertainty"]
+        row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
+
+
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
-                        seed: int = 0, max_iter: int = 25) -> dict:
+                        seed: int = 0, max_iter: int = 25, pointing=None,
+                        refine_clock: bool = True) -> dict:
     """Diagnose a photodiode instrument (see module doc); returns the report dict.
+
+    ``pointing`` (2 U,) [deg]: the units' calibrated pointing offsets
+    (:func:`calibrated_pointing` of other sessions' reports), held in every fit (NaN: a unit
+    not calibrated, fitted); ``None`` fits them all on this session (where a common elevation offset and a clock error trade one
+    for the other, :mod:`.pointing`).
 
     Raises
     ------
+    PointingCalibrationError
+        A ``pointing`` that is not 2 U angles within +-20 deg (or NaN).
     SunTooLowError
         With the sun below the twilight limit at a sample.
     InstrumentDataError
@@ -496,6 +613,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         usable readings than the base fit has parameters (the other sweeps have none).
     """
     path = inst.source.get("path", "photodiode data")
+    if pointing is not None:
+        inst = replace(inst, pointing_deg=_checked_pointing(pointing, inst.n_units))
     sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
@@ -586,9 +705,12 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             try:
                 start = _start_effect(fe, btr.theta, ftr, e, sigma)
                 fr, fr_aop = _fit_effect(fe, start, sigma)
+                feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
+                teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             except InvalidParameterError as exc:
-                # a fit that leaves the model's valid range makes the candidate not
-                # applicable to this session; it never ends the diagnosis
+                # a fit that leaves the model's valid range (on the training or the held-out
+                # sweeps) makes the candidate not applicable to this session; it never ends
+                # the diagnosis
                 unavailable[e.name] = f"not applicable here: its fit left the valid range ({exc})"
                 continue
             if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
@@ -600,8 +722,6 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                                                                      fe.layout.effect.stop)])
             fold_params[e.name].append(fr.theta[fe.layout.effect])
             fold_converged[e.name].append(bool(fr.converged))
-            feho = Forward(iho, e, sun=sun, polarizer_sign=sign)
-            teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
             res[e.name][ho] = re
             heads[e.name][ho] = feho.headings(teho)
             decoders.setdefault(e.name, []).append((e, teho, ho))
@@ -632,6 +752,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         if e.name == "clock_offset":
             rows[-1].update(clock_report(work, e, first.theta, L, sun, sign, sigma,
                                          rows[-1]["params"]["clock_offset_s"], rows, cand))
+            if refine_clock and rows[-1]["significant"] and \
+                    abs(rows[-1]["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
+                _refine_clock(inst, rows[-1], n_folds=n_folds, seed=seed, max_iter=max_iter)
             # a clock offset within twice its uncertainty is no finding, however it fits
             rows[-1]["explained"] = rows[-1]["explained"] and rows[-1]["significant"]
     rows.sort(key=lambda r: r.get("score", np.inf))
@@ -837,22 +960,46 @@ def _base_fit_report(theta, L, fwd, inst, sign):
     def per_pd(values, f=float):
         return {c: f(v) if ok else None for c, v, ok in zip(inst.columns, values, pd_fitted)}
 
-    el = theta[L.pointing][:L.n_units]
-    return {"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
+    point = theta[L.pointing] + (0.0 if inst.pointing_deg is None
+                                 else np.nan_to_num(inst.pointing_deg))
+    el = point[:L.n_units]
+    return {"pointing_held": inst.pointing_deg is not None,"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
             "dop_scale": float(theta[L.scale]),
             "polarizer_offset_deg": per_unit(theta[L.delta]),
             "polarizer_angle_deviation_deg": per_pd(theta[L.angle]),
             "elevation_offset_deg": per_unit(el),
             "elevation_offset_mean_deg": (float(np.mean(el[unit_fitted])) if unit_fitted.any()
                                           else None),
-            "azimuth_offset_deg": per_unit(theta[L.pointing][L.n_units:]),
+            "azimuth_offset_deg": per_unit(point[L.n_units:]),
             "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g))),
             "offset": per_pd(theta[L.off], lambda o: float(o * fwd.level)),
             "heading_offset_deg": [float(h) for h in theta[L.heading]]}
 
 
 def diagnose_photodiodes(data: PhotodiodeData, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
-                         seed: int = 0, where: str = "photodiode data") -> dict:
+                         seed: int = 0, where: str = "photodiode data", pointing=None) -> dict:
     """:func:`diagnose_instrument` of a photodiode file."""
     return diagnose_instrument(instrument_from_photodiodes(data, where), effects,
-                               n_folds=n_folds, seed=seed)
+                               n_folds=n_folds, seed=seed, pointing=pointing)
+
+
+POINTING_LIMIT_DEG = 20.0
+"""Largest calibrated pointing offset accepted [deg]: the fit's own bound on the offsets."""
+
+
+def _checked_pointing(pointing, n_units: int) -> np.ndarray:
+    p = np.asarray(pointing, float)
+    if p.shape != (2 * n_units,):
+        raise PointingCalibrationError(
+            f"a calibrated pointing holds {2 * n_units} angles (elevation then azimuth offset "
+            f"of each of the {n_units} units); got shape {p.shape}")
+    bad = np.isinf(p) | (np.abs(p) > POINTING_LIMIT_DEG)
+    if np.isnan(p).all():
+        raise PointingCalibrationError("the calibrated pointing holds no unit (all NaN)")
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        kind = "elevation" if i < n_units else "azimuth"
+        raise PointingCalibrationError(
+            f"calibrated {kind} offset of unit {i % n_units} is {float(p[i])!r} deg: expected an "
+            f"angle within +-{POINTING_LIMIT_DEG:g} deg (NaN: not calibrated, fitted)")
+    return p
