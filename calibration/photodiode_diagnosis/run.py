@@ -195,29 +195,8 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
         nominal[L.scale] = NOMINAL_DOP_SCALE
         scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
     scored.sort(key=lambda x: x[0])
-    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [
-        _rebased(fwd, t, float(t[L.effect][0])) for _, t in scored[:2]]
+    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
 
-
-def _rebased(fwd: Forward, t, offset_s: float) -> np.ndarray:
-    """``t`` with the instrument fitted afresh at the clock ``offset_s`` (polarizer sense and
-    offset from :func:`orient`, then the plain fit): a base fitted under a clock hours off
-    carries polarizer offsets and headings from another minimum, and an AoP fit of the clock
-    started there stays near it (on a real session with its clock 2 h off, the clock stopped
-    at 2.75 h from the carried start; from a fresh one it found the minimum the session has
-    at its own time)."""
-    L = fwd.layout
-    shifted = Forward(replace(fwd.inst, t_s=fwd.inst.t_s + offset_s), sun=fwd.sun)
-    theta = np.zeros(shifted.layout.size)
-    theta[shifted.layout.scale] = t[L.scale]
-    sign, theta = orient(shifted, theta)
-    if sign != fwd.polarizer_sign:      # the sense is the session's; keep the base's
-        return t
-    first = fit(shifted, theta, sigma=0.02, max_iter=EFFECT_MAX_ITER)
-    out = t.copy()
-    out[:L.n_base] = first.theta[:L.n_base]
-    out[L.effect] = offset_s
-    return out
 
 
 
