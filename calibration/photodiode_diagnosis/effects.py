@@ -66,6 +66,7 @@ import numpy as np
 from sensor.compound_eye import SkySample
 from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 
+from ..diagnosis.errors import EffectUnavailableError
 from ..effects import UnknownEffectError
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
@@ -78,10 +79,6 @@ RING_EFFECT_NAMES = ("multiple_scattering", "neutral_points", "fov", "occlusion"
 engine runs (Mie phase matrices on a 25 x 37 table, per AOD and sun node) add minutes to a
 session, beyond the one-minute goal of a default diagnosis on this machine class."""
 OPTIONAL_EFFECT_NAMES = ("aerosol",)
-
-
-class EffectUnavailableError(RuntimeError):
-    """An effect that cannot be evaluated here (optional engine missing, sun too low)."""
 
 
 class RingEffect:

@@ -26,6 +26,7 @@ import scipy.sparse as sp
 
 from skysim.exceptions import InvalidParameterError
 
+from ..diagnosis.fit_result import FitResult
 from .forward import Forward
 
 __all__ = ["FitResult", "Priors", "fit", "fit_pinned", "geometry_mask", "fit_headings",
@@ -80,24 +81,6 @@ class Priors:
             lo[L.effect], hi[L.effect] = e.lower, e.upper
             step[L.effect] = e.fd_step
         return cls(mu, sd, lo, hi, step)
-
-
-@dataclass
-class FitResult:
-    theta: np.ndarray
-    cost: float
-    rms: float
-    n_iter: int
-    converged: bool
-    covariance: np.ndarray | None = None
-    free: np.ndarray | None = None
-
-    def sd(self, index: int) -> float | None:
-        """Posterior SD of parameter ``index`` (None without a covariance or if held)."""
-        if self.covariance is None or self.free is None or not self.free[index]:
-            return None
-        pos = int(np.sum(self.free[:index]))
-        return float(np.sqrt(max(self.covariance[pos, pos], 0.0)))
 
 
 def _groups(fwd: Forward, free: np.ndarray):

@@ -43,8 +43,8 @@ import numpy as np
 
 from sensor.compound_eye import SkySample, body_attitude
 from sensor.photodiode import malus_signal
-from skysim.sky import RayleighSky, Sky
-from skysim.sun import Site, sun_vector
+from skysim.sky import RayleighSky
+from skysim.sun import SunTrack
 
 from .instrument import Instrument
 
@@ -112,28 +112,6 @@ class Layout:
     @property
     def n_base(self) -> int:
         return self.heading.start
-
-
-class SunTrack:
-    """Sun direction over a span of times, from ephemeris knots (linear in the ENU vector).
-
-    Knots every ``step_s`` from :func:`skysim.sun.sun_vector`; 60 s knots err by < 1e-4 deg
-    (the sun turns 0.25 deg/min; the chord error is ``(0.25 deg)^2 / 8`` in radians).
-    """
-
-    def __init__(self, site: Site, t_min_s: float, t_max_s: float, margin_s: float,
-                 step_s: float = 60.0):
-        import pandas as pd
-        t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
-        times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)
-        self.t_s = t
-        self.vectors, _ = sun_vector(times, site)
-
-    def __call__(self, t_s) -> np.ndarray:
-        """Unit sun vectors in ENU (n, 3) at times ``t_s`` [s since epoch, UTC]."""
-        t_s = np.asarray(t_s, float)
-        v = np.stack([np.interp(t_s, self.t_s, self.vectors[:, c]) for c in range(3)], axis=-1)
-        return v / np.linalg.norm(v, axis=-1, keepdims=True)
 
 
 class Forward:
@@ -256,7 +234,6 @@ class Forward:
         """Predicted readings (n, P) in session-median units and the profiled radiance (n, U)."""
         if self.dop_free:
             return self._predict_dop_free(theta, obs)
-        L = self.layout
         m = self.channel_model(theta, obs)
         off = self._offsets(theta, obs)
         w = self.usable

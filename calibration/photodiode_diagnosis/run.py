@@ -1,5 +1,5 @@
 """The diagnosis of a photodiode instrument: faults, base fit, held-out gap, where, which, how
-far (schema ``skysim.diagnosis/1``; method in ``docs/diagnosis.md``, section "Photodiode
+far (its dict is read into the shared report by :mod:`calibration.diagnosis.rings`; method in ``docs/diagnosis.md``, section "Photodiode
 instruments").
 """
 
@@ -15,12 +15,12 @@ from skysim.exceptions import InvalidParameterError
 from skysim.sky import RayleighSky
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
-from ..diagnosis import DIAGNOSIS_SCHEMA, DiagnosisError, InsufficientDataError
+from ..diagnosis import LEGACY_SCHEMA, DiagnosisError, InsufficientDataError
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
-from .errors import (InstrumentDataError, NoUsableChannelsError, PointingCalibrationError,
+from .errors import (InstrumentDataError, PointingCalibrationError,
                      SunTooLowError)
 from .faults import bright_glare, malus_outliers, screen
-from .fit import Priors, coarse_headings, fit, fit_headings, fit_pinned
+from .fit import fit, fit_headings, fit_pinned
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
 
@@ -498,7 +498,7 @@ def _params(effect, theta, layout):
 
 
 def _no_signal_report(inst, scr, why) -> dict:
-    return {"schema": DIAGNOSIS_SCHEMA, "instrument": "photodiodes",
+    return {"schema": LEGACY_SCHEMA, "instrument": "photodiodes",
             "verdict": {"effect": "unexplained", "reason": why, "gap_before": None,
                         "gap_after": None, "shrink": None, "params": {},
                         "metric": "held-out RMS of relative photodiode residuals"},
@@ -776,7 +776,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
          "params": avail[0]["params"] if verdict not in ("none", "unexplained") else {}}
     v["shrink"] = 1 - v["gap_after"] / g0
     return {
-        "schema": DIAGNOSIS_SCHEMA, "instrument": "photodiodes", "verdict": v,
+        "schema": LEGACY_SCHEMA, "instrument": "photodiodes", "verdict": v,
         "candidates": rows, "where": where, "faults": scr.faults,
         "noise_floor": {"rms": floor, "method": "second differences along each sweep"},
         "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
