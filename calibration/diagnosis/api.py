@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from .camera import CameraAdapter
 from .report import DiagnosisReport
 from .rings import RingAdapter
 from .sky import SkyAdapter
@@ -11,7 +12,7 @@ from .three_pair import ThreePairAdapter
 
 __all__ = ["ADAPTERS", "adapter_for", "diagnose"]
 
-ADAPTERS = (ThreePairAdapter(), RingAdapter(), SkyAdapter())
+ADAPTERS = (ThreePairAdapter(), RingAdapter(), SkyAdapter(), CameraAdapter())
 """Registered instrument adapters, asked in this order (:class:`.protocol.InstrumentAdapter`)."""
 
 
@@ -31,8 +32,9 @@ def adapter_for(data, sidecar: dict | None = None):
             else f"a {type(data).__name__}")
     raise UnsupportedInstrumentError(
         f"no diagnosis reads {what}: give a measurement table (skysim.measurement/1, a file, a "
-        "Measurement, or a DataFrame with sidecar=...), photodiode data (skysim.photodiodes/1) "
-        "or a sky field (SkyCases)")
+        "Measurement, or a DataFrame with sidecar=...), photodiode data (skysim.photodiodes/1), "
+        "a sky field (SkyCases) or polarization-camera frames (skysim.dofp/1 images, "
+        "CameraFrames)")
 
 
 def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
@@ -41,10 +43,11 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
 
     Parameters
     ----------
-    data_or_path : path, DataFrame, Measurement, PhotodiodeData, DiagnosisData, Instrument or SkyCases
-        A data file with its JSON sidecar ("skysim.measurement/1" or "skysim.photodiodes/1"),
-        a three-pair measurement table (a DataFrame needs ``sidecar=``), a photodiode session
-        (ring, dome or the one-unit three-pair sensor) or a sky field.
+    data_or_path : path, list of paths, DataFrame, Measurement, PhotodiodeData, DiagnosisData, Instrument, SkyCases, CameraFrames or CameraFrame
+        A data file with its JSON sidecar ("skysim.measurement/1", "skysim.photodiodes/1" or
+        a raw camera image with "skysim.dofp/1"), a folder or list of raw camera images, a
+        three-pair measurement table (a DataFrame needs ``sidecar=``), a photodiode session
+        (ring, dome or the one-unit three-pair sensor), a sky field or camera frames.
     candidates : sequence of str, optional
         Candidate effects (default: the instrument's default set).
     folds : int
@@ -53,7 +56,8 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
         Seed of the bootstrap of the standard errors.
     **options
         Passed to the adapter: ``thresholds`` (three-pair), ``sidecar`` (DataFrame input),
-        ``noise_floor``, ``calibration_cases``, ``settings``, ``n_grid``, ``xatol`` (sky).
+        ``noise_floor``, ``calibration_cases``, ``settings``, ``n_grid``, ``xatol`` (sky),
+        ``dmax``, ``min_elevation_deg``, ``min_signal_dn``, ``block_superpixels`` (camera).
 
     Returns
     -------
@@ -70,7 +74,10 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
     DiagnosisError
         When the data allow no held-out diagnosis (the message says why).
     """
-    if isinstance(data_or_path, (str, Path)):
+    if _camera_files(data_or_path):
+        adapter = next(a for a in ADAPTERS if isinstance(a, CameraAdapter))
+        data = adapter.load(data_or_path)
+    elif isinstance(data_or_path, (str, Path)):
         from .three_pair_data import read_sidecar
         path = Path(data_or_path)
         sidecar = read_sidecar(path)
@@ -83,6 +90,15 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
         adapter = adapter_for(data, options.get("sidecar"))
     return adapter.diagnose(data, adapter.candidates(candidates), folds=folds, seed=seed,
                             **options)
+
+
+def _camera_files(x) -> bool:
+    """True for a folder, a raw camera image, or a list of paths (camera frames)."""
+    from sensor.camera.files import IMAGE_SUFFIXES
+    if isinstance(x, (str, Path)):
+        return Path(x).is_dir() or Path(x).suffix.lower() in IMAGE_SUFFIXES
+    return isinstance(x, (list, tuple)) and bool(x) and all(isinstance(p, (str, Path))
+                                                             for p in x)
 
 
 def _file_adapter(path, sidecar: dict):
