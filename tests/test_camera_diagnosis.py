@@ -53,7 +53,100 @@ def _frame(seed, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None, extinction_r
     return CameraFrame(raw, doc, name=f"seed {seed}")
 
 
+def _values(rep):
+    return {k: v["value"] for k, v in rep.verdict.params.items()}
+
+
 def test_clean_frame_is_none():
+    """Noise only: the base model is within the floor, and the report has the shared shape."""
     rep = diagnosis.diagnose(_frame(1), seed=0)
-    print(rep.to_markdown())
+    assert isinstance(rep, DiagnosisReport) and rep.instrument == "camera"
     assert rep.verdict.effect == "none"
+    # the floor is the shot noise of the normalised channels: sqrt(2 / n_e)-ish per channel
+    # at ~4000 e- per pixel, about 0.01-0.02
+    assert 0.005 < rep.noise_floor < 0.03
+    assert not rep.carrying_gap()
+    d = rep.to_dict()
+    assert d["schema"] == "skysim.diagnosis/2" and d["instrument"] == "camera"
+    assert DiagnosisReport.from_dict(d).verdict.effect == "none"
+    assert "Verdict: `none`" in rep.to_markdown()
+
+
+# Tolerances: the recovered parameters' noise from ~2500 usable super-pixels at a 0.013
+# per-channel floor is about 0.02 px (centre), 2e-4 (focal scale), 0.03 deg (angles) and
+# 1e-3 in 1/ER (measured errors on these seeds: 0.011 px, 1e-4, 0.03 deg, 4e-5); the
+# tolerances are ten standard errors, tight enough that a wrong model could not pass.
+@pytest.mark.parametrize("shift", [(3.0, -2.0, 1.0), (0.0, 0.0, 1.04)])
+def test_lens_error_is_named(shift):
+    rep = diagnosis.diagnose(_frame(2, lens_shift=shift), seed=0)
+    assert rep.verdict.effect == "lens"
+    p = _values(rep)
+    assert p["dcx_px"] == pytest.approx(shift[0], abs=0.2)
+    assert p["dcy_px"] == pytest.approx(shift[1], abs=0.2)
+    assert p["focal_scale"] == pytest.approx(shift[2], abs=2e-3)
+    assert rep.verdict.shrink > 0.2
+
+
+def test_polarizer_angles_are_named():
+    off = (2.0, -1.5, 0.0, 1.0)
+    rep = diagnosis.diagnose(_frame(3, angle_offsets=off), seed=0)
+    assert rep.verdict.effect == "polarizer_angles"
+    got = [_values(rep)[f"offset_a{r}{c}_deg"] for r in (0, 1) for c in (0, 1)]
+    np.testing.assert_allclose(got, off, atol=0.3)
+
+
+def test_extinction_ratio_is_named():
+    rep = diagnosis.diagnose(_frame(4, extinction_ratio=20.0), seed=0)
+    assert rep.verdict.effect == "extinction_ratio"
+    assert _values(rep)["inverse_extinction_ratio"] == pytest.approx(1 / 20.0, abs=0.01)
+
+
+def test_dop_scale_fitted_when_the_sidecar_lacks_it():
+    """Without the sky's d_max the base fits it, and the extinction ratio, exactly a smaller
+    d_max on these data, is not tried; the fitted d_max absorbs the injected ER:
+    d_max (1 - 1/ER) / (1 + 1/ER) = 0.7 * 19/21 = 0.633."""
+    f = _frame(4, extinction_ratio=20.0)
+    doc = {k: v for k, v in f.sidecar.items() if k != "generator"}
+    rep = diagnosis.diagnose(CameraFrame(f.raw, doc), seed=0)
+    assert not rep.candidate("extinction_ratio").available
+    assert rep.verdict.effect == "none"
+    assert rep.extra["base"]["d_max"] == pytest.approx(DMAX * 19 / 21, abs=5e-3)
+
+
+def test_several_frames_from_a_folder_fold_by_frame(tmp_path):
+    from sensor.camera.files import write_raw
+    for k, hours in enumerate((1.5, 2.5, 3.5)):
+        f = _frame(10 + k, time=TIME + dt.timedelta(hours=hours - 2.5), yaw=40.0 * k)
+        write_raw(tmp_path / f"sky{k}.tiff", f.raw,
+                  {k2: v for k2, v in f.sidecar.items() if k2 != "schema"})
+    rep = diagnosis.diagnose(tmp_path, seed=0)
+    assert rep.instrument == "camera" and len(rep.data["frames"]) == 3
+    assert rep.data["split"]["method"].startswith("whole frames")
+    assert rep.verdict.effect == "none"
+    files = sorted(str(p) for p in tmp_path.glob("*.tiff"))
+    assert diagnosis.diagnose(files[:2], folds=2).data["frames"] == files[:2]
+
+
+def test_occluder_mask_is_flagged_not_fitted():
+    """A dark object (a mast) over part of the sky spoils the base fit unless masked."""
+    f = _frame(5)
+    raw = f.raw.copy()
+    mast = np.zeros(raw.shape, bool)
+    mast[20:70, 60:66] = True
+    raw[mast] = (raw[mast] * 0.3).astype(np.uint16)   # dark, unpolarized-looking structure
+    raw[mast & (np.indices(raw.shape)[1] % 2 == 0)] //= 2
+    hit = CameraFrame(raw, f.sidecar)
+    assert diagnosis.diagnose(hit, seed=0).verdict.effect != "none"
+    rep = diagnosis.diagnose(CameraFrames((hit,), masks=(mast,)), seed=0)
+    assert rep.verdict.effect == "none"
+    assert rep.data["masked_pixels"] == int(mast.sum())
+
+
+def test_bad_input_raises_named_errors():
+    f = _frame(6)
+    with pytest.raises(UnknownEffectError, match="vignette"):
+        diagnosis.diagnose(f, candidates=["vignette"])
+    with pytest.raises(CameraInputError, match="dmax"):
+        diagnosis.diagnose(f, dmax=1.5)
+    with pytest.raises(CameraInputError, match="uint16"):
+        CameraFrame(f.raw.astype(float), f.sidecar)
