@@ -272,12 +272,14 @@ def test_sky_field_through_the_entry_point_splits_by_fold():
 
 def test_adapters_and_effects_implement_the_protocol():
     from calibration.diagnosis.api import ADAPTERS
+    from calibration.diagnosis.camera import CAMERA_EFFECTS
     from calibration.diagnosis.protocol import Effect, InstrumentAdapter
     from calibration.diagnosis.sky import SKY_EFFECTS
     from calibration.effects import EFFECT_NAMES, get_effect
-    assert [a.name for a in ADAPTERS] == ["three_pair", "photodiodes", "sky"]
+    assert [a.name for a in ADAPTERS] == ["three_pair", "photodiodes", "sky", "camera"]
     assert all(isinstance(a, InstrumentAdapter) for a in ADAPTERS)
-    for e in [get_effect(n) for n in EFFECT_NAMES] + list(SKY_EFFECTS.values()):
+    for e in ([get_effect(n) for n in EFFECT_NAMES] + list(SKY_EFFECTS.values())
+              + list(CAMERA_EFFECTS.values())):
         assert isinstance(e, Effect), e.name
     # k counts the parameters added to the base: all of a three-pair effect's; a sky model
     # that trades d_max for tau adds none
