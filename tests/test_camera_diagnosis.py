@@ -25,7 +25,7 @@ from skysim.sun import sun_position
 SIZE = 128
 DMAX = 0.7
 SITE = {"latitude_deg": 34.25, "longitude_deg": 108.9, "altitude_m": 400.0}
-TIME = dt.datetime(2024, 5, 22, 2, 30, tzinfo=dt.timezone.utc)   # sun about 55 deg high
+TIME = dt.datetime(2024, 5, 22, 2, 30, tzinfo=dt.timezone.utc)   # sun 58 deg high
 
 
 def _frame(seed, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None, extinction_ratio=np.inf,

@@ -70,10 +70,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..effects import UnknownEffectError
 from . import core
 from .core import Thresholds
-from .errors import DiagnosisError, InsufficientDataError
+from .errors import DiagnosisError
+from .protocol import candidate_names
 from .report import Candidate, DiagnosisReport, Verdict
 
 __all__ = ["CAMERA_CANDIDATES", "CameraAdapter", "CameraEffect", "CameraFrame",
@@ -435,10 +435,8 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         When the blocks allow no held-out split.
     """
     t0 = time.perf_counter()
-    unknown = [e for e in candidates if e not in CAMERA_CANDIDATES]
-    if unknown:
-        raise UnknownEffectError(f"unknown camera candidate(s) {unknown}; choose from "
-                                 f"{', '.join(CAMERA_CANDIDATES)}")
+    candidates = candidate_names(candidates, CAMERA_CANDIDATES, DEFAULT_CAMERA_CANDIDATES,
+                                 "camera")
     if dmax is not None and not 0 < dmax <= 1:
         raise CameraInputError(f"dmax must be in (0, 1]; got {dmax!r}")
     if int(block_superpixels) != block_superpixels or block_superpixels < 1:
@@ -577,14 +575,7 @@ class CameraAdapter:
         return load_frames(path)
 
     def candidates(self, names=None) -> tuple:
-        if names is None:
-            return DEFAULT_CAMERA_CANDIDATES
-        names = tuple(names)
-        unknown = [e for e in names if e not in CAMERA_CANDIDATES]
-        if unknown:
-            raise UnknownEffectError(f"unknown camera candidate(s) {unknown}; choose from "
-                                     f"{', '.join(CAMERA_CANDIDATES)}")
-        return names
+        return candidate_names(names, CAMERA_CANDIDATES, DEFAULT_CAMERA_CANDIDATES, "camera")
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
                  **options) -> DiagnosisReport:

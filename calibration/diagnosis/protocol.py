@@ -17,7 +17,7 @@ from typing import Protocol, runtime_checkable
 
 from .report import DiagnosisReport
 
-__all__ = ["Effect", "InstrumentAdapter"]
+__all__ = ["Effect", "InstrumentAdapter", "candidate_names"]
 
 
 @runtime_checkable
@@ -72,3 +72,32 @@ class InstrumentAdapter(Protocol):
     def diagnose(self, data, candidates, *, folds: int, seed: int,
                  **options) -> DiagnosisReport:
         """Fit, score and judge (:mod:`.core`) and return the report."""
+
+
+def candidate_names(names, known, default, instrument: str) -> tuple:
+    """Validated candidate names of an adapter (:meth:`InstrumentAdapter.candidates`).
+
+    Parameters
+    ----------
+    names : sequence of str or None
+        Requested candidates; None gives ``default``.
+    known : sequence of str
+        Every candidate the instrument knows.
+    default : tuple of str
+    instrument : str
+        Named in the error (``sky``, ``camera``).
+
+    Raises
+    ------
+    UnknownEffectError
+        Naming the unknown candidates and the known ones.
+    """
+    if names is None:
+        return tuple(default)
+    names = tuple(names)
+    unknown = [e for e in names if e not in known]
+    if unknown:
+        from ..effects import UnknownEffectError
+        raise UnknownEffectError(f"unknown {instrument} candidate(s) {unknown}; choose from "
+                                 f"{', '.join(known)}")
+    return names

@@ -67,6 +67,7 @@ from ..effects import UnknownEffectError
 from . import core
 from .core import Thresholds
 from .errors import DiagnosisError, InsufficientDataError
+from .protocol import candidate_names
 from .report import Candidate, DiagnosisReport, Verdict
 
 __all__ = [
@@ -377,10 +378,7 @@ def diagnose_sky(cases: SkyCases, calibration_cases, *, candidates=SKY_CANDIDATE
         For a candidate name outside :data:`SKY_CANDIDATES`.
     """
     t0 = time.perf_counter()
-    unknown = [e for e in candidates if e not in SKY_CANDIDATES]
-    if unknown:
-        raise UnknownEffectError(f"unknown sky candidate(s) {unknown}; choose from "
-                                 f"{', '.join(SKY_CANDIDATES)}")
+    candidate_names(candidates, SKY_CANDIDATES, SKY_CANDIDATES, "sky")
     if not noise_floor > 0:
         raise SkyGapInputError(f"noise_floor must be > 0; got {noise_floor!r} (the RMS Stokes "
                                "residual a perfect model would leave, e.g. 2e-3)")
@@ -474,14 +472,7 @@ class SkyAdapter:
             "Q/I and U/I per case), not from a file")
 
     def candidates(self, names=None) -> tuple:
-        if names is None:
-            return SKY_CANDIDATES
-        names = tuple(names)
-        unknown = [e for e in names if e not in SKY_CANDIDATES]
-        if unknown:
-            raise UnknownEffectError(f"unknown sky candidate(s) {unknown}; choose from "
-                                     f"{', '.join(SKY_CANDIDATES)}")
-        return names
+        return candidate_names(names, SKY_CANDIDATES, SKY_CANDIDATES, "sky")
 
     def diagnose(self, data: SkyCases, candidates, *, folds: int = 2, seed: int = 0,
                  noise_floor: float | None = None, calibration_cases=None,
