@@ -29,7 +29,7 @@ TIME = dt.datetime(2024, 5, 22, 2, 30, tzinfo=dt.timezone.utc)   # sun 58 deg hi
 
 
 def _frame(seed, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None, extinction_ratio=np.inf,
-           yaw=30.0, time=TIME):
+           yaw=30.0, time=TIME, sky=None):
     """A raw frame of the simulator with the given injected errors, and the nominal sidecar."""
     nominal = PolarizationCamera.fisheye(SIZE, SIZE)
     lens = FisheyeLens(nominal.lens.focal_px * lens_shift[2], nominal.lens.cx + lens_shift[0],
@@ -41,7 +41,7 @@ def _frame(seed, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None, extinction_r
     true = PolarizationCamera(lens, MosaicSensor(SIZE, SIZE, **kw))
     sun = sun_position([time], SITE["latitude_deg"], SITE["longitude_deg"],
                        SITE["altitude_m"]).iloc[0]
-    sky = make_sky("rayleigh", dmax=DMAX)
+    sky = sky or make_sky("rayleigh", dmax=DMAX)
     scene = true.scene(sky, camera_attitude(yaw), float(sun["elevation_deg"]),
                        float(sun["azimuth_deg"]))
     exposure = true.auto_exposure_s(scene)
@@ -99,6 +99,18 @@ def test_extinction_ratio_is_named():
     rep = diagnosis.diagnose(_frame(4, extinction_ratio=20.0), seed=0)
     assert rep.verdict.effect == "extinction_ratio"
     assert _values(rep)["inverse_extinction_ratio"] == pytest.approx(1 / 20.0, abs=0.01)
+
+
+def test_neutral_point_sky_is_named():
+    """A sky with neutral points (Berry et al. 2004, singularities 40 deg apart) seen by an
+    ideal camera: its sidecar records a Berry sky, so d_max is fitted; the diagnosis names
+    the sky's DoP pattern and recovers the separation. Tolerance 3 deg: the DoP changes by
+    a few 1e-3 per degree of separation over most of the sky, against a 0.013 floor."""
+    rep = diagnosis.diagnose(_frame(7, sky=make_sky("berry", delta_deg=40.0, dmax=DMAX)),
+                             seed=0)
+    assert rep.verdict.effect == "sky_dop"
+    assert _values(rep)["delta_deg"] == pytest.approx(40.0, abs=3.0)
+    assert _values(rep)["d_max"] == pytest.approx(DMAX, abs=0.02)
 
 
 def test_dop_scale_fitted_when_the_sidecar_lacks_it():

@@ -13,6 +13,7 @@ far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
 """
 
 from .api import diagnose
+from .camera import CameraFrame, CameraFrames, CameraInputError, diagnose_camera
 from .core import Thresholds, assign_folds, decide, noise_floor
 from .errors import (
     AllNaNChannelError,
@@ -53,6 +54,9 @@ __all__ = [
     "DIAGNOSIS_SCHEMA",
     "LEGACY_SCHEMA",
     "AllNaNChannelError",
+    "CameraFrame",
+    "CameraFrames",
+    "CameraInputError",
     "Candidate",
     "DiagnosisData",
     "DiagnosisError",
@@ -73,6 +77,7 @@ __all__ = [
     "data_from_table",
     "decide",
     "diagnose",
+    "diagnose_camera",
     "diagnose_three_pair",
     "fit_model",
     "load_diagnosis_data",
