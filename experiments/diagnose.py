@@ -429,12 +429,13 @@ def _diagnose_cmd(args) -> int:
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
     written = write_diagnosis(report, out)
     v = report.verdict
-    u = report.unit
+    # a dimensionless gap (a fraction of the mean reading or signal) is printed bare
+    u, su = ("relative", "") if report.unit == "1" else (report.unit, f" {report.unit}")
     print(f"verdict: {v.effect} ({v.reason})")
     if v.gap_before is not None:
         se = "" if v.shrink_se is None else f" +- {100 * v.shrink_se:.1f}"
-        print(f"gap {v.gap_before:.4g} -> {v.gap_after:.4g} {u} (noise floor "
-              f"{report.noise_floor:.4g} {u}), shrink {100 * v.shrink:.1f}{se} %")
+        print(f"gap {v.gap_before:.4g} -> {v.gap_after:.4g}{su} (noise floor "
+              f"{report.noise_floor:.4g}{su}), shrink {100 * v.shrink:.1f}{se} %")
     print(f"| effect | held-out gap [{u}] | score | explains |")
     for c in report.candidates:
         if c.available:
@@ -515,12 +516,14 @@ def register(sub) -> None:
                                    "and give a verdict (schema skysim.diagnosis/2).",
                        formatter_class=DefaultsHelpFormatter)
     d.add_argument("data", type=existing_file,
-                   help="measurement table or photodiode data (.csv/.parquet + sidecar)")
+                   help="measurement table or photodiode data (.csv/.parquet + sidecar), or "
+                        "a raw polarization-camera frame (.tif/.tiff/.png + sidecar)")
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
                    "tilt,aureole,stray_light (default), and aerosol (asked for by name: its "
-                   "engine runs take minutes)")
+                   "engine runs take minutes); for camera frames: lens,polarizer_angles,"
+                   "extinction_ratio,sky_dop (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")

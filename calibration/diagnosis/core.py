@@ -189,7 +189,10 @@ def held_out_score(gap: float, gap_base: float, floor: float, n_held_out: int,
 
 
 def explains(gap: float, gap_base: float, floor: float, thresholds: Thresholds) -> bool:
-    """True when a candidate's held-out gap is at the floor (module docstring, step 4)."""
+    """True when a candidate's held-out gap is at the floor (module docstring, step 4);
+    False when the base's gap already is (there is nothing to explain)."""
+    if gap_base <= floor * (1 + thresholds.none_margin):
+        return False
     excess0 = max(gap_base ** 2 - floor ** 2, 0.0)
     return bool(gap <= floor * (1 + thresholds.explained_margin)
                 or gap ** 2 - floor ** 2 <= thresholds.residual_excess * excess0)
