@@ -82,8 +82,8 @@ from .exceptions import BroadcastError, InvalidParameterError
 from .validation import check_finite, check_in_range
 
 __all__ = ["EARTH_RADIUS_M", "QUANTILE_GRID", "THICKNESS_PROFILES", "CloudField",
-           "equal_area_grid", "layer_intersection", "matern_correlation",
-           "matern_efold_ratio"]
+           "air_below", "equal_area_grid", "layer_intersection",
+           "matern_correlation", "matern_efold_ratio", "time_offsets_s"]
 
 EARTH_RADIUS_M = 6_371_008.8
 """Mean radius of the Earth [m] (GRS80 mean radius R1, Moritz 2000 [1]_)."""
@@ -126,6 +126,54 @@ def layer_intersection(elevation_deg, height_m):
     slant = (2.0 * R * h + h * h) / (root + R * se)
     distance = (R + h) * np.arctan2(slant * np.cos(e), R + slant * se)
     return distance, root / (R + h)
+
+
+@functools.lru_cache(maxsize=32)
+def _air_mass_table(height_m: float):
+    """Relative air masses ``(below the layer, whole path)`` of rays at the elevations
+    :data:`_AIR_MASS_ELEVATIONS` (curved rays through an exponential atmosphere)."""
+    from .clouds import MOLECULAR_SCALE_HEIGHT_M as H
+    R = EARTH_RADIUS_M
+    e = np.radians(_AIR_MASS_ELEVATIONS)[:, None]
+    r_layer = R + height_m
+    s_below = np.sqrt(r_layer ** 2 - (R * np.cos(e[:, 0])) ** 2) - R * np.sin(e[:, 0])
+    grid = np.concatenate([[0.0], np.geomspace(1.0, 3e6, 800)])[None, :]      # [m]
+    z = np.sqrt(R * R + grid * grid + 2.0 * R * grid * np.sin(e)) - R
+    n = np.exp(-z / H) / H
+    cum = np.concatenate([np.zeros((e.size, 1)),
+                          np.cumsum(0.5 * (n[:, 1:] + n[:, :-1]) * np.diff(grid), axis=1)],
+                         axis=1)
+    below = np.array([np.interp(sb, grid[0], c) for sb, c in zip(s_below, cum)])
+    return below, cum[:, -1]
+
+
+_AIR_MASS_ELEVATIONS = np.concatenate([np.arange(0.0, 10.0, 0.1), np.arange(10.0, 90.01, 0.5)])
+
+
+def air_below(elevation_deg, height_m: float, tau: float = 0.0973):
+    """The air between the site and a layer at ``height_m`` [m] along view rays.
+
+    With ``m_b`` and ``m`` the ray's relative air masses below the layer and in all (number
+    density ``exp(-z / H)``, ``H`` = :data:`skysim.clouds.MOLECULAR_SCALE_HEIGHT_M`, along
+    the curved ray; ``m`` tends to ``sqrt(pi R / (2 H))`` at the horizon, tested) and
+    ``tau`` the molecular optical thickness (default: 550 nm at sea level, Bodhaine et al.
+    1999):
+
+    Returns
+    -------
+    fraction : ndarray
+        Share of the clear sky's light along the ray that this air scatters,
+        ``(1 - exp(-tau m_b)) / (1 - exp(-tau m))``: about ``1 - exp(-h / H)`` overhead
+        (:func:`skysim.clouds.molecular_fraction_below`), growing towards 1 at the horizon,
+        where the ray stays low.
+    transmission : ndarray
+        ``exp(-tau m_b)``: what reaches the site of light from the layer.
+    """
+    below, total = _air_mass_table(float(height_m))
+    el = np.asarray(elevation_deg, float)
+    mb = np.interp(el, _AIR_MASS_ELEVATIONS, below)
+    m = np.interp(el, _AIR_MASS_ELEVATIONS, total)
+    return np.expm1(-tau * mb) / np.expm1(-tau * m), np.exp(-tau * mb)
 
 
 def matern_correlation(r_over_L, smoothness: float) -> np.ndarray:

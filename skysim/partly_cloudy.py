@@ -5,9 +5,10 @@ zenith-angle cosine ``mu`` (:func:`skysim.cloud_field.layer_intersection`), the 
 ``S`` is the sum of three parts (each cloud column a plane-parallel layer of its own: the
 independent pixel approximation, as :mod:`skysim.cloud_light`):
 
-1. **The air below the cloud base**, which holds the fraction ``f_b = 1 - exp(-h / H)`` of the
-   molecular optical depth (:func:`skysim.clouds.molecular_fraction_below`), scatters the
-   sunlight as in the clear sky: ``f_b S_clear``, the clear sky's own Stokes, so its E-vector
+1. **The air below the cloud base** scatters the sunlight as in the clear sky: ``f_b S_clear``,
+   with ``f_b`` its share of the ray's light (:func:`skysim.cloud_field.air_below`:
+   ``1 - exp(-h / H)`` overhead, more towards the horizon, where the ray stays low) and
+   ``S_clear`` the clear sky's own Stokes, so its E-vector
    continues the clear-sky pattern under the cloud (Pomozi, Horváth & Wehner 2001 [1]_; Pust
    & Shaw 2008 [2]_ saw this light set the AoP of most clouds). Where a cloud stands between
    that air and the sun the air is shaded: it is lit by the sunlight that cloud lets through,
@@ -19,18 +20,20 @@ independent pixel approximation, as :mod:`skysim.cloud_light`):
    through, a thick one hides it.
 3. **The cloud's own light**, the sunlight it transmits diffusely, bright and weakly
    polarized (:func:`skysim.cloud_light.cloud_stokes`: the droplets' single scattering,
-   polarized by their phase matrix, plus unpolarized multiple scattering).
+   polarized by their phase matrix, plus unpolarized multiple scattering), dimmed by the
+   air below on its way, ``t_b = exp(-tau_R m_b)`` (:func:`skysim.cloud_field.air_below`):
+   clouds near the horizon fade into the haze.
 
-So ``S = S_clear (1 - f_b (1 - T_sun) - (1 - f_b)(1 - T)) + k S_cloud``, where ``k`` turns
+So ``S = S_clear (1 - f_b (1 - T_sun) - (1 - f_b)(1 - T)) + k t_b S_cloud``, where ``k`` turns
 the cloud's light (in the unit of an incident solar flux ``pi``) into the clear sky's unit
 (:meth:`skysim.sky.Sky.flux_pi_scale`). Clear directions have ``T = 1``; with no cloud
 anywhere (cover 0 or ``tau`` 0) the factor is exactly 1 and the clear sky comes back
 unchanged.
 
 Left out: reflections between ground and cloud base, the air lit by the clouds' diffuse
-light and the air above lit by their tops, the attenuation of the cloud's light by the air
-below it and of the sunbeam by the air above, the light of cloud sides (a thin layer has
-none), and the multiply scattered light's weak polarization. Against the radiative transfer
+light and the air above lit by their tops, the attenuation of the sunbeam by the air above
+the cloud, the light of cloud sides (a thin layer has none), and the multiply scattered
+light's weak polarization. Against the radiative transfer
 of an overcast layer (:class:`skysim.clouds.CloudySky`, cloud optical thickness 1 and 2)
 the DoP and AoP agree closely and the radiance is low by up to about a half
 (``docs/clouds.md``).
@@ -49,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 
 from . import rayleigh
-from .cloud_field import CloudField, layer_intersection, time_offsets_s
+from .cloud_field import CloudField, air_below, layer_intersection, time_offsets_s
 from .cloud_light import cloud_stokes, pattern_transmission
 from .exceptions import InvalidParameterError
 from .sky import Sky, SkyField
@@ -91,8 +94,6 @@ class PartlyCloudySky(Sky):
         self.clear, self.clouds = clear, clouds
         self.time_s = check_finite("time_s", time_s)
         self.min_sun_elevation_deg = max(float(clear.min_sun_elevation_deg), 0.0)
-        from .clouds import molecular_fraction_below
-        self.fraction_below = float(molecular_fraction_below(clouds.base_m))
 
     def at(self, time_s) -> "PartlyCloudySky":
         """The same clouds at another time [s] (scalar, or one per sun position)."""
@@ -136,7 +137,7 @@ class PartlyCloudySky(Sky):
         xs = 0.5 * s_view * np.sin(av) + s_sun * np.sin(asun) - c._wind[0] * t
         ys = 0.5 * s_view * np.cos(av) + s_sun * np.cos(asun) - c._wind[1] * t
         tau_sun = c.optical_thickness_of(c._gaussian_at(xs, ys))
-        fb = self.fraction_below
+        fb, t_air = air_below(vel, c.base_m)
         keep = 1.0 - (fb * (1.0 - pattern_transmission(tau_sun, mu0))
                       + (1.0 - fb) * (1.0 - pattern_transmission(tau, mu)))
         I, Q, U = (np.asarray(a, float).ravel() * keep for a in (clear.I, clear.Q, clear.U))
@@ -148,7 +149,7 @@ class PartlyCloudySky(Sky):
             cos_scat = np.sin(ve) * np.sin(se) + np.cos(ve) * np.cos(se) * np.cos(
                 np.radians(a - z))
             ic, qc, uc = cloud_stokes(tau[cloudy], mu[cloudy], mu0[cloudy], cos_scat, pa, pb)
-            k = np.broadcast_to(self.clear.flux_pi_scale(v, s), ic.shape)
+            k = np.broadcast_to(self.clear.flux_pi_scale(v, s), ic.shape) * t_air[cloudy]
             I[cloudy] += k * ic
             Q[cloudy] += k * qc
             U[cloudy] += k * uc
@@ -164,6 +165,6 @@ class PartlyCloudySky(Sky):
         return {"model": self.name, "clear": self.clear.describe(),
                 "clouds": self.clouds.describe(),
                 "time_s": float(t) if t.ndim == 0 else "one per sun position",
-                "fraction_of_air_below_cloud": self.fraction_below,
+                "air_below_cloud": "share of the ray's molecular scattering below the base",
                 "cloud_light": "single scattering (Mie phase matrix) + unpolarized multiple "
                                "scattering (delta-Eddington flux, escape function)"}

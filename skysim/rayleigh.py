@@ -287,8 +287,8 @@ def slab_transmission(tau, mu, mu0) -> np.ndarray:
     (mu mu0)``, without cancellation at ``mu = mu0`` (broadcast; ``mu, mu0 > 0``).
     """
     tau, mu, mu0 = np.broadcast_arrays(*(np.asarray(a, float) for a in (tau, mu, mu0)))
-    x = tau * (mu0 - mu) / (mu * mu0)
-    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # mu = 0: the horizon
+        x = tau * (mu0 - mu) / (mu * mu0)
         small = np.abs(x) < 1e-4
         direct = mu0 * (np.exp(-tau / mu0) - np.exp(-tau / mu)) / (mu0 - mu)
         series = (tau / mu) * np.exp(-tau / mu0) * (1.0 - 0.5 * x + x * x / 6.0)

@@ -4,9 +4,9 @@ drift, thickness profiles and bad input."""
 import numpy as np
 import pytest
 
-from skysim.cloud_field import (EARTH_RADIUS_M, QUANTILE_GRID, CloudField, equal_area_grid,
-                                layer_intersection, matern_correlation, matern_efold_ratio,
-                                time_offsets_s)
+from skysim.cloud_field import (EARTH_RADIUS_M, QUANTILE_GRID, CloudField, air_below,
+                                equal_area_grid, layer_intersection, matern_correlation,
+                                matern_efold_ratio, time_offsets_s)
 from skysim.exceptions import BroadcastError, InvalidParameterError
 
 
@@ -31,6 +31,25 @@ def test_layer_intersection_matches_vector_geometry_and_its_limits():
     s45, mu45 = layer_intersection(45.0, h)
     assert s45 == pytest.approx(h, rel=2 * h / R)
     assert mu45 == pytest.approx(np.sin(np.radians(45.0)), rel=2 * h / R)
+
+
+def test_air_below_the_layer_has_the_closed_form_limits():
+    # Overhead and in the thin limit the share is 1 - exp(-h/H) (H = 8 km); the whole
+    # path's air mass at the horizon is sqrt(pi R / (2 H)) (Chapman's grazing limit, to
+    # O(H/R) = 1e-3); at 30 deg the plane-parallel 1/sin(e) within 1 %
+    from skysim.clouds import MOLECULAR_SCALE_HEIGHT_M as H
+    from skysim.clouds import molecular_fraction_below
+    frac, trans = air_below(90.0, 1000.0, tau=1e-9)
+    assert frac == pytest.approx(molecular_fraction_below(1000.0), rel=1e-4)
+    tau = 1e-9
+    # thin atmosphere: transmission exp(-tau m_b) gives m_b, the fraction m_b / m gives m
+    f0, t0 = air_below(0.0, 1000.0, tau=tau)
+    m_horizon = -np.log(t0) / tau / f0
+    assert m_horizon == pytest.approx(np.sqrt(np.pi * EARTH_RADIUS_M / (2 * H)), rel=0.02)
+    _, t30 = air_below(30.0, 1000.0, tau=tau)
+    assert -np.log(t30) / tau == pytest.approx(molecular_fraction_below(1000.0) / 0.5,
+                                               rel=0.01)
+    assert air_below(0.0, 1000.0)[0] > 0.7 > 0.2 > air_below(60.0, 1000.0)[0]
 
 
 def test_matern_correlation_is_exponential_for_one_half():
