@@ -22,9 +22,10 @@ def sky_title(describe: dict, sun_elevation_deg: float, sun_azimuth_deg: float) 
     clouds = ""
     if "clouds" in describe and "clear" in describe:   # a partly cloudy sky
         c = describe["clouds"]
-        clouds = f"; clouds cover {c['cover']:g}, tau {c['tau']:g}, seed {c['seed']}"
+        seed = f", seed {c['seed']}" if isinstance(c.get("seed"), int) else ""
+        clouds = f"; clouds cover {c['cover']:g}, tau {c['tau']:g}{seed}"
         describe = describe["clear"]
-    params = ", ".join(f"{k} {describe[k]:g}" for k in TITLE_PARAMETERS
+    params = ", ".join(f"{k} {describe[k]:.4g}" for k in TITLE_PARAMETERS
                        if isinstance(describe.get(k), (int, float)))
     return (f"{describe.get('model', '')} sky{', ' + params if params else ''}{clouds}; sun "
             f"elevation {sun_elevation_deg:.1f}°, azimuth {sun_azimuth_deg:.1f}°")
