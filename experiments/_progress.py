@@ -12,7 +12,8 @@ import sys
 import warnings
 
 __all__ = ["ANNOUNCE_AFTER_S", "REPRODUCTION_SECONDS", "announce_duration",
-           "expected_reproduction_seconds", "format_duration", "install_warning_format"]
+           "expected_reproduction_seconds", "format_duration", "install_warning_format",
+           "report_run", "reproduction"]
 
 ANNOUNCE_AFTER_S = 10.0
 """Runs expected to take longer than this [s] print their expected duration first."""
@@ -84,3 +85,27 @@ def install_warning_format() -> None:
     """Show every warning as one line (:func:`_one_line`); which warnings show is left to
     Python's filters (``-W``, ``PYTHONWARNINGS``)."""
     warnings.formatwarning = _one_line
+
+
+def report_run(title: str, summary: str, elapsed_s: float, out, files) -> None:
+    """What a reproduction prints when it is done: its title, its summary lines, the wall
+    time [s] and the files it wrote into ``out``."""
+    print(title)
+    print(summary)
+    print(f"{elapsed_s:.1f} s; wrote {out}/{', '.join(files)}")
+
+
+def reproduction(target: str, title: str, run, summarize, files):
+    """The ``skysim reproduce target`` function of a study whose ``run(quick=, trials=,
+    seed=, out=)`` returns a dict with ``summary["elapsed_s"]``: it runs into ``--out``
+    (default ``results/<target>``) and prints :func:`report_run` with ``summarize(result)``.
+    It reports ``run``'s module as its own, where the command line finds the study's
+    ``DEFAULT_SEED``."""
+    def _reproduce(args) -> int:
+        from pathlib import Path
+        out = Path(args.out or f"results/{target}")
+        result = run(quick=args.quick, trials=args.trials, seed=args.seed, out=out)
+        report_run(title, summarize(result), result["summary"]["elapsed_s"], out, files)
+        return 0
+    _reproduce.__module__ = run.__module__
+    return _reproduce

@@ -373,15 +373,9 @@ def format_summary(table: pd.DataFrame) -> str:
     return "\n".join(lines)
 
 
-def _reproduce(args) -> int:
-    out = Path(args.out or "results/cloudy-compass")
-    result = run(quick=args.quick, trials=args.trials, seed=args.seed, out=out)
-    print("Cloudy compass — heading error vs cloud cover and optical thickness")
-    print(format_summary(result["table"]))
-    print(f"{result['summary']['elapsed_s']:.1f} s; wrote {out}/table.md, table.csv, "
-          "summary.json, heading_vs_cover.png, example_sky.png")
-    return 0
-
-
 def register_reproduce(targets: dict) -> None:
-    targets["cloudy-compass"] = _reproduce
+    from ._progress import reproduction
+    targets["cloudy-compass"] = reproduction(
+        "cloudy-compass", "Cloudy compass — heading error vs cloud cover and optical thickness",
+        run, lambda result: format_summary(result["table"]),
+        ("table.md", "table.csv", "summary.json", "heading_vs_cover.png", "example_sky.png"))
