@@ -12,6 +12,9 @@ Models (select with :func:`make_sky`):
 - ``"berry"``: the analytic neutral-point singularity model of Berry, Dennis & Lee (2004).
 - ``"aerosol"``: molecules and an aerosol type (OPAC presets, Mie optics) over a Lambertian
   ground, multiple scattering (optional extra ``skysim[rt]``).
+
+Broken clouds go in front of any of them: :class:`skysim.partly_cloudy.PartlyCloudySky`
+(which needs the model's radiance unit, :meth:`Sky.flux_pi_scale`).
 """
 
 from __future__ import annotations
