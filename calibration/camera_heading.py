@@ -53,6 +53,7 @@ import numpy as np
 
 from sensor.camera.demosaic import StokesImage, image_e_vectors
 from sensor.camera.mosaic import camera_attitude
+from skysim.exceptions import InvalidParameterError
 from skysim.validation import check_in_range
 
 from .exceptions import ConvergenceError, TooFewSamplesError
@@ -166,7 +167,7 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     check_in_range("sun_elevation_deg", sun_elevation_deg, -10.0, 90.0)
     check_in_range("min_dolp", min_dolp, 0.0, 1.0, high_open=True)
     if loss not in LOSSES:
-        raise ValueError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
+        raise InvalidParameterError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
     robust = loss == "cauchy"
     use = stokes.valid & (stokes.dolp >= min_dolp)
     n = int(use.sum())

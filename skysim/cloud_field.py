@@ -47,7 +47,8 @@ those cells, i.e. of the dome's solid angle to within one cell (1 / 18432). Its 
 optical thickness at 550 nm is ``tau`` everywhere in the cloud (``thickness="uniform"``:
 every cloud of the same thickness) or ``tau (g - t) / <g - t>`` (``"excess"``: thicker in the
 cores, thinning to 0 at the edges; ``<.>`` the mean over the cloudy cells, so the mean over
-the cover is ``tau``).
+the cover is ``tau``; at cover 1 the threshold lies half a value spacing below the grid's
+lowest value).
 
 Drift
 -----
