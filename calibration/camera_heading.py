@@ -53,11 +53,12 @@ import numpy as np
 
 from sensor.camera.demosaic import StokesImage, image_e_vectors
 from sensor.camera.mosaic import camera_attitude
+from skysim.exceptions import InvalidParameterError
 from skysim.validation import check_in_range
 
 from .exceptions import ConvergenceError, TooFewSamplesError
 
-__all__ = ["DEFAULT_DEMOSAIC", "CameraHeading", "heading_from_image"]
+__all__ = ["DEFAULT_DEMOSAIC", "LOSSES", "CameraHeading", "heading_from_image"]
 
 DEFAULT_DEMOSAIC = "centred"
 """Demosaicing of the heading's command and studies: half resolution with the four channels
@@ -128,9 +129,16 @@ def _newton(m: np.ndarray, alpha: float) -> float:
     return alpha
 
 
+LOSSES = ("cauchy", "linear")
+"""Losses of :func:`heading_from_image`: Cauchy's robust loss (default), or plain weighted
+least squares (every usable sample keeps its prior weight: a reference showing what the
+robust loss buys where clouds or trees break the pattern)."""
+
+
 def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
                        sun_azimuth_deg: float, *, pitch_deg: float = 0.0, roll_deg: float = 0.0,
-                       min_dolp: float = 0.05, max_iter: int = 30) -> CameraHeading:
+                       min_dolp: float = 0.05, max_iter: int = 30,
+                       loss: str = "cauchy") -> CameraHeading:
     """Heading of a camera from its Stokes image (see the module doc for the method).
 
     Parameters
@@ -145,6 +153,9 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         Camera tilt from gravity [deg] (:func:`sensor.camera.camera_attitude`).
     min_dolp : float
         Samples of lower DoLP are excluded [1].
+    loss : {"cauchy", "linear"}
+        Cauchy's robust loss by reweighting (module doc), or weighted least squares with the
+        prior weights alone (one solve, no reweighting).
 
     Raises
     ------
@@ -155,6 +166,9 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
     """
     check_in_range("sun_elevation_deg", sun_elevation_deg, -10.0, 90.0)
     check_in_range("min_dolp", min_dolp, 0.0, 1.0, high_open=True)
+    if loss not in LOSSES:
+        raise InvalidParameterError(f"loss must be one of {', '.join(LOSSES)}; got {loss!r}")
+    robust = loss == "cauchy"
     use = stokes.valid & (stokes.dolp >= min_dolp)
     n = int(use.sum())
     if n < 10:
@@ -195,10 +209,11 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         z = r * sqrt_prior
         zs = z[::every]
         scale = 1.4826 * np.median(np.abs(zs - np.median(zs)))
-        u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
-        done = step is not None and abs(step) < 1e-8  # rad: 6e-7 deg
         alpha = new
-        if done:
+        if not robust:   # least squares: the prior weights, one solve
+            break
+        u = prior / (1.0 + (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2)
+        if step is not None and abs(step) < 1e-8:  # rad: 6e-7 deg
             break
     else:
         raise ConvergenceError(f"heading did not settle in {max_iter} reweighting iterations",
@@ -220,7 +235,8 @@ def heading_from_image(stokes: StokesImage, lens, sun_elevation_deg: float,
         diff = (grid[:, 1:] - grid[:, :-1])[pair]
         meat = n * 0.5 * np.mean(diff ** 2)
     # M-estimator sandwich: the bread is the derivative of the weighted score, psi'(z)
-    q = (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2
+    # (1 for least squares)
+    q = (z / (_CAUCHY_C * max(scale, 1e-12))) ** 2 if robust else np.zeros_like(z)
     bread = np.sum(prior * (1.0 - q) / (1.0 + q) ** 2 * jac ** 2)
     sigma = np.sqrt(meat) / bread
     heading = float(np.mod(sun_azimuth_deg - np.degrees(alpha), 360.0))

@@ -12,7 +12,8 @@ import sys
 import warnings
 
 __all__ = ["ANNOUNCE_AFTER_S", "REPRODUCTION_SECONDS", "announce_duration",
-           "expected_reproduction_seconds", "format_duration", "install_warning_format"]
+           "expected_reproduction_seconds", "format_duration", "install_warning_format",
+           "report_run", "reproduction"]
 
 ANNOUNCE_AFTER_S = 10.0
 """Runs expected to take longer than this [s] print their expected duration first."""
@@ -30,10 +31,12 @@ REPRODUCTION_SECONDS = {
     "real-sky-compass": (1500.0, 64.0, None),
     "moonlit-sky": (160.0, 6.0, None),
     "moonlit-compass": (13.0, 3.0, None),
+    "cloudy-compass": (23.0, 5.0, 8),
 }
 """Measured wall time of each reproduction on a shared 2-core machine [s]: the full runs of
 sky-gap (14 min), physical-sky (7 min with its aerosol skies), jin2020 (73 s), camera (53 s),
-real-sky-compass (25 min for the 14 reference sessions) and moonlit-sky (2.7 min), every
+real-sky-compass (25 min for the 14 reference sessions), moonlit-sky (2.7 min) and
+cloudy-compass (23 s; its --trials are camera images, which take most of the time), every
 --quick run;
 the other full runs scaled from their quick runs by the number of trials (an upper bound:
 the fixed costs are scaled too). Zero: not measured (nothing is announced)."""
@@ -82,3 +85,27 @@ def install_warning_format() -> None:
     """Show every warning as one line (:func:`_one_line`); which warnings show is left to
     Python's filters (``-W``, ``PYTHONWARNINGS``)."""
     warnings.formatwarning = _one_line
+
+
+def report_run(title: str, summary: str, elapsed_s: float, out, files) -> None:
+    """What a reproduction prints when it is done: its title, its summary lines, the wall
+    time [s] and the files it wrote into ``out``."""
+    print(title)
+    print(summary)
+    print(f"{elapsed_s:.1f} s; wrote {out}/{', '.join(files)}")
+
+
+def reproduction(target: str, title: str, run, summarize, files):
+    """The ``skysim reproduce target`` function of a study whose ``run(quick=, trials=,
+    seed=, out=)`` returns a dict with ``summary["elapsed_s"]``: it runs into ``--out``
+    (default ``results/<target>``) and prints :func:`report_run` with ``summarize(result)``.
+    It reports ``run``'s module as its own, where the command line finds the study's
+    ``DEFAULT_SEED``."""
+    def _reproduce(args) -> int:
+        from pathlib import Path
+        out = Path(args.out or f"results/{target}")
+        result = run(quick=args.quick, trials=args.trials, seed=args.seed, out=out)
+        report_run(title, summarize(result), result["summary"]["elapsed_s"], out, files)
+        return 0
+    _reproduce.__module__ = run.__module__
+    return _reproduce

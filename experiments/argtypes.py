@@ -13,10 +13,10 @@ import argparse
 import math
 from pathlib import Path
 
-__all__ = ["DefaultsHelpFormatter", "aware_time", "data_file_and_sidecars", "existing_file",
-           "float_in", "int_at_least", "nonnegative_float", "nonnegative_int", "output_dir",
-           "output_file", "positive_float", "positive_int", "refuse_replacing_inputs", "seed",
-           "time_step"]
+__all__ = ["DefaultsHelpFormatter", "aware_time", "cloud_spec", "data_file_and_sidecars",
+           "existing_file", "float_in", "int_at_least", "nonnegative_float", "nonnegative_int",
+           "output_dir", "output_file", "positive_float", "positive_int",
+           "refuse_replacing_inputs", "seed", "time_step", "wind_spec"]
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """Adds ``(default: X)`` to an option's help unless the help already speaks of its
@@ -96,6 +96,44 @@ def float_in(low: float = -math.inf, high: float = math.inf, *, low_open: bool =
 
 positive_float = float_in(0.0, low_open=True)
 nonnegative_float = float_in(0.0)
+
+
+CLOUD_TAU_DEFAULT = 10.0
+"""Cloud optical thickness of ``--clouds COVER`` alone: a stratocumulus (the ISCCP classes put
+low clouds of optical thickness 3.6-23 there, Rossow & Schiffer 1999,
+doi:10.1175/1520-0477(1999)080<2261:AIUCFI>2.0.CO;2)."""
+
+
+def _parts(text: str, n_max: int, form: str) -> list[str]:
+    parts = [t.strip() for t in text.split(",")]
+    if not 1 <= len(parts) <= n_max or any(not t for t in parts):
+        raise argparse.ArgumentTypeError(f"write {form}; got {text!r}")
+    return parts
+
+
+def cloud_spec(text: str) -> tuple[float, float, int]:
+    """``COVER[,TAU[,SEED]]``: cloud cover (fraction of the sky, 0-1), cloud optical thickness
+    at 550 nm (0-100, default :data:`CLOUD_TAU_DEFAULT`) and the seed of the cloud field
+    (integer >= 0, default 0)."""
+    parts = _parts(text, 3, "COVER[,TAU[,SEED]], e.g. 0.5 or 0.5,10 or 0.5,10,3")
+    cover = float_in(0.0, 1.0)(parts[0])
+    tau = float_in(0.0, 100.0)(parts[1]) if len(parts) > 1 else CLOUD_TAU_DEFAULT
+    return cover, tau, seed(parts[2]) if len(parts) > 2 else 0
+
+
+cloud_spec.__name__ = "COVER[,TAU[,SEED]]"
+
+
+def wind_spec(text: str) -> tuple[float, float]:
+    """``SPEED,FROM``: wind speed [m/s, 0-100] and the azimuth it blows from [deg]."""
+    parts = _parts(text, 2, "SPEED,FROM (m/s, deg), e.g. 8,270")
+    if len(parts) != 2:
+        raise argparse.ArgumentTypeError(f"write SPEED,FROM (m/s, deg), e.g. 8,270; got "
+                                         f"{text!r}")
+    return float_in(0.0, 100.0, unit="m/s")(parts[0]), _number(parts[1])
+
+
+wind_spec.__name__ = "SPEED,FROM"
 
 
 def aware_time(text: str):

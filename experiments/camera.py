@@ -41,6 +41,9 @@ CAL_ANGLES_DEG = (0.0, 30.0, 60.0, 90.0, 120.0, 150.0)
 # rounded up by about 10 % for the interpreter's own share
 CAMERA_BYTES_PER_PIXEL = {"rayleigh": 160, "berry": 320, "multiple": 420}
 CAMERA_FIGURE_BYTES_PER_PIXEL = 340
+CLOUDS_BYTES_PER_PIXEL = 300
+"""Added by --clouds (traced on 512x512: rayleigh 300 -> 408, berry 241 -> 374; a cloudy
+rayleigh sky leaves the float32 path for float64, hence more than the difference)."""
 HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
 HEADING_FIGURE_BYTES_PER_PIXEL = 50
 
@@ -99,11 +102,14 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
 
 def _make_sky(args):
     from skysim.sky import make_sky
+
+    from ._clouds_cli import with_clouds
     if args.sky == "multiple":
-        return make_sky("multiple", tau=args.tau, albedo=args.albedo)
-    if args.sky == "rayleigh":  # float32 throughout: within 2e-6 of float64 (docs/camera.md)
+        return with_clouds(make_sky("multiple", tau=args.tau, albedo=args.albedo), args)
+    if args.sky == "rayleigh" and args.clouds is None:
+        # float32 throughout: within 2e-6 of float64 (docs/camera.md)
         return make_sky("rayleigh", dmax=args.dmax, dtype="float32")
-    return make_sky(args.sky, dmax=args.dmax)
+    return with_clouds(make_sky(args.sky, dmax=args.dmax), args)
 
 
 def _camera_command(args) -> int:
@@ -114,9 +120,11 @@ def _camera_command(args) -> int:
 
     require_image_codec(args.out)  # before the work, not after it
     check_memory(args.width * args.height * (CAMERA_BYTES_PER_PIXEL[args.sky]
+                                             + (CLOUDS_BYTES_PER_PIXEL if args.clouds else 0)
                                              + (CAMERA_FIGURE_BYTES_PER_PIXEL if args.figure
                                                 else 0)),
                  f"a {args.width}x{args.height} camera image ({args.sky} sky"
+                 f"{', partly cloudy' if args.clouds else ''}"
                  f"{', with --figure' if args.figure else ''})",
                  "use a smaller --width/--height" + (" or leave out --figure" if args.figure
                                                      else ""))
@@ -150,7 +158,8 @@ def _camera_command(args) -> int:
           f"azimuth; {int((raw >= cam.sensor.max_dn).sum())} saturated pixels)")
     if args.figure:
         st = camera_stokes(cam, raw, exposure, valid=scene.valid)
-        stokes_figure(st, cam.lens, att, args.figure, f"{sky.describe()['model']} sky, "
+        clouds = f", clouds {args.clouds[0]:g} at tau {args.clouds[1]:g}" if args.clouds else ""
+        stokes_figure(st, cam.lens, att, args.figure, f"{args.sky} sky{clouds}, "
                       f"sun {sun_el:.1f} deg")
         print(f"wrote {args.figure}")
     return 0
@@ -198,6 +207,7 @@ def _heading_command(args) -> int:
 
 
 def register(sub) -> None:
+    from ._clouds_cli import add_cloud_options
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
                        "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "
@@ -243,6 +253,7 @@ def register(sub) -> None:
     p.add_argument("--tau", type=positive_float, default=0.1,
                    help="multiple: Rayleigh optical thickness")
     p.add_argument("--albedo", type=float_in(0, 1), default=0.1, help="multiple: ground albedo")
+    add_cloud_options(p)
     p.add_argument("--seed", type=seed, default=0, help="random seed of the noise")
     p.add_argument("--figure", type=output_file(".png"), default=None,
                    help="also write DoLP/AoP images (.png)")

@@ -148,6 +148,7 @@ def _sky(args) -> int:
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
 
+    from ._clouds_cli import with_clouds
     params = _sky_params(args)
     refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
                               sidecar_path(args.out)), ("--plot", args.plot)],
@@ -171,7 +172,10 @@ def _sky(args) -> int:
         sun_el, sun_az = float(pos.elevation_deg.iloc[0]), float(pos.azimuth_deg.iloc[0])
         sun_info = {"site": site.to_dict(), "time": args.time.isoformat(),
                     "elevation_deg": sun_el, "azimuth_deg": sun_az}
-    sky = make_sky(args.model, **params) if sky is None else sky
+    if sky is not None and args.clouds is not None:
+        raise ValueError("--clouds needs the sunlit sky (--source sun): the clouds are lit by "
+                         "the Sun")
+    sky = with_clouds(make_sky(args.model, **params), args) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
     chunk = 100_000
     starts = range(0, el.size, chunk)
@@ -201,9 +205,11 @@ def _sky(args) -> int:
         marks = None
         if args.model == "multiple":  # radiance (flux pi)
             maps["I (flux pi)"] = (table["I"], "magma", None)
-        if args.model == "aerosol":  # log scale: the aureole is brighter by orders of magnitude
-            maps["log10 I (flux pi)"] = (np.log10(table["I"]), "magma", None)
-        if args.model == "multiple" and args.source == "sun":  # and the neutral points
+        if args.model == "aerosol" or args.clouds:  # log scale: bright aureole and clouds
+            unit = "relative" if args.model in ("rayleigh", "berry") else "flux pi"
+            maps[f"log10 I ({unit})"] = (np.log10(table["I"]), "magma", None)
+        if args.model == "multiple" and args.source == "sun" and not args.clouds:
+            # and the neutral points of the clear sky
             from skysim.neutral_points import neutral_points_from_modes
             marks = neutral_points_from_modes(sky.modes(sun_el), sun_el).marks(sun_az)
         plot_polar_maps(el, az, maps, args.plot, sun=(sun_el, sun_az), marks=marks,
@@ -244,6 +250,7 @@ def _sample(args) -> int:
     from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
+    from ._clouds_cli import with_clouds
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
@@ -271,8 +278,9 @@ def _sample(args) -> int:
                          f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; shorten --duration, "
                          "--sweeps or --sweep-interval")
     times = pd.DatetimeIndex(args.start + pd.to_timedelta(offsets_s.ravel(), unit="s"))
-    sky = make_sky("rayleigh", dmax=args.dmax)
-    _, _, _, sun_az0 = zenith_polarization(sky, site, times[::args.n], np.zeros(args.sweeps))
+    clear = make_sky("rayleigh", dmax=args.dmax)
+    _, _, _, sun_az0 = zenith_polarization(clear, site, times[::args.n], np.zeros(args.sweeps))
+    sky = with_clouds(clear, args, times)
     headings = (sun_az0[:, None] - 90.0
                 + np.linspace(0.0, 180.0, args.n, endpoint=False)[None, :]).ravel()
     sweep = np.repeat(np.arange(args.sweeps), args.n)
@@ -338,6 +346,7 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
+    from ._clouds_cli import add_cloud_options
     fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,
@@ -389,11 +398,12 @@ def register(sub) -> None:
     p.add_argument("--delta-deg", type=float_in(0, 90, low_open=True, high_open=True,
                                                 unit="deg"),
                    help="berry: separation of the neutral-point pairs [deg] (model default 40)")
+    add_cloud_options(p)
     p.add_argument("--out", type=output_file(".csv", ".parquet"),
                    help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
     p.add_argument("--plot", type=output_file(".png"),
                    help="PNG with polar maps of DoP and AoP (multiple: also I and the neutral "
-                        "points; aerosol: also log10 I)")
+                        "points; aerosol and --clouds: also log10 I)")
     p.set_defaults(func=_sky)
 
     s = sub.add_parser("sample", help="simulate a three-pair sensor sweep (measurement table)",
@@ -428,6 +438,7 @@ def register(sub) -> None:
                         "[log10], noise_V (3) [V], turntable_error_deg [deg]")
     s.add_argument("--no-daq", action="store_true",
                    help="no 16-bit quantisation of the outputs (+/-10 V range)")
+    add_cloud_options(s, wind=True)
     s.add_argument("--seed", type=seed, default=0, help="random seed, >= 0")
     s.set_defaults(func=_sample)
 

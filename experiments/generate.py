@@ -41,11 +41,11 @@ SKYMAP_SCHEMA = "skysim.skymap/1"
 _KINDS = ("sky_map", "measurement", "photodiodes")
 _TIMES = {"start", "n", "duration_s"}
 ENTRY_KEYS = {
-    "sky_map": {"name", "format", "sky", "time", "sun_elevation_deg", "sun_azimuth_deg",
-                "grid_step_deg"},
-    "measurement": {"name", "format", "sky", *_TIMES, "errors", "heading_offset_deg",
-                    "daq_bits", "daq_range_V"},
-    "photodiodes": {"name", "format", "sky", *_TIMES, "configuration", "n_units",
+    "sky_map": {"name", "format", "sky", "clouds", "time", "sun_elevation_deg",
+                "sun_azimuth_deg", "grid_step_deg"},
+    "measurement": {"name", "format", "sky", "clouds", *_TIMES, "errors",
+                    "heading_offset_deg", "daq_bits", "daq_range_V"},
+    "photodiodes": {"name", "format", "sky", "clouds", *_TIMES, "configuration", "n_units",
                     "elevation_deg", "installation_error_max_deg", "yaw_start_deg",
                     "yaw_end_deg", "pitch_deg", "roll_deg", "attitude_noise_deg",
                     "noise_counts", "sweeps", "sweep_interval_s"},
@@ -161,6 +161,36 @@ def _sky(entry: dict, where: str):
                                   f"{model!r} ({exc})") from exc
 
 
+CLOUD_KEYS = ("cover", "tau", "seed", "correlation_deg", "base_m", "thickness",
+              "wind_speed_m_s", "wind_from_deg")
+"""Keys of an entry's ``clouds`` table (:class:`skysim.cloud_field.CloudField`)."""
+
+
+def _cloudy(sky, entry: dict, where: str, times=None):
+    """``sky`` behind the entry's ``clouds`` (itself without them); ``times``: one per sample,
+    the cloud field as drawn at the first."""
+    spec = entry.get("clouds")
+    if spec is None:
+        return sky
+    if not isinstance(spec, dict) or "cover" not in spec:
+        raise GenerateConfigError(f"{where}: clouds must be a table with at least cover, e.g. "
+                                  "{cover = 0.5, tau = 10.0, seed = 1}; got " f"{spec!r}")
+    unknown = sorted(set(spec) - set(CLOUD_KEYS))
+    if unknown:
+        raise GenerateConfigError(f"{where}: unknown clouds key(s) {unknown}; valid: "
+                                  f"{', '.join(CLOUD_KEYS)}")
+    from skysim.cloud_field import CloudField
+    from skysim.partly_cloudy import PartlyCloudySky
+    args = dict(spec)
+    try:
+        field = CloudField(args.pop("cover"), args.pop("tau", 10.0), args.pop("seed", 0),
+                           **args)
+    except (InvalidParameterError, TypeError) as exc:
+        raise GenerateConfigError(f"{where}: clouds: {exc}") from exc
+    out = PartlyCloudySky(sky, field)
+    return out if times is None else out.at_times(times)
+
+
 def _write(table, sidecar: dict, path: Path) -> None:
     from sensor.tables import write_table_and_sidecar
     write_table_and_sidecar(table, sidecar, path)
@@ -174,7 +204,7 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
     from skysim.resources import check_memory
 
     from .commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION, sky_grid, sky_grid_size
-    sky = _sky(entry, where)
+    sky = _cloudy(_sky(entry, where), entry, where)
     if "time" in entry:
         pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,
                            site.altitude_m)
@@ -230,9 +260,10 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     else:
         raise GenerateConfigError(f"{where}: errors must be 'random', 'none' or a table of "
                                   f"OpponentErrors fields; got {errors!r}")
-    sky = _sky(entry, where)
+    clear = _sky(entry, where)
     times = _times(entry, where)
-    _, _, _, sun_az0 = zenith_polarization(sky, site, times[:1], [0.0])
+    _, _, _, sun_az0 = zenith_polarization(clear, site, times[:1], [0.0])
+    sky = _cloudy(clear, entry, where, times)
     headings = (sun_az0[0] + _number(entry, "heading_offset_deg", -90.0, where)
                 + np.linspace(0.0, 180.0, len(times), endpoint=False))
     bits = entry.get("daq_bits", 16)
@@ -273,7 +304,7 @@ def _photodiodes(entry: dict, site, seed: int, path: Path, where: str) -> None:
     times = pd.DatetimeIndex(np.concatenate([one + pd.Timedelta(seconds=k * every)
                                              for k in range(n_sweeps)]))
     yaw = np.tile(yaw1, n_sweeps)
-    data = sensor.sample(_sky(entry, where), site, times, yaw,
+    data = sensor.sample(_cloudy(_sky(entry, where), entry, where, times), site, times, yaw,
                          _number(entry, "pitch_deg", 0.0, where),
                          _number(entry, "roll_deg", 0.0, where), rng,
                          attitude_noise_deg=_number(entry, "attitude_noise_deg", 0.0, where,

@@ -486,15 +486,10 @@ def format_summary(summary: dict) -> str:
     return "\n".join(lines)
 
 
-def _reproduce(args) -> int:
-    out = Path(args.out or "results/moonlit-compass")
-    result = run(quick=args.quick, trials=args.trials, seed=args.seed, out=out)
-    print("Moonlit compass — heading error vs lunar phase and Moon elevation")
-    print(format_summary(result["summary"]))
-    print(f"{result['summary']['elapsed_s']:.1f} s; wrote {out}/table.md, table.csv, "
-          "conditions.csv, summary.json, heading_vs_phase.png, heading_vs_illuminance.png")
-    return 0
-
-
 def register_reproduce(targets: dict) -> None:
-    targets["moonlit-compass"] = _reproduce
+    from ._progress import reproduction
+    targets["moonlit-compass"] = reproduction(
+        "moonlit-compass", "Moonlit compass — heading error vs lunar phase and Moon elevation",
+        run, lambda result: format_summary(result["summary"]),
+        ("table.md", "table.csv", "conditions.csv", "summary.json", "heading_vs_phase.png",
+         "heading_vs_illuminance.png"))

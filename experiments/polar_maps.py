@@ -19,10 +19,16 @@ the sidecar)."""
 def sky_title(describe: dict, sun_elevation_deg: float, sun_azimuth_deg: float) -> str:
     """Figure title: the sky model with its scalar parameters and the sun, e.g.
     ``rayleigh sky, dmax 0.7; sun elevation 30°, azimuth 275°``."""
-    params = ", ".join(f"{k} {describe[k]:g}" for k in TITLE_PARAMETERS
+    clouds = ""
+    if "clouds" in describe and "clear" in describe:   # a partly cloudy sky
+        c = describe["clouds"]
+        seed = f", seed {c['seed']}" if isinstance(c.get("seed"), int) else ""
+        clouds = f"; clouds cover {c['cover']:g}, tau {c['tau']:g}{seed}"
+        describe = describe["clear"]
+    params = ", ".join(f"{k} {describe[k]:.4g}" for k in TITLE_PARAMETERS
                        if isinstance(describe.get(k), (int, float)))
-    return (f"{describe.get('model', '')} sky{', ' + params if params else ''}; sun elevation "
-            f"{sun_elevation_deg:.1f}°, azimuth {sun_azimuth_deg:.1f}°")
+    return (f"{describe.get('model', '')} sky{', ' + params if params else ''}{clouds}; sun "
+            f"elevation {sun_elevation_deg:.1f}°, azimuth {sun_azimuth_deg:.1f}°")
 
 
 def plot_polar_maps(elevation_deg, azimuth_deg, quantities: dict, path, *, sun=None,

@@ -9,6 +9,8 @@ _EXPORTS = {
     "NaiveDatetimeError": ".exceptions",
     "SunBelowHorizonError": ".exceptions",
     "BerrySky": ".berry",
+    "CloudField": ".cloud_field",
+    "PartlyCloudySky": ".partly_cloudy",
     "MultipleScatteringSky": ".multiple",
     "neutral_points": ".neutral_points",
     "RayleighSky": ".sky",
@@ -22,7 +24,8 @@ _EXPORTS = {
 """Public name -> submodule defining it (imported on first access: the sun pulls in pandas)."""
 
 __all__ = ["InvalidParameterError", "NaiveDatetimeError", "SunBelowHorizonError", "Sky",
-           "SkyField", "RayleighSky", "MultipleScatteringSky", "BerrySky", "neutral_points",
+           "SkyField", "RayleighSky", "MultipleScatteringSky", "BerrySky", "CloudField",
+           "PartlyCloudySky", "neutral_points",
            "make_sky", "Site", "sun_position", "sun_vector",
            "__version__"]
 

@@ -444,6 +444,11 @@ class AerosolSky(Sky):
                 out[:, use] += weight[use] * np.asarray(st)
         return out[0], out[1], out[2]
 
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """1: ``I`` is in the unit of an incident solar flux ``pi``."""
+        return np.ones(np.broadcast_shapes(np.shape(view_elevation_deg),
+                                           np.shape(sun_elevation_deg)))
+
     def describe(self) -> dict:
         optics = aerosol_optics(self.aerosol, self.wavelength_nm, self.n_moments)
         ref = aerosol_optics(self.aerosol, REFERENCE_WAVELENGTH_NM, self.n_moments)

@@ -182,6 +182,11 @@ class BerrySky(Sky):
         chi = np.radians(aop)
         return intensity, intensity * dop * np.cos(2 * chi), intensity * dop * np.sin(2 * chi)
 
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """As the Rayleigh sky's (``I`` is the same relative radiance):
+        :func:`skysim.rayleigh.flux_pi_scale`."""
+        return rayleigh.flux_pi_scale(view_elevation_deg, sun_elevation_deg)
+
     def describe(self) -> dict:
         return {"model": self.name, "delta_deg": self.delta_deg, "dmax": self.dmax,
                 "dop": "dmax |w| / (2 - |w|)",

@@ -589,6 +589,11 @@ class MultipleScatteringSky(Sky):
         return sorted(set(np.unique(sel[exact]).tolist()) | set(np.unique(lo[~exact]).tolist())
                       | set(np.unique(hi[~exact]).tolist()))
 
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """1: ``I`` is in the unit of an incident solar flux ``pi``."""
+        return np.ones(np.broadcast_shapes(np.shape(view_elevation_deg),
+                                           np.shape(sun_elevation_deg)))
+
     def describe(self) -> dict:
         return {"model": self.name, "tau": self.tau, "tau_check": tau_check(self.tau),
                 "albedo": self.albedo,

@@ -408,6 +408,13 @@ class MoonlitSky(Sky):
         I = I + dark_sky_radiance(vel, self.band, self.dark_sky_mag_arcsec2, self.extinction)
         return I, Q, U
 
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """``E / pi`` [W m^-2 nm^-1 sr^-1]: a radiance of 1 in the unit of an incident flux
+        ``pi`` is ``E / pi`` for the Moon's irradiance ``E`` (above the atmosphere)."""
+        return np.full(np.broadcast_shapes(np.shape(view_elevation_deg),
+                                           np.shape(sun_elevation_deg)),
+                       self.moon_irradiance / np.pi)
+
     def describe(self) -> dict:
         return {"model": self.name, "band": self.band,
                 "moon_irradiance_W_m2_nm": self.moon_irradiance,

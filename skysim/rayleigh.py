@@ -16,6 +16,8 @@ References
 .. [2] J. Yang, N. Zhou, Y. Huang, X. Liu, "Analysis and compensation of angle errors of
    polarization navigation sensors", Opt. Precision Eng. 22(6):1424-1429 (2014),
    doi:10.3788/OPE.20142206.1424, eq. (1).
+.. [3] J. E. Hansen, L. D. Travis, "Light scattering in planetary atmospheres", Space Sci.
+   Rev. 16:527-610 (1974), doi:10.1007/BF00168069.
 """
 
 from __future__ import annotations
@@ -35,6 +37,8 @@ __all__ = [
     "polarization_field",
     "stokes",
     "stokes_from_sun_projections",
+    "slab_transmission",
+    "flux_pi_scale",
     "FLOAT32_AOP_ERROR_DEG",
     "FLOAT32_DOP_ERROR",
     "FLOAT32_MIN_SCATTERING_ANGLE_DEG",
@@ -271,3 +275,41 @@ def stokes(view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_
     if dmax.ndim == 0:
         return f["I"], f["Q"], f["U"]
     return f["I"], f["Q"] * dmax, f["U"] * dmax
+
+
+def slab_transmission(tau, mu, mu0) -> np.ndarray:
+    """``h = mu0 (exp(-tau/mu0) - exp(-tau/mu)) / (mu0 - mu)`` [1]: singly scattered light
+    leaving the base of a slab of optical thickness ``tau`` along ``mu`` for a beam at
+    ``mu0`` is ``w F0 P h / (4 pi)`` (Hansen & Travis 1974 [3]_, sect. 3; any phase
+    function ``P`` of mean 1 over the sphere); ``tau / mu`` for a thin slab.
+
+    Computed as ``(tau / mu) exp(-tau / mu0) (1 - exp(-x)) / x``, ``x = tau (mu0 - mu) /
+    (mu mu0)``, without cancellation at ``mu = mu0`` (broadcast; ``mu, mu0 > 0``).
+    """
+    tau, mu, mu0 = np.broadcast_arrays(*(np.asarray(a, float) for a in (tau, mu, mu0)))
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):  # mu = 0: the horizon
+        x = tau * (mu0 - mu) / (mu * mu0)
+        small = np.abs(x) < 1e-4
+        direct = mu0 * (np.exp(-tau / mu0) - np.exp(-tau / mu)) / (mu0 - mu)
+        series = (tau / mu) * np.exp(-tau / mu0) * (1.0 - 0.5 * x + x * x / 6.0)
+    return np.where(small, series, direct)
+
+
+
+def flux_pi_scale(view_elevation_deg, sun_elevation_deg, tau: float | None = None):
+    """The relative radiance (:func:`relative_radiance`) for a radiance of 1 in the unit of an
+    incident solar flux ``pi`` (the unit of :mod:`skysim.multiple`).
+
+    Below a thin Rayleigh slab of optical thickness ``tau`` the sky's radiance in that unit is
+    ``P h / 4`` (:func:`slab_transmission`, ``P`` the relative radiance, ``mu = sin(view
+    elevation)``, ``mu0 = sin(sun elevation)``), so the factor is ``4 / h`` (about
+    ``4 mu / tau`` overhead). ``tau`` defaults to the molecular optical thickness at 550 nm
+    at sea level, 0.0973 (Bodhaine et al. 1999, :func:`skysim.multiple.bodhaine_optical_thickness`).
+    Broadcast; the sun above the horizon.
+    """
+    if tau is None:
+        from .multiple import bodhaine_optical_thickness
+        tau = float(bodhaine_optical_thickness(550.0))
+    mu = np.sin(np.radians(np.asarray(view_elevation_deg, float)))
+    mu0 = np.sin(np.radians(np.asarray(sun_elevation_deg, float)))
+    return 4.0 / slab_transmission(tau, mu, mu0)

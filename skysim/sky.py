@@ -12,6 +12,9 @@ Models (select with :func:`make_sky`):
 - ``"berry"``: the analytic neutral-point singularity model of Berry, Dennis & Lee (2004).
 - ``"aerosol"``: molecules and an aerosol type (OPAC presets, Mie optics) over a Lambertian
   ground, multiple scattering (optional extra ``skysim[rt]``).
+
+Broken clouds go in front of any of them: :class:`skysim.partly_cloudy.PartlyCloudySky`
+(which needs the model's radiance unit, :meth:`Sky.flux_pi_scale`).
 """
 
 from __future__ import annotations
@@ -127,6 +130,20 @@ class Sky(abc.ABC):
                 sun_azimuth_deg) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Return broadcast ``(I, Q, U)`` arrays for already validated inputs."""
 
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """This model's ``I`` for a radiance of 1 in the unit of an incident solar flux ``pi``
+        per unit area normal to the beam (the unit of :mod:`skysim.multiple`), at view and
+        sun elevations [deg] (broadcast): how light computed in that absolute unit, such as a
+        cloud's (:mod:`skysim.partly_cloudy`), joins this sky.
+
+        Raises
+        ------
+        NotImplementedError
+            For a model whose ``I`` has no stated absolute unit.
+        """
+        raise NotImplementedError(f"sky model {self.name!r} does not state the unit of its "
+                                  "radiance, so no cloud light can be added to it")
+
     def describe(self) -> dict:
         """Model name and parameters, for sidecars."""
         return {"model": self.name}
@@ -172,6 +189,11 @@ class RayleighSky(Sky):
         vel, vaz = (np.broadcast_to(x, f["I"].shape) for x in (vel, vaz))
         return SkyField.with_polarization(vel, vaz, f["I"], f["Q"], f["U"], f["dop"],
                                           f["aop_deg"])
+
+    def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:
+        """The relative radiance against the flux-``pi`` unit: that of a thin Rayleigh slab
+        of the molecular optical thickness at 550 nm (:func:`skysim.rayleigh.flux_pi_scale`)."""
+        return rayleigh.flux_pi_scale(view_elevation_deg, sun_elevation_deg)
 
     def describe(self) -> dict:
         out = {"model": self.name, "dmax": self.dmax}
