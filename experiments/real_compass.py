@@ -131,15 +131,25 @@ def clock_check(files, reports: dict, out: Path, effects, folds: int = 3,
     open-sky session and diagnose them with the unit pointing calibrated on the day's other
     sessions (:func:`calibration.photodiode_diagnosis.calibrated_pointing`, leave one out).
 
-    ``reports`` maps each session file to its diagnosis (sessions without one are skipped).
+    ``reports`` maps each session file to its diagnosis (sessions without one, or whose
+    screen stopped the fit, are skipped).
     Writes ``clock_check.csv`` and returns the table: per case the verdict, the fitted clock
     offset and its uncertainty, the error against the injected one and whether it was found.
     """
     from calibration import diagnose
     from calibration.diagnosis import DiagnosisError
     from calibration.diagnosis.rings import pointing_from_reports
+    from calibration.photodiode_diagnosis import PointingCalibrationError
     from sensor.photodiodes_io import PhotodiodeData, read_photodiodes
-    open_sky = [f for f in files if "canopy" not in Path(f).name and f in reports]
+
+    def fitted(report) -> bool:     # a session the screen stopped (a dark sky) fitted nothing
+        try:
+            pointing_from_reports([report])
+        except PointingCalibrationError:
+            return False
+        return True
+    open_sky = [f for f in files if "canopy" not in Path(f).name and f in reports
+                and fitted(reports[f])]
     if len(open_sky) < 3:
         return pd.DataFrame()
     rows = []
