@@ -104,6 +104,44 @@ def test_verdict_rule_branches():
     assert [c.effect for c in ranked] == ["y", "x", "c"]
 
 
+def test_partial_explanation_option_with_block_consistency():
+    """The rule's options for instruments no single effect takes to the floor (the ring's
+    thresholds): a candidate explains when it removes at least ``1 - residual_excess`` of
+    the excess variance and lowers the gap in at least ``block_consistency`` of the held-out
+    blocks; a fitted effect indistinguishable from its null never explains."""
+    t = Thresholds(residual_excess=0.95, block_consistency=0.75)
+    floor, g0 = 1.0, 3.0                                   # excess variance 8
+    g_5 = np.sqrt(9.0 - 0.05 * 8.0)                        # removes exactly 5 %
+    assert core.excess_removed(g_5, g0, floor) == pytest.approx(0.05, rel=1e-12)
+    assert core.explains(g_5 - 1e-9, g0, floor, t, blocks_improved=0.75)
+    assert not core.explains(g_5 + 1e-6, g0, floor, t, blocks_improved=1.0)
+    assert not core.explains(g_5 - 1e-9, g0, floor, t, blocks_improved=0.7)
+    assert not core.explains(1.0, g0, floor, t, blocks_improved=1.0, null_excluded=False)
+    with pytest.raises(ValueError, match="blocks_improved"):
+        core.explains(2.0, g0, floor, t)
+    with pytest.raises(ValueError, match="residual_excess=1.5"):
+        Thresholds(residual_excess=1.5)
+    # the default rule needs no block count, and is unchanged by a consistency of 0
+    assert core.explains(np.sqrt(1 + 0.02 * 8.0), g0, floor, Thresholds())
+    # the reason states the rule that was met
+    effect, reason = decide([_cand("a", 2.5, -50.0)], g0, floor, t)
+    assert effect == "a" and "removes 34 % of the excess" in reason and "75 %" in reason
+    effect, reason = decide([_cand("a", 2.9, -5.0, explained=False)], g0, floor, t)
+    assert effect == "unexplained" and "7 % removed" in reason
+
+
+def test_blocks_improved_counts_blocks_whose_sum_of_squares_falls():
+    """Against a loop over blocks: block 0 improves, block 1 worsens, block 2 improves on
+    its finite values (NaN = reading not used)."""
+    block = np.repeat([0, 1, 2], 4)
+    r0 = np.array([1, 1, 1, 1, 1, 1, 1, 1, 2, 2, np.nan, 2.0])[:, None] * np.ones((1, 2))
+    r1 = np.array([0.5, 1, 1, 1, 1, 1, 1, 1.5, 1, 2, 9.0, 2])[:, None] * np.ones((1, 2))
+    r1[10] = np.nan
+    loop = np.mean([np.nansum(r1[block == b] ** 2) < np.nansum(r0[block == b] ** 2)
+                    for b in range(3)])
+    assert core.blocks_improved(r0, r1, block) == pytest.approx(loop) == pytest.approx(2 / 3)
+
+
 def test_shrink_uncertainty_equals_a_direct_block_bootstrap():
     """Against a second implementation (a loop over resamples) with the same generator."""
     rng = np.random.default_rng(0)

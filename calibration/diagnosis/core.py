@@ -25,9 +25,14 @@ candidate effect on held-out data; everything that turns them into a verdict is 
 4. **Verdict** (:func:`explains`, :func:`decide`). ``none`` when the base gap is within the
    floor, ``G_0 <= f (1 + none_margin)``; the best-ranked candidate when its score is
    negative and it *explains* the gap: ``G_c <= f (1 + explained_margin)``, or it removes
-   all but ``residual_excess`` of the excess variance ``G_0^2 - f^2``; ``unexplained``
-   otherwise. Each candidate is fitted on its own, so the verdict with a candidate withheld
-   is :func:`decide` on the remaining rows.
+   all but ``residual_excess`` of the excess variance ``G_0^2 - f^2``
+   (:func:`excess_removed`); ``unexplained`` otherwise. Two options of the same rule, for
+   instruments that need them: ``block_consistency`` also requires the candidate to lower
+   the held-out sum of squares in at least that fraction of the held-out blocks
+   (:func:`blocks_improved`), and an adapter that can tell a fitted effect from its null
+   (the ring's clock offset against its uncertainty) withholds a candidate whose effect it
+   cannot (``null_excluded``). Each candidate is fitted on its own, so the verdict with a
+   candidate withheld is :func:`decide` on the remaining rows.
 5. **Shrink** (:func:`shrink_uncertainty`). ``1 - G_after / G_before`` with standard errors
    from a bootstrap over whole held-out blocks (Künsch 1989 [4]_), resampling blocks with
    their sums of squares so the gaps before and after stay paired.
@@ -59,9 +64,9 @@ import numpy as np
 from .errors import InsufficientDataError
 from .report import Candidate, Slice
 
-__all__ = ["Thresholds", "assign_folds", "decide", "explains", "held_out_score",
-           "noise_floor", "partition_shares", "partition_slices", "rank", "rms",
-           "shrink_uncertainty", "slice_limit", "sort_slices"]
+__all__ = ["Thresholds", "assign_folds", "blocks_improved", "decide", "excess_removed",
+           "explains", "held_out_score", "noise_floor", "partition_shares", "partition_slices",
+           "rank", "rms", "shrink_uncertainty", "slice_limit", "sort_slices"]
 
 
 @dataclass(frozen=True)
@@ -76,15 +81,37 @@ class Thresholds:
         sets, not the benchmark seed): 0.10 let a wrong candidate absorb 8 % of weak gaps
         (1.1-2 x floor) in leave-one-out, 0.07 halves that with no loss of correct verdicts,
         0.05 starts to miss true effects.
+    residual_excess : the share of the excess variance a candidate may leave and still
+        explain the gap (0.02: all but 2 % removed, i.e. down to the floor).
+    block_consistency : a candidate explains the gap only when it also lowers the held-out
+        sum of squares in at least this fraction of the held-out blocks (0: not required).
+        Needed where ``residual_excess`` is large: an instrument whose gap no single effect
+        takes to the floor (a real sky) names a candidate that removes part of it, and a
+        part may come from a few blocks alone (one sweep the fit happens to suit); a
+        candidate that removes nearly all the excess lowers every block's gap anyway.
+
+    The ring (photodiode) instruments use ``residual_excess=0.95, block_consistency=0.75``
+    (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there).
     """
 
     none_margin: float = 0.10
     explained_margin: float = 0.07
     residual_excess: float = 0.02
+    block_consistency: float = 0.0
+
+    def __post_init__(self):
+        for name in ("none_margin", "explained_margin"):
+            if not getattr(self, name) >= 0:
+                raise ValueError(f"Thresholds.{name}={getattr(self, name)!r}: expected >= 0")
+        for name in ("residual_excess", "block_consistency"):
+            if not 0 <= getattr(self, name) <= 1:
+                raise ValueError(f"Thresholds.{name}={getattr(self, name)!r}: expected a "
+                                 "fraction in [0, 1]")
 
     def to_dict(self) -> dict:
         return {"none_margin": self.none_margin, "explained_margin": self.explained_margin,
-                "residual_excess": self.residual_excess}
+                "residual_excess": self.residual_excess,
+                "block_consistency": self.block_consistency}
 
 
 # ------------------------------------------------------------------------------ folds
@@ -188,14 +215,70 @@ def held_out_score(gap: float, gap_base: float, floor: float, n_held_out: int,
                  + extra_params * np.log(max(n_calibration, 2)))
 
 
-def explains(gap: float, gap_base: float, floor: float, thresholds: Thresholds) -> bool:
-    """True when a candidate's held-out gap is at the floor (module docstring, step 4);
-    False when the base's gap already is (there is nothing to explain)."""
+def excess_removed(gap: float, gap_base: float, floor: float) -> float:
+    """Share of the excess held-out variance a candidate removes,
+    ``(G_0^2 - G_c^2) / (G_0^2 - f^2)`` (negative when it adds to the gap; the denominator
+    is kept above 1e-300 for a base gap at the floor)."""
+    return float((gap_base ** 2 - gap ** 2) / max(gap_base ** 2 - floor ** 2, 1e-300))
+
+
+def blocks_improved(res0, res1, block) -> float:
+    """Fraction of the held-out blocks whose residual sum of squares the candidate lowers.
+
+    Parameters
+    ----------
+    res0, res1 : ndarray (n, ...)
+        Held-out residuals of the base and of the candidate (NaN where not used).
+    block : array (n,)
+        Block of every row.
+    """
+    (ss0, _), (ss1, _) = _block_sums(res0, block), _block_sums(res1, block)
+    return float(np.mean(ss1 < ss0))
+
+
+def _block_sums(res, block) -> tuple[np.ndarray, np.ndarray]:
+    """Per block (in block-id order): sum of squared finite residuals, and their count."""
+    ids, idx = np.unique(np.asarray(block), return_inverse=True)
+    r = np.asarray(res, float).reshape(len(idx), -1)
+    return (np.bincount(idx, np.nansum(r ** 2, axis=1), ids.size),
+            np.bincount(idx, np.isfinite(r).sum(axis=1), ids.size))
+
+
+def explains(gap: float, gap_base: float, floor: float, thresholds: Thresholds, *,
+             blocks_improved: float | None = None, null_excluded: bool = True) -> bool:
+    """True when a candidate explains the held-out gap (module docstring, step 4); False
+    when the base's gap is already at the floor (there is nothing to explain).
+
+    Parameters
+    ----------
+    gap, gap_base, floor : float
+        Held-out gaps of the candidate and of the base, noise floor [one unit].
+    thresholds : Thresholds
+    blocks_improved : float, optional
+        :func:`blocks_improved` of the candidate; required when
+        ``thresholds.block_consistency`` is above 0.
+    null_excluded : bool
+        False when the adapter finds the fitted effect indistinguishable from its null
+        (within twice its uncertainty); such a candidate is never named, however it fits.
+
+    Raises
+    ------
+    ValueError
+        For ``thresholds.block_consistency > 0`` without ``blocks_improved``.
+    """
     if gap_base <= floor * (1 + thresholds.none_margin):
         return False
+    if thresholds.block_consistency > 0:
+        if blocks_improved is None:
+            raise ValueError("thresholds.block_consistency="
+                             f"{thresholds.block_consistency!r} needs the candidate's "
+                             "blocks_improved")
+        if blocks_improved < thresholds.block_consistency:
+            return False
     excess0 = max(gap_base ** 2 - floor ** 2, 0.0)
-    return bool(gap <= floor * (1 + thresholds.explained_margin)
-                or gap ** 2 - floor ** 2 <= thresholds.residual_excess * excess0)
+    return bool(null_excluded and (gap <= floor * (1 + thresholds.explained_margin)
+                                   or gap ** 2 - floor ** 2
+                                   <= thresholds.residual_excess * excess0))
 
 
 def rank(candidates: list[Candidate]) -> list[Candidate]:
@@ -222,10 +305,23 @@ def decide(candidates, gap_before: float, floor: float,
     if not rows:
         return "unexplained", "no candidate effects were available"
     best = rows[0]
+    removed = excess_removed(best.gap_after, gap_before, floor)
+    consistent = (f" and lowers the gap in at least {100 * thresholds.block_consistency:.0f} % "
+                  "of the held-out blocks" if thresholds.block_consistency > 0 else "")
     if best.explained and best.score < 0:
-        return best.effect, "best-ranked candidate brings the held-out gap to the noise floor"
-    return "unexplained", (f"no candidate brings the held-out gap to the noise floor (best: "
-                           f"{best.effect}, {best.gap_after:.3g} vs floor {floor:.3g})")
+        if best.gap_after <= floor * (1 + thresholds.explained_margin):
+            return best.effect, ("best-ranked candidate brings the held-out gap to the "
+                                 "noise floor")
+        return best.effect, (f"best-ranked candidate removes {100 * removed:.0f} % of the "
+                             "excess held-out variance (at least "
+                             f"{100 * (1 - thresholds.residual_excess):.0f} % needed)"
+                             + consistent)
+    return "unexplained", (f"no candidate with a negative score brings the held-out gap to "
+                           f"the noise floor or removes at least "
+                           f"{100 * (1 - thresholds.residual_excess):.0f} % of the excess "
+                           f"held-out variance{consistent} (best: {best.effect}, "
+                           f"{best.gap_after:.3g} vs floor {floor:.3g}, "
+                           f"{100 * removed:.0f} % removed)")
 
 
 # ------------------------------------------------------------------------------ shrink
@@ -247,15 +343,11 @@ def shrink_uncertainty(res0, res1, block, rng: np.random.Generator,
         ``gap_before_se``, ``gap_after_se``, ``shrink_se`` [gap unit; shrink unitless];
         None with fewer than two blocks (no spread to resample).
     """
-    ids, idx = np.unique(np.asarray(block), return_inverse=True)
-    if ids.size < 2:
+    n_blocks = np.unique(np.asarray(block)).size
+    if n_blocks < 2:
         return None
-    r0 = np.asarray(res0, float).reshape(len(idx), -1)
-    r1 = np.asarray(res1, float).reshape(len(idx), -1)
-    ss0 = np.bincount(idx, np.nansum(r0 ** 2, axis=1), ids.size)
-    ss1 = np.bincount(idx, np.nansum(r1 ** 2, axis=1), ids.size)
-    cnt = np.bincount(idx, np.isfinite(r0).sum(axis=1), ids.size)
-    pick = rng.integers(0, ids.size, (n_boot, ids.size))
+    (ss0, cnt), (ss1, _) = _block_sums(res0, block), _block_sums(res1, block)
+    pick = rng.integers(0, n_blocks, (n_boot, n_blocks))
     g0 = np.sqrt(ss0[pick].sum(1) / cnt[pick].sum(1))
     g1 = np.sqrt(ss1[pick].sum(1) / cnt[pick].sum(1))
     return {"gap_before_se": float(np.std(g0)), "gap_after_se": float(np.std(g1)),
