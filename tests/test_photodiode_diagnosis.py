@@ -18,6 +18,7 @@ import pandas as pd
 import pytest
 
 from calibration.diagnosis import InsufficientDataError
+from calibration.diagnosis.core import assign_folds
 from calibration.photodiode_diagnosis import (
     InstrumentDataError,
     SunTooLowError,
@@ -35,7 +36,7 @@ from calibration.photodiode_diagnosis.effects import (
 )
 from calibration.photodiode_diagnosis.forward import Forward, SunTrack
 from calibration.photodiode_diagnosis.instrument import held_readings
-from calibration.photodiode_diagnosis.run import held_out_folds
+from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
 from experiments.real_injection import inject
 from sensor.compound_eye import ring_configuration
 from sensor.photodiodes_io import PhotodiodeData, PhotodiodeFormatError
@@ -153,6 +154,18 @@ def test_yaw_scale_named_and_recovered(session):
     k = doc["verdict"]["params"]["factor"]["value"]
     assert abs(k / truth["factor"] - 1) < 0.015
     assert doc["heading_error"]["best_deg"] < doc["heading_error"]["base_deg"]
+    # scored and decided by the shared core with the ring's thresholds: the named
+    # candidate's excess removed is (G_0^2 - G_c^2) / (G_0^2 - f^2) of the reported gaps,
+    # above the ring's 5 %, over at least 75 % of the held-out sweeps
+    v, row = doc["verdict"], doc["candidates"][0]
+    assert doc["thresholds"] == RING_THRESHOLDS.to_dict() and row["effect"] == "yaw_scale"
+    removed = ((v["gap_before"] ** 2 - v["gap_after"] ** 2)
+               / (v["gap_before"] ** 2 - v["noise_floor"] ** 2))
+    assert row["excess_removed"] == pytest.approx(removed, rel=1e-12)
+    assert removed >= 0.05 and row["sweeps_improved"] >= 0.75 and row["explained"]
+    assert "removes" in v["reason"] and "75 %" in v["reason"]
+    # how far: bootstrap standard errors over the held-out sweeps
+    assert 0 < v["gap_before_se"] < v["gap_before"] and 0 < v["shrink_se"] < 1
 
 
 def test_clock_offset_hours_found(session):
@@ -225,7 +238,7 @@ def test_bad_input(session):
         diagnose_photodiodes(PhotodiodeData(sat, session.sidecar), ("yaw_scale",),
                              where="sat.csv")
     with pytest.raises(Exception, match="folds"):
-        held_out_folds(np.repeat([0, 1, 2], 5), 1)
+        assign_folds(np.repeat([0, 1, 2], 5), 1)
     assert not is_three_pair_sensor(session.sidecar)
 
 

@@ -16,7 +16,7 @@ from .report import Candidate, DiagnosisReport, Slice, Verdict
 __all__ = ["from_legacy_dict", "from_ring_v1", "from_sky_v1", "from_three_pair_v1"]
 
 _RING_KEYS = {"schema", "instrument", "verdict", "candidates", "where", "faults",
-              "noise_floor", "data", "split", "seed"}
+              "noise_floor", "data", "split", "seed", "thresholds"}
 """Keys of the photodiode diagnosis's dict that the report holds in its own fields."""
 _VERDICT_KEYS = ("effect", "reason", "best_candidate", "gap_before", "gap_after", "shrink",
                  "gap_before_se", "gap_after_se", "shrink_se", "params")
@@ -143,7 +143,9 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
     v = d["verdict"]
     nf = d.get("noise_floor") or {}
     floor = nf.get("rms")
-    margin = 0.10
+    # the ring's thresholds where its dict carries them (dicts without: none margin 0.10)
+    thresholds = dict(d.get("thresholds") or {"none_margin": 0.10})
+    margin = thresholds["none_margin"]
     where = []
     if floor is not None:
         rows = [(w["dimension"], w["label"], int(w["n"]), float(w["rms"]), w.get("lo_deg"),
@@ -156,4 +158,4 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
         "photodiodes", str(v.get("metric", "")), "1",
         _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,
         None, None if floor is None else float(floor), nf.get("method", ""),
-        list(d.get("faults", [])), data, {"none_margin": margin}, d.get("seed"), extra)
+        list(d.get("faults", [])), data, thresholds, d.get("seed"), extra)

@@ -2,11 +2,13 @@
 :func:`calibration.photodiode_diagnosis.diagnose_instrument` and reads its result into the
 shared :class:`.report.DiagnosisReport`.
 
-The ring diagnosis keeps its own fit, score and verdict rule (a candidate is named when it
+The ring diagnosis keeps its own physics (forward model, fits, fault screen, clock
+refinement, pointing) and scores and decides through :mod:`.core` like every instrument: the
+one verdict rule with the ring's thresholds
+(:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`: a candidate is named when it
 removes part of the excess variance consistently over the held-out sweeps, since a real sky
-is never reproduced to the noise floor by one effect; see
-:data:`calibration.photodiode_diagnosis.run.EXCESS_FRACTION`); this adapter adds the shared
-slice limits (:func:`.core.slice_limit`) and the notes on what pins a clock offset.
+is never reproduced to the noise floor by one effect). This adapter adds the notes on what
+pins a clock offset.
 """
 
 from __future__ import annotations

@@ -1,6 +1,11 @@
 """The diagnosis of a photodiode instrument: faults, base fit, held-out gap, where, which, how
-far (its dict is read into the shared report by :mod:`calibration.diagnosis.rings`; method in ``docs/diagnosis.md``, section "Photodiode
-instruments").
+far (its dict is read into the shared report by :mod:`calibration.diagnosis.rings`; method in
+``docs/diagnosis.md``, section "Photodiode instruments").
+
+The ring-specific physics is here (forward model, fits, clock refinement, pointing, fault
+screen); folds, noise floor, held-out score, verdict, shrink and slice shares are those of
+every diagnosis, :mod:`calibration.diagnosis.core`, with the ring's thresholds
+:data:`RING_THRESHOLDS`.
 """
 
 from __future__ import annotations
@@ -15,7 +20,9 @@ from skysim.exceptions import InvalidParameterError
 from skysim.sky import RayleighSky
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
-from ..diagnosis import LEGACY_SCHEMA, DiagnosisError, InsufficientDataError
+from ..diagnosis import LEGACY_SCHEMA, DiagnosisError, InsufficientDataError, core
+from ..diagnosis.core import Thresholds
+from ..diagnosis.report import Candidate
 from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
 from .errors import (InstrumentDataError, PointingCalibrationError,
                      SunTooLowError)
@@ -24,19 +31,18 @@ from .fit import fit, fit_headings, fit_pinned
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
 
-__all__ = ["EXCESS_FRACTION", "diagnose_instrument", "diagnose_photodiodes", "orient",
-           "decode_headings", "held_out_folds", "clock_mirror", "solar_noon_s"]
+__all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "orient",
+           "decode_headings", "clock_mirror", "solar_noon_s"]
 
-EXCESS_FRACTION = 0.05
-"""A candidate is named when its complexity-penalised held-out score is negative, it removes
-at least this fraction of the excess held-out variance ``G_0^2 - floor^2``, and it lowers the
-held-out gap in at least :data:`SWEEP_CONSISTENCY` of the held-out sweeps. A real sky is
-never reproduced to the noise floor by one effect (aerosols, clouds, the instrument's own
-optics all add), so the three-pair rule "down to the floor" would call every real session
-unexplained; the sweep-by-sweep consistency keeps a candidate that wins on a few sweeps only
-from being named."""
-SWEEP_CONSISTENCY = 0.75
-NONE_MARGIN = 0.10
+RING_THRESHOLDS = Thresholds(residual_excess=0.95, block_consistency=0.75)
+"""The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.explains`):
+a candidate with a negative held-out score is named when it removes at least 5 % of the excess
+held-out variance ``G_0^2 - floor^2`` (or reaches the floor) and lowers the held-out gap in at
+least 75 % of the held-out sweeps. A real sky is never reproduced to the noise floor by one
+effect (aerosols, clouds, the instrument's own optics all add): on the reference day the
+best candidate leaves 60-97 % of every open-sky session's gap, so "down to the floor" would
+call every real session unexplained. The sweep-by-sweep consistency keeps a candidate that
+wins on a few sweeps only from being named."""
 FIT_SAMPLES = 1500
 """Fits use every k-th sample of a sweep so that about this many samples remain: a platform
 turning once in ~400 samples moves ~1 deg per sample, far finer than the sky's polarization
@@ -59,54 +65,6 @@ def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
     ids, first = np.unique(inst.sweep, return_index=True)
     missed = first[~np.isin(ids, inst.sweep[rows])]
     return inst.subset(np.union1d(rows, missed) if missed.size else rows)
-
-
-def held_out_folds(sweep, n_folds: int) -> np.ndarray:
-    """Fold of every sample: whole sweeps, round-robin in time order.
-
-    Raises
-    ------
-    InsufficientDataError
-        For fewer than 2 folds, or more folds than sweeps.
-    """
-    ids = np.unique(sweep)
-    if not 2 <= int(n_folds) <= ids.size:
-        raise InsufficientDataError(
-            f"folds={n_folds!r}: need 2 <= folds <= number of sweeps ({ids.size}); each fold "
-            "holds out whole sweeps")
-    fold_of = {s: i % int(n_folds) for i, s in enumerate(ids)}
-    return np.array([fold_of[s] for s in sweep])
-
-
-def _sweeps_improved(r0, r1, w, sweep) -> float:
-    """Fraction of sweeps whose held-out residual sum of squares the candidate lowers."""
-    ids = np.unique(sweep)
-    ss0 = np.array([np.sum(np.where(w[sweep == s], r0[sweep == s], 0.0) ** 2) for s in ids])
-    ss1 = np.array([np.sum(np.where(w[sweep == s], r1[sweep == s], 0.0) ** 2) for s in ids])
-    return float(np.mean(ss1 < ss0))
-
-
-def _rms(r, w) -> float:
-    return float(np.sqrt(np.sum(np.where(w, r, 0.0) ** 2) / max(w.sum(), 1)))
-
-
-def noise_floor(residual, usable, sweep) -> float:
-    """White-noise RMS of relative residuals from second differences of each photodiode's
-    consecutive usable readings within a sweep (von Neumann et al. 1941,
-    doi:10.1214/aoms/1177731746): ``mean(d2^2) / 6``. Excluded readings (held, saturated,
-    glare) are skipped rather than breaking the sequence, so a unit converting every few
-    samples still has a floor."""
-    num, cnt = 0.0, 0
-    for p in range(residual.shape[1]):
-        i = np.flatnonzero(usable[:, p])
-        if i.size < 3:
-            continue
-        r, s = residual[i, p], sweep[i]
-        same = (s[2:] == s[1:-1]) & (s[1:-1] == s[:-2])
-        d2 = r[2:] - 2 * r[1:-1] + r[:-2]
-        num += float(np.sum(d2[same] ** 2))
-        cnt += int(same.sum())
-    return float(np.sqrt(num / max(cnt, 1) / 6.0))
 
 
 def orient(fwd: Forward, theta) -> tuple[float, np.ndarray]:
@@ -434,60 +392,46 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
 
 
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
-    """Held-out base residuals by slice, sorted by their share of the excess variance
-    ``sum(r^2) - n floor^2`` of their dimension (each dimension partitions the readings, so
-    its shares add up to 1; of ``sum(r^2)`` where no slice exceeds the floor)."""
+    """Held-out base residuals by slice (:func:`calibration.diagnosis.core.partition_slices`:
+    each dimension partitions the readings, a slice's share is its part of the dimension's
+    excess variance ``sum(r^2) - n floor^2``), as dicts sorted by share."""
     obs = fwd.observe(theta_ho)
     n, P = r.shape
     u = inst.pd_unit
-    r2 = np.where(w, r, 0.0) ** 2
+    r2 = np.where(w, r, np.nan) ** 2
     sun = fwd.sun(inst.t_s)
     view = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)    # (n, U, 3)
     sun_dist = angle_between_deg(view, sun[:, None, :])[:, u]
     sky_az = np.mod(obs.view_azimuth_deg, 360.0)[:, u]
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun)
-    rows = []
-
-    def add(dimension, label, mask, lo=None, hi=None):
-        m = mask & w
-        if m.sum() == 0:
-            return
-        row = {"dimension": dimension, "label": str(label),
-               "excess": float(r2[m].sum() - m.sum() * floor ** 2), "ss": float(r2[m].sum()),
-               "n": int(m.sum()), "rms": float(np.sqrt(r2[m].mean()))}
-        if lo is not None:
-            row["lo_deg"], row["hi_deg"] = float(lo), float(hi)
-        rows.append(row)
-
     full = np.ones((n, P), bool)
-    for k in range(inst.n_units):
-        add("unit", f"u{k}", full & (u == k)[None, :])
-    for p, c in enumerate(inst.columns):
-        add("photodiode", c, full & (np.arange(P) == p)[None, :])
-    for s in range(inst.n_sweeps):
-        add("sweep", s, (inst.sweep == s)[:, None] & full)
-    for lo in range(0, 360, 30):
-        add("sky_azimuth_deg", f"{lo}-{lo + 30}", (sky_az >= lo) & (sky_az < lo + 30), lo, lo + 30)
-    for lo in range(0, 180, 30):
-        add("sun_distance_deg", f"{lo}-{lo + 30}", (sun_dist >= lo) & (sun_dist < lo + 30),
-            lo, lo + 30)
-    add("motion", "rotating", inst.rotating[:, None] & full)
-    add("motion", "standing", ~inst.rotating[:, None] & full)
+    col = np.arange(P)[None, :]
+    dims = [("unit", [full & (u == k)[None, :] for k in range(inst.n_units)],
+             [f"u{k}" for k in range(inst.n_units)], None),
+            ("photodiode", [full & (col == p) for p in range(P)], list(inst.columns), None),
+            ("sweep", [(inst.sweep == s)[:, None] & full for s in range(inst.n_sweeps)],
+             [str(s) for s in range(inst.n_sweeps)], None)]
+    for dim, values, width, top in (("sky_azimuth_deg", sky_az, 30, 360),
+                                    ("sun_distance_deg", sun_dist, 30, 180)):
+        lows = range(0, top, width)
+        dims.append((dim, [(values >= lo) & (values < lo + width) for lo in lows],
+                     [f"{lo}-{lo + width}" for lo in lows],
+                     [(lo, lo + width) for lo in lows]))
+    dims.append(("motion", [inst.rotating[:, None] & full, ~inst.rotating[:, None] & full],
+                 ["rotating", "standing"], None))
     if np.ptp(sun_el) > 2.0:
         edges = np.quantile(sun_el, [0, 1 / 3, 2 / 3, 1])
-        for a, b in zip(edges[:-1], edges[1:]):
-            add("sun_elevation_deg", f"{a:.1f}-{b:.1f}",
-                ((sun_el >= a) & (sun_el <= b))[:, None] & full, a, b)
-    for dim in {r["dimension"] for r in rows}:   # shares within a dimension add up to 1
-        part = [r for r in rows if r["dimension"] == dim]
-        ex = sum(max(r["excess"], 0.0) for r in part)
-        for r in part:
-            r["share"] = (max(r["excess"], 0.0) / ex if ex > 0 else
-                          r["ss"] / max(sum(q["ss"] for q in part), 1e-300))
-    for r in rows:
-        del r["excess"], r["ss"]
-    return sorted(rows, key=lambda x: -x["share"])
+        pairs = list(zip(edges[:-1], edges[1:]))
+        dims.append(("sun_elevation_deg",
+                     [((sun_el >= a) & (sun_el <= b))[:, None] & full for a, b in pairs],
+                     [f"{a:.1f}-{b:.1f}" for a, b in pairs], pairs))
+    out = []
+    for dim, masks, labels, bounds in dims:
+        out += core.partition_slices(dim, masks, labels, r2, floor,
+                                     RING_THRESHOLDS.none_margin, bounds=bounds,
+                                     bound_unit=None if bounds is None else "deg")
+    return [sl.to_dict() for sl in core.sort_slices(out)]
 
 
 def _params(effect, theta, layout):
@@ -608,7 +552,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         raise InstrumentDataError(
             f"{path}: all {int(finite.sum())} readings are at or above the saturation value "
             f"{inst.source['saturation_value']:g}: shorten the exposure or lower the gain")
-    folds = held_out_folds(inst.sweep, n_folds)
+    folds = core.assign_folds(inst.sweep, n_folds)
     cand = [get_ring_effect(e) for e in effects]
     scr = screen(inst)
     if scr.unit_ok.sum() < 2:
@@ -637,7 +581,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     start = first.theta.copy()
     start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
     first, _ = fit_pinned(base, start, sigma=0.02, max_iter=max_iter)
-    sigma = max(noise_floor(full.residual(first.theta), full.usable, work.sweep), 1e-4)
+    sigma = max(core.noise_floor(full.residual(first.theta), full.usable, work.sweep)[0], 1e-4)
 
     shape = work.readings.shape
     res = {"base": np.zeros(shape)}
@@ -704,24 +648,24 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             res[e.name][ho] = re
             heads[e.name][ho] = feho.headings(teho)
             decoders.setdefault(e.name, []).append((e, teho, ho))
-    floor = noise_floor(res["base"], w_ho, work.sweep)
-    g0 = _rms(res["base"], w_ho)
-    n_ho, n_cal = int(w_ho.sum()), int(w_ho.sum() * (n_folds - 1))
+    # held-out residuals, NaN where a reading is not used
+    held = {k: np.where(w_ho, r, np.nan) for k, r in res.items()}
+    floor, _ = core.noise_floor(res["base"], w_ho, work.sweep)
+    g0 = core.rms(held["base"])
+    n_ho = int(w_ho.sum())
+    n_cal = int(n_ho * (1 - 1 / np.unique(folds).size))
     rows = []
     for e in cand:
         if e.name in unavailable:
             rows.append({"effect": e.name, "available": False, "error": unavailable[e.name]})
             continue
-        gc = _rms(res[e.name], w_ho)
-        score = n_ho * np.log(gc ** 2 / g0 ** 2) + e.k * np.log(max(n_cal, 2))
-        frac = (g0 ** 2 - gc ** 2) / max(g0 ** 2 - floor ** 2, 1e-300)
-        better = _sweeps_improved(res["base"], res[e.name], w_ho, work.sweep)
+        gc = core.rms(held[e.name])
         P = np.array(fold_params[e.name])
         rows.append({"effect": e.name, "gap_after": gc, "shrink": 1 - gc / g0,
-                     "score": float(score), "k": e.k, "excess_removed": float(frac),
-                     "sweeps_improved": better,
-                     "explained": bool(frac >= EXCESS_FRACTION and score < 0
-                                       and better >= SWEEP_CONSISTENCY),
+                     "score": core.held_out_score(gc, g0, floor, n_ho, e.k, n_cal), "k": e.k,
+                     "excess_removed": core.excess_removed(gc, g0, floor),
+                     "sweeps_improved": core.blocks_improved(held["base"], held[e.name],
+                                                             work.sweep),
                      "converged": all(fold_converged[e.name]),
                      "params": _fold_params(e, P, fold_sd[e.name])})
         if e.geometric:
@@ -737,21 +681,14 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             if refine_clock and \
                     abs(rows[-1]["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
                 _refine_clock(inst, rows[-1], n_folds=n_folds, seed=seed, max_iter=max_iter)
-            # a clock offset within twice its uncertainty is no finding, however it fits
-            rows[-1]["explained"] = rows[-1]["explained"] and rows[-1]["significant"]
-    rows.sort(key=lambda r: r.get("score", np.inf))
-    avail = [r for r in rows if r.get("available", True)]
-    if g0 <= floor * (1 + NONE_MARGIN):
-        verdict, reason = "none", "held-out gap within the noise floor"
-    elif avail and avail[0]["explained"]:
-        verdict = avail[0]["effect"]
-        reason = (f"best-ranked candidate removes {100 * avail[0]['excess_removed']:.0f} % of "
-                  "the excess held-out variance and lowers the gap in "
-                  f"{100 * avail[0]['sweeps_improved']:.0f} % of the held-out sweeps")
-    else:
-        verdict = "unexplained"
-        reason = ("no candidate removes a significant part of the held-out gap"
-                  if avail else "no candidate effects were available")
+        # a clock offset within twice its uncertainty is no finding, however it fits
+        rows[-1]["explained"] = core.explains(
+            gc, g0, floor, RING_THRESHOLDS, blocks_improved=rows[-1]["sweeps_improved"],
+            null_excluded=rows[-1].get("significant", True))
+    ranked = core.rank([Candidate.from_dict(r) for r in rows])
+    verdict, reason = core.decide(ranked, g0, floor, RING_THRESHOLDS)
+    rows = [c.to_dict() for c in ranked]
+    avail = [r for r in rows if r["available"]]
     best = avail[0]["effect"] if avail else None
     herr = {}
     for key in ("base", best if verdict not in ("none", "unexplained") else None):
@@ -771,16 +708,24 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     theta_all = np.r_[first.theta[:L.n_base], np.zeros(L.n_heading)]
     theta_all[L.heading] = _assemble_headings(heads["base"], work)
     where = _slices(work, fho_all, theta_all, res["base"], w_ho, floor)
-    v = {"effect": verdict, "reason": reason, "gap_before": g0,
-         "gap_after": avail[0]["gap_after"] if verdict not in ("none", "unexplained") else g0,
+    # how far: the best candidate's gap (the base's for ``none``), with bootstrap standard
+    # errors over the held-out sweeps
+    after = best if best is not None and verdict != "none" else "base"
+    se = core.shrink_uncertainty(held["base"], held[after], work.sweep,
+                                 np.random.default_rng(seed))
+    g1 = core.rms(held[after])
+    v = {"effect": verdict, "reason": reason, "gap_before": g0, "gap_after": g1,
+         "shrink": 1 - g1 / g0,
+         "gap_before_se": se["gap_before_se"],
+         "gap_after_se": se["gap_after_se" if after != "base" else "gap_before_se"],
+         "shrink_se": se["shrink_se"] if after != "base" else 0.0,
          "metric": "held-out RMS of relative photodiode residuals (fraction of the unit's "
                    "mean reading)",
          "noise_floor": floor, "best_candidate": best,
          "params": avail[0]["params"] if verdict not in ("none", "unexplained") else {}}
-    v["shrink"] = 1 - v["gap_after"] / g0
     return {
         "schema": LEGACY_SCHEMA, "instrument": "photodiodes", "verdict": v,
-        "candidates": rows, "where": where, "faults": scr.faults,
+        "thresholds": RING_THRESHOLDS.to_dict(), "candidates": rows, "where": where, "faults": scr.faults,
         "noise_floor": {"rms": floor, "method": "second differences along each sweep"},
         "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
                                     "heading [deg], decoded from the instrument's output "
