@@ -7,21 +7,20 @@ optical thickness recovered; a clear session is not.
 """
 
 import numpy as np
-import pandas as pd
 import pytest
+from ring_sessions import ring_session as _ring_session
 
-from calibration.photodiode_diagnosis import diagnose_photodiodes, get_ring_effect
-from calibration.photodiode_diagnosis import instrument_from_photodiodes
+from calibration.photodiode_diagnosis import (
+    diagnose_photodiodes,
+    get_ring_effect,
+    instrument_from_photodiodes,
+)
 from calibration.photodiode_diagnosis.effects import EffectUnavailableError
 from calibration.photodiode_diagnosis.forward import Forward, SunTrack
-from sensor.compound_eye import PhotodiodeModel, ring_configuration
-from sensor.photodiodes_io import PhotodiodeData
 from skysim.cloud_field import CloudField
 from skysim.partly_cloudy import PartlyCloudySky
 from skysim.sky import RayleighSky
-from skysim.sun import Site
 
-SITE = Site(39.258648, 8.440184, 0.0)
 DMAX = 0.6
 
 
@@ -29,21 +28,10 @@ def overcast_sky(tau):
     return PartlyCloudySky(RayleighSky(DMAX), CloudField(1.0, tau, 0, base_m=1000.0))
 
 
-def ring_session(sky, n_sweeps=3, per_sweep=90, start="2022-05-12T10:00:00+02:00", seed=1):
-    """A relative-yaw, counter-clockwise ring session under ``sky``. The ADC gain is set for
-    an overcast sky, which is up to ~100 times brighter than the clear sky towards the sun."""
-    rng = np.random.default_rng(seed)
-    sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel(counts_per_radiance=250.0))
-    t0 = pd.Timestamp(start)
-    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
-                              for s in range(n_sweeps) for k in range(per_sweep)])
-    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
-    sweep = np.repeat(np.arange(n_sweeps), per_sweep)
-    data = sensor.sample(sky, SITE, times, yaw, 0.0, 0.0, rng, yaw_reference="relative",
-                         yaw_offset_deg=35.0, include_truth=False, sweep=sweep)
-    t = data.table.drop(columns=["pitch_deg", "roll_deg"])
-    t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
-    return PhotodiodeData(t, dict(data.sidecar, yaw_sense="counterclockwise"))
+def ring_session(sky, seed=1):
+    """A ring session under ``sky``, its ADC gain set for an overcast sky, which is up to
+    ~100 times brighter than the clear sky towards the sun."""
+    return _ring_session(sky=sky, seed=seed, counts_per_radiance=250.0)
 
 
 def _truth(session, tau):

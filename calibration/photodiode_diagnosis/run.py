@@ -218,7 +218,16 @@ def _fit_effect(fe: Forward, starts, sigma):
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
     fits, failed = [], None
+    aop_sky = fe.aop_sky
     for s in starts:
+        # a clock start far from the recorded time is fitted on the single-scattering AoP:
+        # the sky candidates were fitted about the recorded sun, so under a clock hours off
+        # their skies (a neutral-point separation, an optical thickness) are fitted to the
+        # wrong sky and their AoP misleads the clock (on a real morning session recorded 2 h
+        # early, a fit under the best such sky stopped at +58 +- 43 min)
+        far = fe.effect.name == "clock_offset" and abs(float(s[fe.layout.effect][0])) > \
+            CLOCK_REFINE_S
+        fe.aop_sky = None if far else aop_sky
         try:
             fits.append(fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
                                    geometry=geometric, covariance=geometric))
@@ -226,6 +235,8 @@ def _fit_effect(fe: Forward, starts, sigma):
             # a start outside the model's valid range (the recorded clock putting the sun
             # below the twilight limit, while a start hours away holds): the others decide
             failed = exc
+        finally:
+            fe.aop_sky = aop_sky
     if not fits:
         raise failed
 
@@ -610,7 +621,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     PointingCalibrationError
         A ``pointing`` that is not 2 U angles within +-20 deg (or NaN).
     SunTooLowError
-        With the sun below the twilight limit at a sample.
+        With the sun below the twilight limit at a sample, unless the clock candidate is
+        asked for and the units read a lit sky at a clock offset that puts the sun up
+        (:mod:`.dark_clock`: the clock is then searched first).
     InstrumentDataError
         When every reading is saturated.
     InsufficientDataError
@@ -625,10 +638,16 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
     if sun_el.min() < TWILIGHT_LIMIT_DEG:
         i = int(np.argmin(sun_el))
-        raise SunTooLowError(
+        too_low = SunTooLowError(
             f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
             f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
             "Check the times and their UTC offset, or drop the night samples")
+        if not (refine_clock and "clock_offset" in effects):
+            raise too_low
+        # a lit sky stamped after dusk is a clock hours off: searched first
+        from .dark_clock import diagnose_dark_clock
+        return diagnose_dark_clock(inst, effects, too_low, n_folds=n_folds, seed=seed,
+                                   max_iter=max_iter)
     finite = np.isfinite(inst.readings)
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
