@@ -162,3 +162,34 @@ def test_bad_input_raises_named_errors():
         diagnosis.diagnose(f, dmax=1.5)
     with pytest.raises(CameraInputError, match="uint16"):
         CameraFrame(f.raw.astype(float), f.sidecar)
+
+
+def test_parameter_standard_errors_cover_the_truth_and_shrink_with_frames():
+    """Every fitted parameter has a standard error (the Jacobian at the optimum with the
+    residuals, sandwich over super-pixels). On frames with injected polarizer offsets the
+    recovered offsets lie within 3 SE of the injected ones: over 60 seeds (100-159) the
+    z-scores of the four offsets had RMS 1.13, 0.90, 0.90, 0.90 (the plain ``s^2 (J^T J)^-1``
+    gave 1.35 for the first: the shot noise is larger where the sky is darker), so a 3-SE
+    band holds for >99 % of values. Four frames of the same scene (independent noise) give
+    SEs half those of one frame (1/sqrt(4)); +-0.08 allows the sandwich's own scatter with
+    ~2500 super-pixels per frame (a few %) and the usable pixels differing between frames."""
+    off = (2.0, -1.5, 0.0, 1.0)
+    names = [f"offset_a{r}{c}_deg" for r in (0, 1) for c in (0, 1)]
+    frames = [_frame(30 + k, angle_offsets=off) for k in range(4)]
+    one = diagnosis.diagnose(frames[0], candidates=["polarizer_angles"], seed=0)
+    four = diagnosis.diagnose(CameraFrames(tuple(frames)), candidates=["polarizer_angles"],
+                              seed=0)
+    for rep in (one, four):
+        assert rep.verdict.effect == "polarizer_angles"
+        p = rep.verdict.params
+        for n, o in zip(names, off):
+            assert p[n]["se"] > 0
+            assert abs(p[n]["value"] - o) < 3 * p[n]["se"], (n, p[n])
+    ratio = [four.verdict.params[n]["se"] / one.verdict.params[n]["se"] for n in names]
+    np.testing.assert_allclose(ratio, 0.5, atol=0.08)
+    # the base's fitted d_max and every candidate parameter of a d_max-free fit carry one too
+    f = frames[0]
+    doc = {k: v for k, v in f.sidecar.items() if k != "generator"}
+    rep = diagnosis.diagnose(CameraFrame(f.raw, doc), candidates=["lens"], seed=0)
+    assert rep.extra["base"]["d_max_se"] > 0
+    assert all(v["se"] > 0 for v in rep.candidate("lens").params.values())

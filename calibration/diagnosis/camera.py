@@ -73,6 +73,7 @@ import numpy as np
 from . import core
 from .core import Thresholds
 from .errors import DiagnosisError
+from .fit_result import FitResult
 from .protocol import candidate_names
 from .report import Candidate, DiagnosisReport, Verdict
 
@@ -342,30 +343,55 @@ def _predict(f: _Frame, effect: str | None, theta, dmax: float) -> np.ndarray:
     return _normalised(_superpixels(np.asarray(e, float)))
 
 
-def _fit(frames, effect, dmax_known, theta0=None):
-    """Least squares of a candidate's parameters (and ``d_max`` when not known) on the
-    usable super-pixels of ``frames`` [(frame, row mask)]; returns ``(theta, dmax, ok)``."""
+def _fit(frames, effect, dmax_known, theta0=None) -> tuple[FitResult, float]:
+    """Least squares of a candidate's parameters (and ``d_max`` when not known, last in
+    ``theta``) on the usable super-pixels of ``frames`` [(frame, row mask)]; returns the fit
+    and ``d_max``. Its covariance is the sandwich over super-pixels
+    (:meth:`FitResult.from_least_squares`): the shot noise of ``y`` varies with the sky's
+    brightness across the image, and the four ``y_k`` of a super-pixel sum to zero (three
+    independent values each)."""
     from scipy.optimize import least_squares
     eff = CAMERA_EFFECTS.get(effect)
     null = list(eff.null) if eff else []
     lo = list(eff.bounds[0]) if eff else []
     hi = list(eff.bounds[1]) if eff else []
+    k = len(null)
     free_d = dmax_known is None
     x0 = list(theta0 if theta0 is not None else null) + ([0.7] if free_d else [])
     lo, hi = lo + ([1e-3] if free_d else []), hi + ([1.0] if free_d else [])
     if not x0:
-        return np.array([]), dmax_known, True
+        return FitResult(np.zeros(0), 0.0, None, 0, True, np.zeros((0, 0))), dmax_known
 
     def resid(x):
-        th, d = (x[:-1], x[-1]) if free_d else (x, dmax_known)
+        th, d = (x[:k], x[k]) if free_d else (x, dmax_known)
         return np.concatenate([(_predict(f, effect, th, d)[m] - f.y[m]).ravel()
                                for f, m in frames])
 
     x0 = np.clip(np.asarray(x0, float), np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
     r = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", diff_step=1e-4,
                       max_nfev=200)
-    th, d = (r.x[:-1], r.x[-1]) if free_d else (r.x, dmax_known)
-    return th, float(d), bool(r.success)
+    n_sp = sum(int(m.sum()) for _, m in frames)
+    fit = FitResult.from_least_squares(r, 3 * n_sp, slice(0, k), group_size=4)
+    return fit, float(r.x[k]) if free_d else dmax_known
+
+
+def _parameters(fit: FitResult, effect: CameraEffect | None, free_d: bool) -> dict:
+    """``name -> {"value", "se", "unit"}`` of a fit: the effect's parameters, the extinction
+    ratio ``ER`` itself for that candidate (standard error by the delta method,
+    ``se(ER) = se(1/ER) / (1/ER)^2``) and ``d_max`` when it was fitted."""
+    out = {}
+    if effect is not None:
+        out = fit.parameters(slice(0, effect.k), effect.parameter_names, effect.units)
+        if effect.name == "extinction_ratio":
+            inv = out["inverse_extinction_ratio"]
+            out["extinction_ratio"] = {
+                "value": 1 / inv["value"] if inv["value"] > 0 else None,
+                "se": inv["se"] / inv["value"] ** 2 if inv["value"] > 0 else None,
+                "unit": "1"}
+    if free_d:
+        k = 0 if effect is None else effect.k
+        out.update(fit.parameters(slice(k, k + 1), ("d_max",), ("1",)))
+    return out
 
 
 # ------------------------------------------------------------------------------ where
@@ -473,16 +499,16 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         converged = True
         for k in range(folds):
             cal = [(p, (fo >= 0) & (fo != k)) for p, fo in zip(prepared, fold_of)]
-            th, d, ok = _fit(cal, effect, dmax_known)
-            converged &= ok
+            fit, d = _fit(cal, effect, dmax_known)
+            converged &= fit.converged
             for p, fo, a in zip(prepared, fold_of, offsets):
                 held = fo == k
                 if held.any():
-                    pred[a:a + p.usable.size][held] = _predict(p, effect, th, d)[held]
-        th, d, ok = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
-        return pred, th, d, converged and ok
+                    pred[a:a + p.usable.size][held] = _predict(p, effect, fit.params, d)[held]
+        fit, d = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
+        return pred, fit, d, converged and fit.converged
 
-    pred0, _, d0, ok0 = cross_validate(None)
+    pred0, fit0, d0, ok0 = cross_validate(None)
     res0 = np.where(use[:, None], pred0 - y_data, np.nan)
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
     floor, _ = core.noise_floor(res0, np.repeat(use[:, None], 4, 1), line)
@@ -499,17 +525,11 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                 "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
                 "sidecar) to tell them apart"))
             continue
-        pred, th, d, ok = cross_validate(name)
+        pred, fit, d, ok = cross_validate(name)
         res = np.where(use[:, None], pred - y_data, np.nan)
         residuals[name] = res
         Gc = core.rms(res, use[:, None] & np.ones((1, 4), bool))
-        params = {n: {"value": float(v), "unit": u}
-                  for n, u, v in zip(eff.parameter_names, eff.units, th)}
-        if name == "extinction_ratio":
-            params["extinction_ratio"] = {"value": float(1 / th[0]) if th[0] > 0 else None,
-                                          "unit": "1"}
-        if dmax_known is None:
-            params["d_max"] = {"value": d, "unit": "1"}
+        params = _parameters(fit, eff, dmax_known is None)
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,
             score=core.held_out_score(Gc, G0, floor, N, eff.k, n_cal),
@@ -549,6 +569,8 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                         "folds": folds, "held_out_values": N, "calibration_values": n_cal}},
         thresholds=thresholds.to_dict(), seed=seed,
         extra={"base": {"d_max": d0, "d_max_fitted": dmax_known is None,
+                        "d_max_se": (_parameters(fit0, None, True)["d_max"]["se"]
+                                     if dmax_known is None else None),
                         "converged": ok0},
                "sun": [{"elevation_deg": p.sun_el, "azimuth_deg": p.sun_az}
                        for p in prepared],
