@@ -113,16 +113,35 @@ def test_neutral_point_sky_is_named():
     assert _values(rep)["d_max"] == pytest.approx(DMAX, abs=0.02)
 
 
-def test_dop_scale_fitted_when_the_sidecar_lacks_it():
+def test_extinction_ratio_degenerate_with_the_sky_dop_unless_dmax_is_known():
     """Without the sky's d_max the base fits it, and the extinction ratio, exactly a smaller
-    d_max on these data, is not tried; the fitted d_max absorbs the injected ER:
-    d_max (1 - 1/ER) / (1 + 1/ER) = 0.7 * 19/21 = 0.633."""
+    d_max on these data, is not named: its row says it is degenerate with d_max and gives
+    the product the frames pin, the fitted d_max absorbing the injected ER:
+    d_max (1 - 1/ER) / (1 + 1/ER) = 0.7 * 19/21 = 0.633 (tolerance 5e-3: about 5 of its
+    standard errors, 1e-3). With d_max given (here as an option, the same frame) the ER is
+    fitted and named: 1/ER within 3 SE of 1/20."""
     f = _frame(4, extinction_ratio=20.0)
     doc = {k: v for k, v in f.sidecar.items() if k != "generator"}
-    rep = diagnosis.diagnose(CameraFrame(f.raw, doc), seed=0)
-    assert not rep.candidate("extinction_ratio").available
-    assert rep.verdict.effect == "none"
+    frame = CameraFrame(f.raw, doc)
+    rep = diagnosis.diagnose(frame, candidates=["extinction_ratio", "crosstalk", "lens"],
+                             seed=0)
+    assert rep.verdict.effect != "extinction_ratio"
     assert rep.extra["base"]["d_max"] == pytest.approx(DMAX * 19 / 21, abs=5e-3)
+    for name in ("extinction_ratio", "crosstalk"):
+        c = rep.candidate(name)
+        assert not c.available and c.details["degenerate_with"] == "d_max"
+        ident = c.details["identifiable"]
+        assert ident["value"] == rep.extra["base"]["d_max"] and 0 < ident["se"] < 2e-3
+        back = DiagnosisReport.from_dict(rep.to_dict()).candidate(name)
+        assert back.details["degenerate_with"] == "d_max" and not back.available
+    assert "degenerate_with" in rep.to_dict()["candidates"][-1]
+
+    known = diagnosis.diagnose(frame, candidates=["extinction_ratio", "crosstalk", "lens"],
+                               dmax=DMAX, seed=0)
+    assert known.verdict.effect == "extinction_ratio"
+    p = known.verdict.params["inverse_extinction_ratio"]
+    assert abs(p["value"] - 1 / 20) < 3 * p["se"]
+    assert "degenerate_with" not in known.candidate("extinction_ratio").details
 
 
 def test_several_frames_from_a_folder_fold_by_frame(tmp_path):

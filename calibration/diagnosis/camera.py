@@ -30,7 +30,10 @@ sky misses raw frames, and which camera or sky effect explains it.
    the calibration folds. A uniform loss of modulation from the extinction ratio (factor
    ``(1 - 1/ER) / (1 + 1/ER)``) or from crosstalk (``1 - 4c``, :mod:`sensor.camera.mosaic`)
    is exactly a smaller ``d_max``: with a fitted ``d_max`` these two candidates are not
-   identifiable and are listed as unavailable.
+   identifiable and are listed as unavailable, their row saying so in the field
+   ``degenerate_with: "d_max"`` beside ``identifiable``, the product of ``d_max`` and the
+   modulation factor that the frames do pin (the base's fitted ``d_max``, with its standard
+   error). With ``d_max`` known they are fitted and named as any candidate.
 4. **Folds.** Whole frames when there are several, else spatial blocks of
    ``block_superpixels`` x ``block_superpixels`` super-pixels, dealt to folds round-robin
    (:func:`calibration.diagnosis.core.assign_folds`); every fold is held out once and the
@@ -45,7 +48,14 @@ sky misses raw frames, and which camera or sky effect explains it.
    the four polarizers of the layout), ``extinction_ratio`` (``1/ER`` of all polarizers),
    ``crosstalk`` (share ``c`` of each edge neighbour, on request), ``sky_dop`` (the
    neutral-point sky of Berry, Dennis & Lee 2004 [3]_, :class:`skysim.berry.BerrySky`, with
-   its singularity separation ``delta`` free; ``delta = 0`` is the Rayleigh pattern).
+   its singularity separation ``delta`` free; ``delta = 0`` is the Rayleigh pattern),
+   ``overcast`` (a uniform cloud layer over the whole sky in front of the base sky,
+   :class:`skysim.partly_cloudy.PartlyCloudySky` with a
+   ``CloudField(cover=1, tau, thickness="uniform")``, its optical thickness ``tau`` free:
+   the clear sky's pattern comes through as ``exp(-0.206 tau / mu)`` and the cloud adds its
+   own weakly polarized light, Zege, Ivanov & Katsev 1991 [4]_; ``tau = 0`` is the base sky
+   exactly). Every parameter's standard error is the sandwich covariance over super-pixels
+   at the optimum (:meth:`calibration.diagnosis.FitResult.from_least_squares`).
 7. **Score, verdict, shrink, where.** :mod:`calibration.diagnosis.core`; three independent
    values per super-pixel (the four ``y_k`` sum to zero). Slices: angular distance from the
    sun, view elevation, view azimuth, image rings (radius as a fraction of the image circle)
@@ -59,6 +69,8 @@ References
    (1988).
 .. [3] M. V. Berry, M. R. Dennis, R. L. Lee, "Polarization singularities in the clear sky",
    New J. Phys. 6:162 (2004), doi:10.1088/1367-2630/6/1/162.
+.. [4] E. P. Zege, A. P. Ivanov, I. L. Katsev, *Image Transfer through a Scattering Medium*,
+   Springer (1991) (the small-angle transfer of an angular pattern through a cloud).
 """
 
 from __future__ import annotations
@@ -82,9 +94,11 @@ __all__ = ["CAMERA_CANDIDATES", "CameraAdapter", "CameraEffect", "CameraFrame",
            "load_frames"]
 
 METRIC = "held-out RMS of the super-pixel-normalised channel intensities, model - data"
-CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "crosstalk", "sky_dop")
+CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "crosstalk", "sky_dop",
+                     "overcast")
 """Every candidate effect of the camera diagnosis."""
-DEFAULT_CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "sky_dop")
+DEFAULT_CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "sky_dop",
+                             "overcast")
 """The default set. ``crosstalk`` is tried on request: on a smooth sky its loss of modulation
 ``1 - 4c`` equals the extinction ratio's to within the sky's change across one pixel, so the
 two cannot be told apart from sky images (a flat field behind a rotating polarizer can,
@@ -106,6 +120,9 @@ class CameraEffect:
     units: tuple
     null: tuple
     bounds: tuple
+    starts: tuple = ()
+    """Further starting vectors besides ``null``: the fit starts from whichever fits the
+    calibration data best (a start on a bound can stall a bounded trust-region fit)."""
 
     @property
     def k(self) -> int:
@@ -126,10 +143,14 @@ CAMERA_EFFECTS = {
                                      (0.0,), ((0.0,), (0.5,))),
     "crosstalk": CameraEffect("crosstalk", ("crosstalk",), ("1",), (0.0,), ((0.0,), (0.2,))),
     "sky_dop": CameraEffect("sky_dop", ("delta_deg",), ("deg",), (0.0,), ((0.0,), (80.0,))),
+    "overcast": CameraEffect("overcast", ("cloud_tau",), ("1",), (0.0,), ((0.0,), (30.0,)),
+                             ((0.3,), (1.0,), (3.0,), (10.0,))),
 }
 """Parameters, units, null values (the base model) and fit bounds of each candidate.
 ``offset_aRC_deg`` is the angle error of the polarizer at row R, column C of the 2x2 layout
-(``layout_deg`` of the sidecar)."""
+(``layout_deg`` of the sidecar). ``cloud_tau`` is the vertical optical thickness at 550 nm of
+the overcast layer; above ~10 the clear sky's pattern is all but hidden and the cloud's own
+weak polarization is what is left (:mod:`skysim.cloud_light`)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -332,12 +353,25 @@ def _camera(doc: dict, effect: str, theta) -> object:
     return PolarizationCamera(lens, sensor, cam.photoelectrons_per_s, np.inf)
 
 
+def _sky(effect: str | None, theta, dmax: float):
+    """The sky of the base model or of a sky candidate (module doc, items 3 and 6); a null
+    parameter gives the base sky itself."""
+    from skysim.sky import make_sky
+    base = make_sky("rayleigh", dmax=dmax)
+    if effect == "sky_dop" and theta[0] > 0:
+        return make_sky("berry", delta_deg=float(theta[0]), dmax=dmax)
+    if effect == "overcast" and theta[0] > 0:
+        from skysim.cloud_field import CloudField
+        from skysim.partly_cloudy import PartlyCloudySky
+        return PartlyCloudySky(base, CloudField(cover=1.0, tau=float(theta[0]),
+                                                thickness="uniform"))
+    return base
+
+
 def _predict(f: _Frame, effect: str | None, theta, dmax: float) -> np.ndarray:
     """Model ``y`` (n_sp, 4) of frame ``f`` (module doc, items 2-3 and 6)."""
-    from skysim.sky import make_sky
     cam = _camera(f.doc, effect, theta)
-    sky = (make_sky("berry", delta_deg=float(theta[0]), dmax=dmax) if effect == "sky_dop"
-           and theta[0] > 0 else make_sky("rayleigh", dmax=dmax))
+    sky = _sky(effect, theta, dmax)
     scene = cam.scene(sky, f.attitude, f.sun_el, f.sun_az)
     e = cam.expected_electrons(scene, f.exposure_s) - cam.sensor.dark_current_e_s * f.exposure_s
     return _normalised(_superpixels(np.asarray(e, float)))
@@ -367,7 +401,11 @@ def _fit(frames, effect, dmax_known, theta0=None) -> tuple[FitResult, float]:
         return np.concatenate([(_predict(f, effect, th, d)[m] - f.y[m]).ravel()
                                for f, m in frames])
 
-    x0 = np.clip(np.asarray(x0, float), np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
+    lo_, hi_ = np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9
+    x0 = np.clip(np.asarray(x0, float), lo_, hi_)
+    if eff is not None and eff.starts and theta0 is None:
+        trial = [x0] + [np.clip(np.r_[st, x0[k:]], lo_, hi_) for st in eff.starts]
+        x0 = min(trial, key=lambda x: float(np.sum(resid(x) ** 2)))
     r = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", diff_step=1e-4,
                       max_nfev=200)
     n_sp = sum(int(m.sum()) for _, m in frames)
@@ -392,6 +430,17 @@ def _parameters(fit: FitResult, effect: CameraEffect | None, free_d: bool) -> di
         k = 0 if effect is None else effect.k
         out.update(fit.parameters(slice(k, k + 1), ("d_max",), ("1",)))
     return out
+
+
+def _degeneracy(name: str, d0: float, d0_se: float) -> dict:
+    """What an unavailable extinction-ratio or crosstalk candidate reports with a fitted
+    ``d_max`` (module doc, item 3): ``degenerate_with`` (``"d_max"``), and the one quantity
+    the frames do pin, the product of the sky's DoP scale and the camera's modulation
+    (the base's fitted ``d_max``, with its standard error)."""
+    modulation = ("(1 - 1/ER) / (1 + 1/ER)" if name == "extinction_ratio" else "(1 - 4 c)")
+    return {"degenerate_with": "d_max",
+            "identifiable": {"quantity": f"d_max * {modulation}", "value": d0, "se": d0_se,
+                             "unit": "1"}}
 
 
 # ------------------------------------------------------------------------------ where
@@ -509,6 +558,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         return pred, fit, d, converged and fit.converged
 
     pred0, fit0, d0, ok0 = cross_validate(None)
+    d0_se = _parameters(fit0, None, True)["d_max"]["se"] if dmax_known is None else None
     res0 = np.where(use[:, None], pred0 - y_data, np.nan)
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
     floor, _ = core.noise_floor(res0, np.repeat(use[:, None], 4, 1), line)
@@ -523,7 +573,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
             rows.append(Candidate.unavailable(
                 name, "its uniform loss of modulation equals a smaller sky DoP scale, which is "
                 "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
-                "sidecar) to tell them apart"))
+                "sidecar) to tell them apart", _degeneracy(name, d0, d0_se)))
             continue
         pred, fit, d, ok = cross_validate(name)
         res = np.where(use[:, None], pred - y_data, np.nan)
@@ -569,8 +619,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                         "folds": folds, "held_out_values": N, "calibration_values": n_cal}},
         thresholds=thresholds.to_dict(), seed=seed,
         extra={"base": {"d_max": d0, "d_max_fitted": dmax_known is None,
-                        "d_max_se": (_parameters(fit0, None, True)["d_max"]["se"]
-                                     if dmax_known is None else None),
+                        "d_max_se": d0_se,
                         "converged": ok0},
                "sun": [{"elevation_deg": p.sun_el, "azimuth_deg": p.sun_az}
                        for p in prepared],
