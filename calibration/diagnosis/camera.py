@@ -33,7 +33,11 @@ sky misses raw frames, and which camera or sky effect explains it.
    identifiable and are listed as unavailable, their row saying so in the field
    ``degenerate_with: "d_max"`` beside ``identifiable``, the product of ``d_max`` and the
    modulation factor that the frames do pin (the base's fitted ``d_max``, with its standard
-   error). With ``d_max`` known they are fitted and named as any candidate.
+   error). With ``d_max`` known they are fitted and named as any candidate. Every other
+   candidate fitted with ``d_max`` reports ``correlation_with_d_max`` of each parameter (the
+   overcast layer's ``tau``: 0.98 at ``tau = 1``, where its loss of the clear pattern is
+   nearly uniform, 0.6 at ``tau = 3``; identifiable, with a standard error 5 times that
+   with ``d_max`` given).
 4. **Folds.** Whole frames when there are several, else spatial blocks of
    ``block_superpixels`` x ``block_superpixels`` super-pixels, dealt to folds round-robin
    (:func:`calibration.diagnosis.core.assign_folds`); every fold is held out once and the
@@ -432,6 +436,19 @@ def _parameters(fit: FitResult, effect: CameraEffect | None, free_d: bool) -> di
     return out
 
 
+def _dmax_correlation(fit: FitResult, effect: CameraEffect) -> dict:
+    """``{"correlation_with_d_max": {name: r}}``: the correlation of each of the effect's
+    parameters with the fitted ``d_max`` from the fit's covariance (near +-1: the frames
+    tell the two apart only through the fitted values' standard errors, which it inflates
+    by ``1 / sqrt(1 - r^2)``)."""
+    c = fit.covariance
+    k = effect.k
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = c[:k, k] / np.sqrt(np.diag(c)[:k] * c[k, k])
+    return {"correlation_with_d_max": {n: float(v) for n, v in zip(effect.parameter_names,
+                                                                    r)}}
+
+
 def _degeneracy(name: str, d0: float, d0_se: float) -> dict:
     """What an unavailable extinction-ratio or crosstalk candidate reports with a fitted
     ``d_max`` (module doc, item 3): ``degenerate_with`` (``"d_max"``), and the one quantity
@@ -583,7 +600,8 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,
             score=core.held_out_score(Gc, G0, floor, N, eff.k, n_cal),
-            explained=core.explains(Gc, G0, floor, thresholds), converged=ok, params=params))
+            explained=core.explains(Gc, G0, floor, thresholds), converged=ok, params=params,
+            details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
     rows = core.rank(rows)
     effect, reason = core.decide(rows, G0, floor, thresholds)
     best = next((r.effect for r in rows if r.available), None)
