@@ -334,7 +334,7 @@ class CloudField:
         quantile grid."""
         if self.cover == 0.0:
             return np.inf, 1.0
-        if self.uniform_overcast:   # every value of the field is cloud: no grid needed
+        if self.overcast:
             return -np.inf, 1.0
         g = np.sort(self.gaussian(*equal_area_grid(*QUANTILE_GRID)))
         n_cloud = int(round(self.cover * g.size))
@@ -350,6 +350,19 @@ class CloudField:
         """The value of ``g`` above which a direction is cloudy (+inf: no cloud)."""
         return self._threshold[0]
 
+    @property
+    def overcast(self) -> bool:
+        """True for a uniform overcast (cover 1, uniform thickness): the same optical
+        thickness in every direction, so the Gaussian field need not be evaluated."""
+        return self.cover == 1.0 and self.thickness == "uniform"
+
+    def optical_thickness_at(self, x, y) -> np.ndarray:
+        """Vertical optical thickness [1] at layer coordinates ``x`` (east), ``y`` (north)
+        [m] of the field at the time 0 (:meth:`layer_points`)."""
+        if self.overcast:
+            return np.full(np.broadcast_shapes(np.shape(x), np.shape(y)), self.tau)
+        return self.optical_thickness_of(self._gaussian_at(x, y))
+
     def optical_thickness_of(self, g) -> np.ndarray:
         """Vertical optical thickness [1] where the Gaussian field has the values ``g``."""
         t, excess = self._threshold
@@ -357,20 +370,6 @@ class CloudField:
         if self.thickness == "uniform":
             return np.where(g > t, self.tau, 0.0)
         return np.where(g > t, self.tau * (g - t) / excess, 0.0)
-
-    @property
-    def uniform_overcast(self) -> bool:
-        """True for cover 1 with ``thickness="uniform"``: ``tau`` everywhere, whatever the
-        field's values."""
-        return self.cover == 1.0 and self.thickness == "uniform"
-
-    def optical_thickness_at(self, x, y) -> np.ndarray:
-        """Vertical optical thickness [1] at layer coordinates ``x`` (east), ``y`` (north)
-        [m] of the field at the time 0 (:meth:`layer_points`); a uniform overcast skips the
-        field (its thickness does not depend on it)."""
-        if self.uniform_overcast:
-            return np.full(np.broadcast_shapes(np.shape(x), np.shape(y)), self.tau)
-        return self.optical_thickness_of(self._gaussian_at(x, y))
 
     def optical_thickness(self, elevation_deg, azimuth_deg, time_s=0.0) -> np.ndarray:
         """Vertical optical thickness [1] of the cloud seen along view directions [deg] at

@@ -167,7 +167,7 @@ def test_uniform_overcast_is_tau_everywhere_without_the_field():
     """Cover 1, uniform: every direction and layer point has tau, the same as the field's
     own path (every value above the threshold -inf) gives; the shortcut skips the field."""
     c = CloudField(1.0, 2.5, 7)
-    assert c.uniform_overcast and not CloudField(1.0, 2.5, 7, thickness="excess").uniform_overcast
+    assert c.overcast and not CloudField(1.0, 2.5, 7, thickness="excess").overcast
     assert c.threshold == -np.inf
     x, y, _ = c.layer_points(*equal_area_grid(24, 48))
     fast = c.optical_thickness_at(x, y)

@@ -169,6 +169,16 @@ holds for at the session's mean time: a session spans 12-13 minutes, over which 
 elevation changes by up to 2.5 deg."""
 
 
+def _nominal_instrument(theta, L, groups) -> np.ndarray:
+    """``theta`` with the instrument parameter ``groups`` (slices of the layout ``L``) at
+    their nominal value 0: a start that does not carry what a base fit under a strongly
+    different sky or clock took up into gains, offsets and angles."""
+    out = np.array(theta, float)
+    for sl in groups:
+        out[sl] = 0.0
+    return out
+
+
 def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
     """Starts of the clock offset: no offset, and the two best of the whole and half hours
     (each with the per-sweep headings carried by the sun's azimuth change)."""
@@ -189,9 +199,7 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
         # nominal pointing, a typical DoP scale): a clock hours off corrupts every parameter
         # the base fitted under it (on a simulated ring 2.5 h off, pointing at its -20 deg
         # bound and a DoP scale of 0.99), and the scores with them
-        nominal = t.copy()
-        for sl in (L.lam, L.off, L.angle, L.pointing):
-            nominal[sl] = 0.0
+        nominal = _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.pointing))
         nominal[L.scale] = NOMINAL_DOP_SCALE
         scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
     scored.sort(key=lambda x: x[0])
@@ -233,6 +241,12 @@ def _fit_effect(fe: Forward, starts, sigma):
                                                         - np.asarray(fe.effect.null)))))
 
 
+DOP_SCALE_STARTS = (0.2, 0.4, 0.6, 0.8, 1.0)
+"""DoP scales tried at each start of an effect whose sky takes the scale
+(:attr:`~.effects.RingEffect.dop_scale_in_sky`): clear skies' maximum DoP runs from about 0.2
+(hazy) to 0.8 (clean air, Coulson 1988)."""
+
+
 def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
     """``t`` with its DoP scale set so that the candidate's sky, seen by the instrument,
     carries the polarized fraction the base fit found: ``s' = s m_0 / m_c``, with ``m_0`` and
@@ -271,6 +285,18 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         t = _extend(theta_base, fwd_base, fwd, p)
         # a sky of its own starts with the base fit's DoP scale or with the scale carried
         # over to its DoP, whichever fits better
+        if effect.dop_scale_in_sky:
+            # the DoP scale acts on the clear sky inside the effect's sky, so it trades
+            # with the effect's parameters along a curved valley: each start takes the
+            # best of a few scales (each a new sky)
+            # the base fit's instrument may have absorbed much of a strong effect, so
+            # the nominal instrument is tried as well
+            for tb in (t, _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))):
+                for sc in DOP_SCALE_STARTS:
+                    tt = tb.copy()
+                    tt[L.scale] = sc
+                    scored.append((float(np.sum(fwd.residual(tt) ** 2)), tt))
+            continue
         o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
         for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
             scored.append((float(np.sum(fwd.residual(tt, o) ** 2)), tt))
