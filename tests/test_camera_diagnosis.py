@@ -233,6 +233,10 @@ def test_overcast_model_at_zero_thickness_is_the_base_sky():
     np.testing.assert_allclose(_predict(p, "overcast", [1e-12], DMAX)[p.usable], base,
                                atol=1e-8)
     assert np.abs(_predict(p, "overcast", [0.3], DMAX)[p.usable] - base).max() > 0.1
+    # one overcast layer for every instrument: the ring diagnosis's, with its tau bound
+    from calibration.diagnosis.camera import CAMERA_EFFECTS
+    from calibration.photodiode_diagnosis.effects import OVERCAST_MAX_TAU
+    assert CAMERA_EFFECTS["overcast"].bounds[1] == (OVERCAST_MAX_TAU,)
 
 
 @pytest.mark.parametrize("tau,dmax", [(1.0, DMAX), (1.0, None), (3.0, None)])

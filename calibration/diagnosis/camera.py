@@ -55,7 +55,9 @@ sky misses raw frames, and which camera or sky effect explains it.
    its singularity separation ``delta`` free; ``delta = 0`` is the Rayleigh pattern),
    ``overcast`` (a uniform cloud layer over the whole sky in front of the base sky,
    :class:`skysim.partly_cloudy.PartlyCloudySky` with a
-   ``CloudField(cover=1, tau, thickness="uniform")``, its optical thickness ``tau`` free:
+   ``CloudField(cover=1, tau, thickness="uniform")``, base 1 km, the layer of the ring
+   diagnosis's :class:`calibration.photodiode_diagnosis.effects.Overcast`, its optical
+   thickness ``tau`` free:
    the clear sky's pattern comes through as ``exp(-0.206 tau / mu)`` and the cloud adds its
    own weakly polarized light, Zege, Ivanov & Katsev 1991 [4]_; ``tau = 0`` is the base sky
    exactly). Every parameter's standard error is the sandwich covariance over super-pixels
@@ -109,6 +111,10 @@ two cannot be told apart from sky images (a flat field behind a rotating polariz
 :mod:`calibration.dofp_calibration`)."""
 DEFAULT_THRESHOLDS = Thresholds()
 _DEGENERATE = ("extinction_ratio", "crosstalk")
+OVERCAST_MAX_TAU = 10.0
+"""Upper bound of the overcast ``cloud_tau``: the ring diagnosis's
+:data:`calibration.photodiode_diagnosis.effects.OVERCAST_MAX_TAU` (not imported: that package
+imports this one; a test keeps the two equal)."""
 
 
 class CameraInputError(DiagnosisError, ValueError):
@@ -147,14 +153,15 @@ CAMERA_EFFECTS = {
                                      (0.0,), ((0.0,), (0.5,))),
     "crosstalk": CameraEffect("crosstalk", ("crosstalk",), ("1",), (0.0,), ((0.0,), (0.2,))),
     "sky_dop": CameraEffect("sky_dop", ("delta_deg",), ("deg",), (0.0,), ((0.0,), (80.0,))),
-    "overcast": CameraEffect("overcast", ("cloud_tau",), ("1",), (0.0,), ((0.0,), (30.0,)),
-                             ((0.3,), (1.0,), (3.0,), (10.0,))),
+    "overcast": CameraEffect("overcast", ("cloud_tau",), ("1",), (0.0,),
+                             ((0.0,), (OVERCAST_MAX_TAU,)), ((0.3,), (1.0,), (3.0,))),
 }
 """Parameters, units, null values (the base model) and fit bounds of each candidate.
 ``offset_aRC_deg`` is the angle error of the polarizer at row R, column C of the 2x2 layout
 (``layout_deg`` of the sidecar). ``cloud_tau`` is the vertical optical thickness at 550 nm of
-the overcast layer; above ~10 the clear sky's pattern is all but hidden and the cloud's own
-weak polarization is what is left (:mod:`skysim.cloud_light`)."""
+the overcast layer, up to :data:`calibration.photodiode_diagnosis.effects.OVERCAST_MAX_TAU`
+(beyond it the clear sky's pattern is hidden and the cloud's own weak polarization is what is
+left)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -364,11 +371,9 @@ def _sky(effect: str | None, theta, dmax: float):
     base = make_sky("rayleigh", dmax=dmax)
     if effect == "sky_dop" and theta[0] > 0:
         return make_sky("berry", delta_deg=float(theta[0]), dmax=dmax)
-    if effect == "overcast" and theta[0] > 0:
-        from skysim.cloud_field import CloudField
-        from skysim.partly_cloudy import PartlyCloudySky
-        return PartlyCloudySky(base, CloudField(cover=1.0, tau=float(theta[0]),
-                                                thickness="uniform"))
+    if effect == "overcast" and theta[0] > 0:   # the same layer as the ring diagnosis's
+        from ..photodiode_diagnosis.effects import Overcast
+        return Overcast().sky(theta, base, None)
     return base
 
 
