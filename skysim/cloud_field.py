@@ -334,6 +334,8 @@ class CloudField:
         quantile grid."""
         if self.cover == 0.0:
             return np.inf, 1.0
+        if self.overcast:
+            return -np.inf, 1.0
         g = np.sort(self.gaussian(*equal_area_grid(*QUANTILE_GRID)))
         n_cloud = int(round(self.cover * g.size))
         if n_cloud >= g.size:   # overcast: below the lowest value, halfway to a spacing
@@ -347,6 +349,19 @@ class CloudField:
     def threshold(self) -> float:
         """The value of ``g`` above which a direction is cloudy (+inf: no cloud)."""
         return self._threshold[0]
+
+    @property
+    def overcast(self) -> bool:
+        """True for a uniform overcast (cover 1, uniform thickness): the same optical
+        thickness in every direction, so the Gaussian field need not be evaluated."""
+        return self.cover == 1.0 and self.thickness == "uniform"
+
+    def optical_thickness_at(self, x, y) -> np.ndarray:
+        """Vertical optical thickness [1] at layer coordinates ``x`` (east), ``y`` (north)
+        [m] of the field at the time 0 (:meth:`layer_points`)."""
+        if self.overcast:
+            return np.full(np.broadcast_shapes(np.shape(x), np.shape(y)), self.tau)
+        return self.optical_thickness_of(self._gaussian_at(x, y))
 
     def optical_thickness_of(self, g) -> np.ndarray:
         """Vertical optical thickness [1] where the Gaussian field has the values ``g``."""

@@ -127,7 +127,7 @@ class PartlyCloudySky(Sky):
             vel, vaz, sel, saz, t))
         c = self.clouds
         x, y, mu = c.layer_points(vel, vaz, t)
-        tau = c.optical_thickness_of(c._gaussian_at(x, y))
+        tau = c.optical_thickness_at(x, y)
         mu0 = np.sin(np.radians(sel))
         # the sun's line from the midpoint of the ray below the layer: half the view's layer
         # distance, then as far towards the sun as a layer at half the height
@@ -136,7 +136,7 @@ class PartlyCloudySky(Sky):
         av, asun = np.radians(vaz), np.radians(saz)
         xs = 0.5 * s_view * np.sin(av) + s_sun * np.sin(asun) - c._wind[0] * t
         ys = 0.5 * s_view * np.cos(av) + s_sun * np.cos(asun) - c._wind[1] * t
-        tau_sun = c.optical_thickness_of(c._gaussian_at(xs, ys))
+        tau_sun = c.optical_thickness_at(xs, ys)
         fb, t_air = air_below(vel, c.base_m)
         keep = 1.0 - (fb * (1.0 - pattern_transmission(tau_sun, mu0))
                       + (1.0 - fb) * (1.0 - pattern_transmission(tau, mu)))

@@ -1,4 +1,4 @@
-"""Golden cases of the three diagnoses: small, fast data sets taken from their own tests, and
+"""Golden cases of the diagnoses: small, fast data sets taken from their own tests, and
 the verdicts and held-out gaps the diagnoses gave on them when recorded.
 
 Each case is a function returning the diagnosis report of one data set (through
@@ -6,7 +6,8 @@ Each case is a function returning the diagnosis report of one data set (through
 keeps what must not change when the diagnosis code is reorganised: the verdict (effect name,
 best candidate), the gaps before and after, the shrink, the noise floor and every available
 candidate's held-out gap (units: mV for the three-pair sensor, DoLP units for sky fields,
-fractions of the unit's mean reading for photodiode rings).
+fractions of the unit's mean reading for photodiode rings, of the super-pixel mean for camera
+frames).
 
 Record (only when a behaviour change is intended, and say so in the commit)::
 
@@ -110,6 +111,36 @@ def ring_no_candidates():
     return diagnose(ring_session(), (), folds=3)
 
 
+# ----------------------------------------------------------------------- camera frames
+def camera_none():
+    """tests/test_camera_diagnosis.py: one clean 128 x 128 frame (seed 1), default candidates
+    (overcast among them), d_max known from the sidecar."""
+    from test_camera_diagnosis import _frame
+
+    from calibration.diagnosis import diagnose
+    return diagnose(_frame(1), seed=0)
+
+
+def camera_polarizer_angles_named():
+    """The same camera with polarizer offsets (2, -1.5, 0, 1) deg injected (seed 3)."""
+    from test_camera_diagnosis import _frame
+
+    from calibration.diagnosis import diagnose
+    return diagnose(_frame(3, angle_offsets=(2.0, -1.5, 0.0, 1.0)), seed=0)
+
+
+def camera_extinction_ratio_dmax_fitted():
+    """An extinction ratio of 20 (seed 4) with d_max left out of the sidecar: extinction
+    ratio and crosstalk unavailable (degenerate with the fitted d_max), lens tried."""
+    from test_camera_diagnosis import _frame
+
+    from calibration.diagnosis import CameraFrame, diagnose
+    f = _frame(4, extinction_ratio=20.0)
+    doc = {k: v for k, v in f.sidecar.items() if k != "generator"}
+    return diagnose(CameraFrame(f.raw, doc), ("extinction_ratio", "crosstalk", "lens"),
+                    seed=0)
+
+
 CASES = {
     "three_pair": {"tilt_named": three_pair_tilt_named,
                    "tilt_withheld": three_pair_tilt_withheld,
@@ -118,6 +149,9 @@ CASES = {
             "multiple_scattering_named": sky_multiple_scattering_named},
     "rings": {"yaw_scale_named": ring_yaw_scale_named,
               "no_candidates": ring_no_candidates},
+    "camera": {"none": camera_none,
+               "polarizer_angles_named": camera_polarizer_angles_named,
+               "extinction_ratio_dmax_fitted": camera_extinction_ratio_dmax_fitted},
 }
 NEEDS_ENGINE = {("sky", "multiple_scattering_named")}
 REL_TOLERANCE = {("sky", "multiple_scattering_named"): 1e-5}

@@ -163,6 +163,18 @@ def test_thickness_profiles():
     assert not CloudField(0.0, 4.0, 5).cloudy(*grid).any()
 
 
+def test_uniform_overcast_is_tau_everywhere_without_the_field():
+    """Cover 1, uniform: every direction and layer point has tau, the same as the field's
+    own path (every value above the threshold -inf) gives; the shortcut skips the field."""
+    c = CloudField(1.0, 2.5, 7)
+    assert c.overcast and not CloudField(1.0, 2.5, 7, thickness="excess").overcast
+    assert c.threshold == -np.inf
+    x, y, _ = c.layer_points(*equal_area_grid(24, 48))
+    fast = c.optical_thickness_at(x, y)
+    assert np.array_equal(fast, c.optical_thickness_of(c.gaussian(*equal_area_grid(24, 48))))
+    assert np.all(fast == 2.5) and fast.shape == x.shape
+
+
 def test_times_align_with_the_sun_positions():
     assert time_offsets_s(5.0, (3,)).shape == ()
     assert time_offsets_s([1.0, 2.0, 3.0], (3, 1)).shape == (3, 1)

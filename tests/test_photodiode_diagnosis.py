@@ -38,32 +38,10 @@ from calibration.photodiode_diagnosis.forward import Forward, SunTrack
 from calibration.photodiode_diagnosis.instrument import held_readings
 from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
 from experiments.real_injection import inject
-from sensor.compound_eye import ring_configuration
+from ring_sessions import SITE, ring_session
 from sensor.photodiodes_io import PhotodiodeData, PhotodiodeFormatError
-from skysim.sky import RayleighSky
-from skysim.sun import Site
 
 REAL = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
-SITE = Site(39.258648, 8.440184, 0.0)
-
-
-def ring_session(n_sweeps=3, per_sweep=90, start="2022-05-12T10:00:00+02:00", seed=1,
-                 dmax=0.6):
-    """A relative-yaw, counter-clockwise ring session: each sweep one full turn."""
-    rng = np.random.default_rng(seed)
-    sensor = ring_configuration(8, 45.0)
-    t0 = pd.Timestamp(start)
-    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
-                              for s in range(n_sweeps) for k in range(per_sweep)])
-    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
-    sweep = np.repeat(np.arange(n_sweeps), per_sweep)
-    data = sensor.sample(RayleighSky(dmax), SITE, times, yaw, 0.0, 0.0, rng,
-                         yaw_reference="relative", yaw_offset_deg=35.0, include_truth=False,
-                         sweep=sweep)
-    t = data.table.drop(columns=["pitch_deg", "roll_deg"])
-    t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
-    side = dict(data.sidecar, yaw_sense="counterclockwise")
-    return PhotodiodeData(t, side)
 
 
 @pytest.fixture(scope="module")

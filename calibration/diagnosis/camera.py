@@ -30,7 +30,14 @@ sky misses raw frames, and which camera or sky effect explains it.
    the calibration folds. A uniform loss of modulation from the extinction ratio (factor
    ``(1 - 1/ER) / (1 + 1/ER)``) or from crosstalk (``1 - 4c``, :mod:`sensor.camera.mosaic`)
    is exactly a smaller ``d_max``: with a fitted ``d_max`` these two candidates are not
-   identifiable and are listed as unavailable.
+   identifiable and are listed as unavailable, their row saying so in the field
+   ``degenerate_with: "d_max"`` beside ``identifiable``, the product of ``d_max`` and the
+   modulation factor that the frames do pin (the base's fitted ``d_max``, with its standard
+   error). With ``d_max`` known they are fitted and named as any candidate. Every other
+   candidate fitted with ``d_max`` reports ``correlation_with_d_max`` of each parameter (the
+   overcast layer's ``tau``: 0.98 at ``tau = 1``, where its loss of the clear pattern is
+   nearly uniform, 0.6 at ``tau = 3``; identifiable, with a standard error 5 times that
+   with ``d_max`` given).
 4. **Folds.** Whole frames when there are several, else spatial blocks of
    ``block_superpixels`` x ``block_superpixels`` super-pixels, dealt to folds round-robin
    (:func:`calibration.diagnosis.core.assign_folds`); every fold is held out once and the
@@ -45,7 +52,16 @@ sky misses raw frames, and which camera or sky effect explains it.
    the four polarizers of the layout), ``extinction_ratio`` (``1/ER`` of all polarizers),
    ``crosstalk`` (share ``c`` of each edge neighbour, on request), ``sky_dop`` (the
    neutral-point sky of Berry, Dennis & Lee 2004 [3]_, :class:`skysim.berry.BerrySky`, with
-   its singularity separation ``delta`` free; ``delta = 0`` is the Rayleigh pattern).
+   its singularity separation ``delta`` free; ``delta = 0`` is the Rayleigh pattern),
+   ``overcast`` (a uniform cloud layer over the whole sky in front of the base sky,
+   :class:`skysim.partly_cloudy.PartlyCloudySky` with a
+   ``CloudField(cover=1, tau, thickness="uniform")``, base 1 km, the layer of the ring
+   diagnosis's :class:`calibration.photodiode_diagnosis.effects.Overcast`, its optical
+   thickness ``tau`` free:
+   the clear sky's pattern comes through as ``exp(-0.206 tau / mu)`` and the cloud adds its
+   own weakly polarized light, Zege, Ivanov & Katsev 1991 [4]_; ``tau = 0`` is the base sky
+   exactly). Every parameter's standard error is the sandwich covariance over super-pixels
+   at the optimum (:meth:`calibration.diagnosis.FitResult.from_least_squares`).
 7. **Score, verdict, shrink, where.** :mod:`calibration.diagnosis.core`; three independent
    values per super-pixel (the four ``y_k`` sum to zero). Slices: angular distance from the
    sun, view elevation, view azimuth, image rings (radius as a fraction of the image circle)
@@ -59,6 +75,8 @@ References
    (1988).
 .. [3] M. V. Berry, M. R. Dennis, R. L. Lee, "Polarization singularities in the clear sky",
    New J. Phys. 6:162 (2004), doi:10.1088/1367-2630/6/1/162.
+.. [4] E. P. Zege, A. P. Ivanov, I. L. Katsev, *Image Transfer through a Scattering Medium*,
+   Springer (1991) (the small-angle transfer of an angular pattern through a cloud).
 """
 
 from __future__ import annotations
@@ -73,6 +91,7 @@ import numpy as np
 from . import core
 from .core import Thresholds
 from .errors import DiagnosisError
+from .fit_result import FitResult
 from .protocol import candidate_names
 from .report import Candidate, DiagnosisReport, Verdict
 
@@ -81,15 +100,21 @@ __all__ = ["CAMERA_CANDIDATES", "CameraAdapter", "CameraEffect", "CameraFrame",
            "load_frames"]
 
 METRIC = "held-out RMS of the super-pixel-normalised channel intensities, model - data"
-CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "crosstalk", "sky_dop")
+CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "crosstalk", "sky_dop",
+                     "overcast")
 """Every candidate effect of the camera diagnosis."""
-DEFAULT_CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "sky_dop")
+DEFAULT_CAMERA_CANDIDATES = ("lens", "polarizer_angles", "extinction_ratio", "sky_dop",
+                             "overcast")
 """The default set. ``crosstalk`` is tried on request: on a smooth sky its loss of modulation
 ``1 - 4c`` equals the extinction ratio's to within the sky's change across one pixel, so the
 two cannot be told apart from sky images (a flat field behind a rotating polarizer can,
 :mod:`calibration.dofp_calibration`)."""
 DEFAULT_THRESHOLDS = Thresholds()
 _DEGENERATE = ("extinction_ratio", "crosstalk")
+OVERCAST_MAX_TAU = 10.0
+"""Upper bound of the overcast ``cloud_tau``: the ring diagnosis's
+:data:`calibration.photodiode_diagnosis.effects.OVERCAST_MAX_TAU` (not imported: that package
+imports this one; a test keeps the two equal)."""
 
 
 class CameraInputError(DiagnosisError, ValueError):
@@ -105,6 +130,9 @@ class CameraEffect:
     units: tuple
     null: tuple
     bounds: tuple
+    starts: tuple = ()
+    """Further starting vectors besides ``null``: the fit starts from whichever fits the
+    calibration data best (a start on a bound can stall a bounded trust-region fit)."""
 
     @property
     def k(self) -> int:
@@ -125,10 +153,15 @@ CAMERA_EFFECTS = {
                                      (0.0,), ((0.0,), (0.5,))),
     "crosstalk": CameraEffect("crosstalk", ("crosstalk",), ("1",), (0.0,), ((0.0,), (0.2,))),
     "sky_dop": CameraEffect("sky_dop", ("delta_deg",), ("deg",), (0.0,), ((0.0,), (80.0,))),
+    "overcast": CameraEffect("overcast", ("cloud_tau",), ("1",), (0.0,),
+                             ((0.0,), (OVERCAST_MAX_TAU,)), ((0.3,), (1.0,), (3.0,))),
 }
 """Parameters, units, null values (the base model) and fit bounds of each candidate.
 ``offset_aRC_deg`` is the angle error of the polarizer at row R, column C of the 2x2 layout
-(``layout_deg`` of the sidecar)."""
+(``layout_deg`` of the sidecar). ``cloud_tau`` is the vertical optical thickness at 550 nm of
+the overcast layer, up to :data:`calibration.photodiode_diagnosis.effects.OVERCAST_MAX_TAU`
+(beyond it the clear sky's pattern is hidden and the cloud's own weak polarization is what is
+left)."""
 
 
 @dataclass(frozen=True, eq=False)
@@ -331,41 +364,105 @@ def _camera(doc: dict, effect: str, theta) -> object:
     return PolarizationCamera(lens, sensor, cam.photoelectrons_per_s, np.inf)
 
 
+def _sky(effect: str | None, theta, dmax: float):
+    """The sky of the base model or of a sky candidate (module doc, items 3 and 6); a null
+    parameter gives the base sky itself."""
+    from skysim.sky import make_sky
+    base = make_sky("rayleigh", dmax=dmax)
+    if effect == "sky_dop" and theta[0] > 0:
+        return make_sky("berry", delta_deg=float(theta[0]), dmax=dmax)
+    if effect == "overcast" and theta[0] > 0:   # the same layer as the ring diagnosis's
+        from ..photodiode_diagnosis.effects import Overcast
+        return Overcast().sky(theta, base, None)
+    return base
+
+
 def _predict(f: _Frame, effect: str | None, theta, dmax: float) -> np.ndarray:
     """Model ``y`` (n_sp, 4) of frame ``f`` (module doc, items 2-3 and 6)."""
-    from skysim.sky import make_sky
     cam = _camera(f.doc, effect, theta)
-    sky = (make_sky("berry", delta_deg=float(theta[0]), dmax=dmax) if effect == "sky_dop"
-           and theta[0] > 0 else make_sky("rayleigh", dmax=dmax))
+    sky = _sky(effect, theta, dmax)
     scene = cam.scene(sky, f.attitude, f.sun_el, f.sun_az)
     e = cam.expected_electrons(scene, f.exposure_s) - cam.sensor.dark_current_e_s * f.exposure_s
     return _normalised(_superpixels(np.asarray(e, float)))
 
 
-def _fit(frames, effect, dmax_known, theta0=None):
-    """Least squares of a candidate's parameters (and ``d_max`` when not known) on the
-    usable super-pixels of ``frames`` [(frame, row mask)]; returns ``(theta, dmax, ok)``."""
+def _fit(frames, effect, dmax_known, theta0=None) -> tuple[FitResult, float]:
+    """Least squares of a candidate's parameters (and ``d_max`` when not known, last in
+    ``theta``) on the usable super-pixels of ``frames`` [(frame, row mask)]; returns the fit
+    and ``d_max``. Its covariance is the sandwich over super-pixels
+    (:meth:`FitResult.from_least_squares`): the shot noise of ``y`` varies with the sky's
+    brightness across the image, and the four ``y_k`` of a super-pixel sum to zero (three
+    independent values each)."""
     from scipy.optimize import least_squares
     eff = CAMERA_EFFECTS.get(effect)
     null = list(eff.null) if eff else []
     lo = list(eff.bounds[0]) if eff else []
     hi = list(eff.bounds[1]) if eff else []
+    k = len(null)
     free_d = dmax_known is None
     x0 = list(theta0 if theta0 is not None else null) + ([0.7] if free_d else [])
     lo, hi = lo + ([1e-3] if free_d else []), hi + ([1.0] if free_d else [])
     if not x0:
-        return np.array([]), dmax_known, True
+        return FitResult(np.zeros(0), 0.0, None, 0, True, np.zeros((0, 0))), dmax_known
 
     def resid(x):
-        th, d = (x[:-1], x[-1]) if free_d else (x, dmax_known)
+        th, d = (x[:k], x[k]) if free_d else (x, dmax_known)
         return np.concatenate([(_predict(f, effect, th, d)[m] - f.y[m]).ravel()
                                for f, m in frames])
 
-    x0 = np.clip(np.asarray(x0, float), np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9)
+    lo_, hi_ = np.asarray(lo) + 1e-9, np.asarray(hi) - 1e-9
+    x0 = np.clip(np.asarray(x0, float), lo_, hi_)
+    if eff is not None and eff.starts and theta0 is None:
+        trial = [x0] + [np.clip(np.r_[st, x0[k:]], lo_, hi_) for st in eff.starts]
+        x0 = min(trial, key=lambda x: float(np.sum(resid(x) ** 2)))
     r = least_squares(resid, x0, bounds=(lo, hi), x_scale="jac", diff_step=1e-4,
                       max_nfev=200)
-    th, d = (r.x[:-1], r.x[-1]) if free_d else (r.x, dmax_known)
-    return th, float(d), bool(r.success)
+    n_sp = sum(int(m.sum()) for _, m in frames)
+    fit = FitResult.from_least_squares(r, 3 * n_sp, slice(0, k), group_size=4)
+    return fit, float(r.x[k]) if free_d else dmax_known
+
+
+def _parameters(fit: FitResult, effect: CameraEffect | None, free_d: bool) -> dict:
+    """``name -> {"value", "se", "unit"}`` of a fit: the effect's parameters, the extinction
+    ratio ``ER`` itself for that candidate (standard error by the delta method,
+    ``se(ER) = se(1/ER) / (1/ER)^2``) and ``d_max`` when it was fitted."""
+    out = {}
+    if effect is not None:
+        out = fit.parameters(slice(0, effect.k), effect.parameter_names, effect.units)
+        if effect.name == "extinction_ratio":
+            inv = out["inverse_extinction_ratio"]
+            out["extinction_ratio"] = {
+                "value": 1 / inv["value"] if inv["value"] > 0 else None,
+                "se": inv["se"] / inv["value"] ** 2 if inv["value"] > 0 else None,
+                "unit": "1"}
+    if free_d:
+        k = 0 if effect is None else effect.k
+        out.update(fit.parameters(slice(k, k + 1), ("d_max",), ("1",)))
+    return out
+
+
+def _dmax_correlation(fit: FitResult, effect: CameraEffect) -> dict:
+    """``{"correlation_with_d_max": {name: r}}``: the correlation of each of the effect's
+    parameters with the fitted ``d_max`` from the fit's covariance (near +-1: the frames
+    tell the two apart only through the fitted values' standard errors, which it inflates
+    by ``1 / sqrt(1 - r^2)``)."""
+    c = fit.covariance
+    k = effect.k
+    with np.errstate(invalid="ignore", divide="ignore"):
+        r = c[:k, k] / np.sqrt(np.diag(c)[:k] * c[k, k])
+    return {"correlation_with_d_max": {n: float(v) for n, v in zip(effect.parameter_names,
+                                                                    r)}}
+
+
+def _degeneracy(name: str, d0: float, d0_se: float) -> dict:
+    """What an unavailable extinction-ratio or crosstalk candidate reports with a fitted
+    ``d_max`` (module doc, item 3): ``degenerate_with`` (``"d_max"``), and the one quantity
+    the frames do pin, the product of the sky's DoP scale and the camera's modulation
+    (the base's fitted ``d_max``, with its standard error)."""
+    modulation = ("(1 - 1/ER) / (1 + 1/ER)" if name == "extinction_ratio" else "(1 - 4 c)")
+    return {"degenerate_with": "d_max",
+            "identifiable": {"quantity": f"d_max * {modulation}", "value": d0, "se": d0_se,
+                             "unit": "1"}}
 
 
 # ------------------------------------------------------------------------------ where
@@ -473,16 +570,17 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         converged = True
         for k in range(folds):
             cal = [(p, (fo >= 0) & (fo != k)) for p, fo in zip(prepared, fold_of)]
-            th, d, ok = _fit(cal, effect, dmax_known)
-            converged &= ok
+            fit, d = _fit(cal, effect, dmax_known)
+            converged &= fit.converged
             for p, fo, a in zip(prepared, fold_of, offsets):
                 held = fo == k
                 if held.any():
-                    pred[a:a + p.usable.size][held] = _predict(p, effect, th, d)[held]
-        th, d, ok = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
-        return pred, th, d, converged and ok
+                    pred[a:a + p.usable.size][held] = _predict(p, effect, fit.params, d)[held]
+        fit, d = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
+        return pred, fit, d, converged and fit.converged
 
-    pred0, _, d0, ok0 = cross_validate(None)
+    pred0, fit0, d0, ok0 = cross_validate(None)
+    d0_se = _parameters(fit0, None, True)["d_max"]["se"] if dmax_known is None else None
     res0 = np.where(use[:, None], pred0 - y_data, np.nan)
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
     floor, _ = core.noise_floor(res0, np.repeat(use[:, None], 4, 1), line)
@@ -497,23 +595,18 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
             rows.append(Candidate.unavailable(
                 name, "its uniform loss of modulation equals a smaller sky DoP scale, which is "
                 "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
-                "sidecar) to tell them apart"))
+                "sidecar) to tell them apart", _degeneracy(name, d0, d0_se)))
             continue
-        pred, th, d, ok = cross_validate(name)
+        pred, fit, d, ok = cross_validate(name)
         res = np.where(use[:, None], pred - y_data, np.nan)
         residuals[name] = res
         Gc = core.rms(res, use[:, None] & np.ones((1, 4), bool))
-        params = {n: {"value": float(v), "unit": u}
-                  for n, u, v in zip(eff.parameter_names, eff.units, th)}
-        if name == "extinction_ratio":
-            params["extinction_ratio"] = {"value": float(1 / th[0]) if th[0] > 0 else None,
-                                          "unit": "1"}
-        if dmax_known is None:
-            params["d_max"] = {"value": d, "unit": "1"}
+        params = _parameters(fit, eff, dmax_known is None)
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,
             score=core.held_out_score(Gc, G0, floor, N, eff.k, n_cal),
-            explained=core.explains(Gc, G0, floor, thresholds), converged=ok, params=params))
+            explained=core.explains(Gc, G0, floor, thresholds), converged=ok, params=params,
+            details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
     rows = core.rank(rows)
     effect, reason = core.decide(rows, G0, floor, thresholds)
     best = next((r.effect for r in rows if r.available), None)
@@ -549,6 +642,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                         "folds": folds, "held_out_values": N, "calibration_values": n_cal}},
         thresholds=thresholds.to_dict(), seed=seed,
         extra={"base": {"d_max": d0, "d_max_fitted": dmax_known is None,
+                        "d_max_se": d0_se,
                         "converged": ok0},
                "sun": [{"elevation_deg": p.sun_el, "azimuth_deg": p.sun_az}
                        for p in prepared],

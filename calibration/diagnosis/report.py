@@ -123,7 +123,8 @@ class Candidate:
         ``name -> {"value", "unit", "se"...}`` (``se``: standard error where known).
     error : str or None
     details : dict
-        What an instrument adds (e.g. the clock offset's sensitivity).
+        What an instrument adds (e.g. the clock offset's sensitivity; for an unavailable
+        candidate, e.g. ``degenerate_with``: the parameter it cannot be told from here).
     """
 
     effect: str
@@ -139,21 +140,24 @@ class Candidate:
     details: dict = field(default_factory=dict)
 
     @classmethod
-    def unavailable(cls, effect: str, error: str) -> Candidate:
-        return cls(effect, available=False, explained=False, error=error)
+    def unavailable(cls, effect: str, error: str, details: dict | None = None) -> Candidate:
+        return cls(effect, available=False, explained=False, error=error,
+                   details=dict(details or {}))
 
     def to_dict(self) -> dict:
         if not self.available:
-            return {"effect": self.effect, "available": False, "error": self.error}
+            return _jsonable({"effect": self.effect, "available": False, "error": self.error,
+                              **self.details})
         d = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "details"}
         d.pop("error")
         return _jsonable({**d, **self.details})
 
     @classmethod
     def from_dict(cls, d: dict) -> Candidate:
-        if not d.get("available", True):
-            return cls.unavailable(str(d["effect"]), str(d.get("error", "")))
         own = {f.name for f in fields(cls)}
+        if not d.get("available", True):
+            return cls.unavailable(str(d["effect"]), str(d.get("error", "")),
+                                   {k: v for k, v in d.items() if k not in own})
         kw = {k: d[k] for k in own if k in d and k != "details"}
         kw.setdefault("k", 0)
         return cls(**kw, details={k: v for k, v in d.items() if k not in own})

@@ -11,6 +11,10 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
 - ``neutral_points`` (``separation_deg``): the Berry, Dennis & Lee (2004) sky whose neutral
   points stand ``separation / 2`` either side of the sun and anti-sun (the real sky's are
   15-25 deg from the sun): DoP higher near the sun and flatter overall. Base at 0.
+- ``overcast`` (``cloud_tau``): a uniform cloud layer over the whole sky
+  (:class:`skysim.partly_cloudy.PartlyCloudySky` at cover 1): the clear sky's pattern passes
+  below and through the cloud, attenuated with its optical thickness, and the droplets add
+  their own bright, weakly polarized light, strongest towards the sun. Base at ``tau = 0``.
 - ``fov`` (``alpha_deg``): each unit integrates the Stokes vector over a cone of half-angle
   ``alpha`` about its axis. The cone is sampled by six directions on the ring at the RMS
   radius ``alpha / sqrt(2)`` of a uniform cap, which reproduces the cone average to second
@@ -50,6 +54,11 @@ References
    doi:10.1364/AO.17.002900 (aureole radiance vs scattering angle).
 .. [4] R. P. Breault, "Control of stray light", in Handbook of Optics vol. I, 2nd ed.,
    McGraw-Hill (1995), ch. 38 (point-source transmittance of baffled sensors).
+.. [5] G. Pomozi, G. Horváth, R. Wehner, "How the clear-sky angle of polarization pattern
+   continues underneath clouds", J. Exp. Biol. 204:2933-2942 (2001).
+.. [6] R. Hegedüs, S. Åkesson, G. Horváth, "Polarization patterns of thick clouds: overcast
+   skies have distribution of the angle of polarization similar to that of clear skies",
+   J. Opt. Soc. Am. A 24(8):2347-2356 (2007), doi:10.1364/JOSAA.24.002347.
 .. [2] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
    compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
    Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w (ring compass, canopy scenes).
@@ -78,7 +87,7 @@ RING_EFFECT_NAMES = ("multiple_scattering", "neutral_points", "fov", "occlusion"
 """The default candidates. ``aerosol`` is asked for by name (``--effects aerosol,...``): its
 engine runs (Mie phase matrices on a 25 x 37 table, per AOD and sun node) add minutes to a
 session, beyond the one-minute goal of a default diagnosis on this machine class."""
-OPTIONAL_EFFECT_NAMES = ("aerosol",)
+OPTIONAL_EFFECT_NAMES = ("aerosol", "overcast")
 
 
 class RingEffect:
@@ -103,6 +112,12 @@ class RingEffect:
     scale): its parameters are fitted, with the units' pointing, on the angle of polarization
     alone (the DoP profiled out), so that a DoP profile the sky model lacks cannot be traded
     for a false clock, tilt or pointing; then held."""
+
+    dop_scale_in_sky: ClassVar[bool] = False
+    """True when the effect's sky takes the DoP scale ``s`` on the base sky it wraps (its
+    argument ``base_sky`` is then the base sky of maximum DoP ``s``), instead of ``s``
+    scaling the DoP of all the light a unit sees: light the effect adds (a cloud's own) is
+    not depolarized with the clear sky."""
 
     def bind(self, inst) -> None:
         """Adapt the parameter list to an instrument (per-photodiode effects)."""
@@ -531,6 +546,56 @@ class Aerosol(RingEffect):
         return self._grid.at(float(p[0]))
 
 
+OVERCAST_BASE_M = 1000.0
+"""Cloud base [m above the site] of the ``overcast`` candidate: stratus and stratocumulus,
+the layer clouds that cover a whole sky, have bases from near the ground to about 2 km
+(WMO International Cloud Atlas, 2017). The base sets only the share of the sky's light
+scattered by the air below the cloud, a few percent of the light at the zenith."""
+OVERCAST_MAX_TAU = 10.0
+"""Upper bound of the fitted cloud optical thickness [1]: beyond it the sky's pattern is
+hidden (transmitted share ``exp(-0.206 tau / mu) < 0.13`` overhead) and the cloud's own light,
+polarized below about 0.16 under a thick overcast (Hegedüs et al. 2007 [6]_), is nearly all a
+unit sees."""
+
+
+class Overcast(RingEffect):
+    """A uniform overcast: a cloud layer of optical thickness ``tau`` (550 nm) over the whole
+    sky in front of the base sky (:class:`skysim.partly_cloudy.PartlyCloudySky` with a
+    :class:`skysim.cloud_field.CloudField` of cover 1): the clear sky's E-vector pattern
+    continues below and through the cloud (Pomozi, Horváth & Wehner 2001 [5]_), attenuated, while
+    the droplets' own light adds bright, weakly polarized radiance, most of it in the forward
+    peak towards the sun. So the DoP falls with ``tau``, most near the sun, and the AoP keeps
+    the clear-sky pattern. Checked against the radiative transfer of an overcast layer
+    (:class:`skysim.clouds.CloudySky`, ``docs/clouds.md``). Base at ``tau = 0`` (exactly: no
+    cloud light, full transmission)."""
+
+    name = "overcast"
+    dop_scale_in_sky = True
+    names = ("cloud_tau",)
+    units = ("1",)
+    null = (0.0,)
+    lower = (0.0,)
+    upper = (OVERCAST_MAX_TAU,)
+    prior_sd = (5.0,)
+    fd_step = (1e-3,)
+
+    def starts(self, ctx) -> list:
+        # thin (the pattern through the cloud), medium, thick (the cloud's own light)
+        return [np.array([t]) for t in (0.3, 1.0, 3.0)]
+
+    def available(self, sun_elevation_deg) -> None:
+        if np.min(sun_elevation_deg) <= 0.0:
+            raise EffectUnavailableError(
+                f"{self.name} needs the sun above the horizon (the cloud is lit by the "
+                f"sunbeam); got {float(np.min(sun_elevation_deg)):.2f} deg")
+
+    def sky(self, p, base_sky, sun_enu):
+        from skysim.cloud_field import CloudField
+        from skysim.partly_cloudy import PartlyCloudySky
+        clouds = CloudField(1.0, float(p[0]), 0, base_m=OVERCAST_BASE_M, n_modes=16)
+        return PartlyCloudySky(base_sky, clouds)
+
+
 class Aureole(RingEffect):
     name = "aureole"
     names = ("amplitude", "scale_deg")
@@ -595,8 +660,8 @@ class StrayLight(RingEffect):
         return np.asarray(p[:P]) * np.exp(-psi / p[P])
 
 
-_EFFECTS = {c.name: c for c in (MultipleScattering, Aerosol, NeutralPoints, FieldOfView, Occlusion,
-                                YawScale, ClockOffset, Tilt, Aureole, StrayLight)}
+_EFFECTS = {c.name: c for c in (MultipleScattering, Aerosol, NeutralPoints, Overcast, FieldOfView,
+                                Occlusion, YawScale, ClockOffset, Tilt, Aureole, StrayLight)}
 
 
 def get_ring_effect(name: str) -> RingEffect:

@@ -99,7 +99,9 @@ def _groups(fwd: Forward, free: np.ndarray):
                                            for i in idx]))
     groups.append((list(range(L.delta.start, L.delta.stop)), "output",
                    [("cols", cols_of_unit[u]) for u in range(inst.n_units)]))
-    groups.append(([L.scale], "output", [("all", None)]))
+    e = fwd.effect
+    scale_stage = "geometry" if e is not None and e.dop_scale_in_sky else "output"
+    groups.append(([L.scale], scale_stage, [("all", None)]))
     for half in range(2):   # elevation offsets of all units, then azimuth offsets
         start = L.pointing.start + half * inst.n_units
         groups.append((list(range(start, start + inst.n_units)), "geometry",
@@ -109,7 +111,6 @@ def _groups(fwd: Forward, free: np.ndarray):
         groups.append((h, "geometry", [("all", None)]))
     else:
         groups.append((h, "geometry", [("rows", inst.sweep == k) for k in range(len(h))]))
-    e = fwd.effect
     n_pd_eff = 0 if e is None else e.per_photodiode
     if n_pd_eff:
         s0 = L.effect.start

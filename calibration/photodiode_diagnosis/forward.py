@@ -158,6 +158,9 @@ class Forward:
         self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= 3))[:, units]
         self._scale = np.where(self.usable, mean[:, units], 1.0)
         self._sky = RayleighSky(1.0)
+        self._dop_in_sky = bool(effect is not None and effect.dop_scale_in_sky)
+        """The DoP scale is the base sky's ``d_max`` inside the effect's sky (see
+        :attr:`~.effects.RingEffect.dop_scale_in_sky`), not a factor on every unit's DoP."""
         self.dop_free = False
         self.aop_sky = None
         """A sky (:class:`skysim.sky.Sky`) whose angle of polarization the DoP-free stage
@@ -186,6 +189,8 @@ class Forward:
         att = self._attitude(self.headings(theta), pitch, roll)
         sun = self.sun(t)
         base_sky = self.aop_sky if self.dop_free and self.aop_sky is not None else self._sky
+        if self._dop_in_sky and not self.dop_free:
+            base_sky = RayleighSky(float(np.clip(theta[self.layout.scale], 0.0, 1.0)))
         sky = base_sky if e is None else e.sky(pe, base_sky, sun)
         sensor = self.pointed_sensor(theta)
         if e is not None and e.observes:
@@ -225,7 +230,8 @@ class Forward:
         """``g_p (1 + s d cos 2(chi - a_p - beta_p - delta_u))`` (n, P), Malus's law [2]_."""
         L, inst = self.layout, self.inst
         u = inst.pd_unit
-        d = np.clip(theta[L.scale] * obs.dop[:, u], 0.0, 0.999)
+        s = 1.0 if self._dop_in_sky else theta[L.scale]
+        d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
         angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         return malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
                             responsivity=np.exp(theta[L.lam]))

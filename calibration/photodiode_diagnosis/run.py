@@ -127,6 +127,16 @@ holds for at the session's mean time: a session spans 12-13 minutes, over which 
 elevation changes by up to 2.5 deg."""
 
 
+def _nominal_instrument(theta, L, groups) -> np.ndarray:
+    """``theta`` with the instrument parameter ``groups`` (slices of the layout ``L``) at
+    their nominal value 0: a start that does not carry what a base fit under a strongly
+    different sky or clock took up into gains, offsets and angles."""
+    out = np.array(theta, float)
+    for sl in groups:
+        out[sl] = 0.0
+    return out
+
+
 def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
     """Starts of the clock offset: no offset, and the two best of the whole and half hours
     (each with the per-sweep headings carried by the sun's azimuth change)."""
@@ -147,9 +157,7 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
         # nominal pointing, a typical DoP scale): a clock hours off corrupts every parameter
         # the base fitted under it (on a simulated ring 2.5 h off, pointing at its -20 deg
         # bound and a DoP scale of 0.99), and the scores with them
-        nominal = t.copy()
-        for sl in (L.lam, L.off, L.angle, L.pointing):
-            nominal[sl] = 0.0
+        nominal = _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.pointing))
         nominal[L.scale] = NOMINAL_DOP_SCALE
         scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
     scored.sort(key=lambda x: x[0])
@@ -168,7 +176,16 @@ def _fit_effect(fe: Forward, starts, sigma):
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
     fits, failed = [], None
+    aop_sky = fe.aop_sky
     for s in starts:
+        # a clock start far from the recorded time is fitted on the single-scattering AoP:
+        # the sky candidates were fitted about the recorded sun, so under a clock hours off
+        # their skies (a neutral-point separation, an optical thickness) are fitted to the
+        # wrong sky and their AoP misleads the clock (on a real morning session recorded 2 h
+        # early, a fit under the best such sky stopped at +58 +- 43 min)
+        far = fe.effect.name == "clock_offset" and abs(float(s[fe.layout.effect][0])) > \
+            CLOCK_REFINE_S
+        fe.aop_sky = None if far else aop_sky
         try:
             fits.append(fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
                                    geometry=geometric, covariance=geometric))
@@ -176,6 +193,8 @@ def _fit_effect(fe: Forward, starts, sigma):
             # a start outside the model's valid range (the recorded clock putting the sun
             # below the twilight limit, while a start hours away holds): the others decide
             failed = exc
+        finally:
+            fe.aop_sky = aop_sky
     if not fits:
         raise failed
 
@@ -189,6 +208,12 @@ def _fit_effect(fe: Forward, starts, sigma):
     close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
     return min(close, key=lambda f: float(np.sum(np.abs(f[0].theta[L.effect]
                                                         - np.asarray(fe.effect.null)))))
+
+
+DOP_SCALE_STARTS = (0.2, 0.4, 0.6, 0.8, 1.0)
+"""DoP scales tried at each start of an effect whose sky takes the scale
+(:attr:`~.effects.RingEffect.dop_scale_in_sky`): clear skies' maximum DoP runs from about 0.2
+(hazy) to 0.8 (clean air, Coulson 1988)."""
 
 
 def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
@@ -229,6 +254,18 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         t = _extend(theta_base, fwd_base, fwd, p)
         # a sky of its own starts with the base fit's DoP scale or with the scale carried
         # over to its DoP, whichever fits better
+        if effect.dop_scale_in_sky:
+            # the DoP scale acts on the clear sky inside the effect's sky, so it trades
+            # with the effect's parameters along a curved valley: each start takes the
+            # best of a few scales (each a new sky)
+            # the base fit's instrument may have absorbed much of a strong effect, so
+            # the nominal instrument is tried as well
+            for tb in (t, _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))):
+                for sc in DOP_SCALE_STARTS:
+                    tt = tb.copy()
+                    tt[L.scale] = sc
+                    scored.append((float(np.sum(fwd.residual(tt) ** 2)), tt))
+            continue
         o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
         for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
             scored.append((float(np.sum(fwd.residual(tt, o) ** 2)), tt))
@@ -528,7 +565,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     PointingCalibrationError
         A ``pointing`` that is not 2 U angles within +-20 deg (or NaN).
     SunTooLowError
-        With the sun below the twilight limit at a sample.
+        With the sun below the twilight limit at a sample, unless the clock candidate is
+        asked for and the units read a lit sky at a clock offset that puts the sun up
+        (:mod:`.dark_clock`: the clock is then searched first).
     InstrumentDataError
         When every reading is saturated.
     InsufficientDataError
@@ -543,10 +582,16 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
     if sun_el.min() < TWILIGHT_LIMIT_DEG:
         i = int(np.argmin(sun_el))
-        raise SunTooLowError(
+        too_low = SunTooLowError(
             f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
             f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
             "Check the times and their UTC offset, or drop the night samples")
+        if not (refine_clock and "clock_offset" in effects):
+            raise too_low
+        # a lit sky stamped after dusk is a clock hours off: searched first
+        from .dark_clock import diagnose_dark_clock
+        return diagnose_dark_clock(inst, effects, too_low, n_folds=n_folds, seed=seed,
+                                   max_iter=max_iter)
     finite = np.isfinite(inst.readings)
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
