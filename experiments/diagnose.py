@@ -48,7 +48,7 @@ from sensor.opponent import OpponentSensor
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from .argtypes import (
+from experiments.cli.argtypes import (
     DefaultsHelpFormatter,
     existing_file,
     int_at_least,

@@ -38,7 +38,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .argtypes import output_dir
+from experiments.cli.argtypes import output_dir
 from .figures import save_png
 
 __all__ = [
@@ -258,7 +258,7 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
     from skysim.neutral_points import neutral_points
     from skysim.sky import RayleighSky
 
-    from .commands import sky_grid
+    from experiments.cli.commands import sky_grid
 
     t0 = time.perf_counter()
     out = Path(out)

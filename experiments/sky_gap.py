@@ -25,7 +25,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .argtypes import output_dir
+from experiments.cli.argtypes import output_dir
 from .figures import save_png
 from .physical_sky import natraj_path, read_natraj
 

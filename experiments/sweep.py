@@ -56,7 +56,7 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError, SkysimError
 
-from .argtypes import existing_file, output_dir, positive_int
+from experiments.cli.argtypes import existing_file, output_dir, positive_int
 from .figures import pyplot, save_png
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 

@@ -18,7 +18,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED,
+from experiments.cli.main import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED,
                              build_parser, main)
 
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
@@ -425,7 +425,7 @@ def test_expected_trials_match_the_designs():
 # --------------------------------------------------------------------------- interrupts, pipes
 
 def test_ctrl_c_prints_one_line(monkeypatch, capsys):
-    import experiments.commands as commands
+    import experiments.cli.commands as commands
 
     def interrupted(args):
         raise KeyboardInterrupt
@@ -436,7 +436,7 @@ def test_ctrl_c_prints_one_line(monkeypatch, capsys):
 
 
 def test_a_bug_is_one_line_unless_the_traceback_is_asked_for(monkeypatch, capsys):
-    import experiments.commands as commands
+    import experiments.cli.commands as commands
 
     def buggy(args):
         raise TypeError("unsupported operand")
@@ -759,12 +759,12 @@ def test_warnings_are_one_readable_line():
     """A library's warning during a command: one line on stderr, no source line (run in a
     fresh interpreter: pytest records warnings itself)."""
     import subprocess
-    code = ("import warnings, experiments.commands as c\n"
+    code = ("import warnings, experiments.cli.commands as c\n"
             "def warns(args):\n"
             "    warnings.warn('invalid value encountered in\\n    arccos', RuntimeWarning)\n"
             "    return 0\n"
             "c._sky = warns\n"
-            "from experiments.cli import main\n"
+            "from experiments.cli.main import main\n"
             "raise SystemExit(main(['sky', '--sun-elevation', '30', '--sun-azimuth', '10']))\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120)
@@ -814,7 +814,7 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
     out = tmp_path / "r"
     assert main(["reproduce", "compound-eye", "--trials", "2", "--out", str(out)]) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "reproduce", "camera",
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli.main", "reproduce", "camera",
                              "--trials", "1000", "--out", str(out), "--force"],
                             stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

@@ -9,7 +9,7 @@ import pytest
 pytest.importorskip("sasktran2", reason="the study's clear sky needs the 'rt' extra")
 
 from experiments import cloudy_compass as cc  # noqa: E402
-from experiments.cli import main  # noqa: E402
+from experiments.cli.main import main  # noqa: E402
 
 
 @pytest.fixture(scope="module")

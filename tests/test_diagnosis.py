@@ -26,7 +26,7 @@ from calibration.diagnosis import (
     fit_model,
     noise_floor_V,
 )
-from experiments.cli import main
+from experiments.cli.main import main
 from experiments.diagnose import run_benchmark, score_benchmark, simulate_session
 from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
 

@@ -11,7 +11,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import main
+from experiments.cli.main import main
 from experiments.generate import (AOP_MIN_DOP, CompareError, GenerateConfigError,
                                   compare_paths, compare_tables, generate, load_generate_config)
 from sensor.measurement import read_measurement

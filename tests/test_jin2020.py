@@ -6,7 +6,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import build_parser, main
+from experiments.cli.main import build_parser, main
 from experiments.jin2020 import (
     PAPER_SUN,
     QUICK,

@@ -76,7 +76,7 @@ def test_reference_option_takes_a_file_or_a_folder(tmp_path):
 
 
 def test_reproduce_refuses_a_bad_reference_without_traceback(tmp_path, capsys):
-    from experiments.cli import main
+    from experiments.cli.main import main
     assert main(["reproduce", "physical-sky", "--reference", str(tmp_path),
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err

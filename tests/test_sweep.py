@@ -307,7 +307,7 @@ def test_salib_indices_find_the_only_influential_factor(tmp_path):
 
 
 def test_cli_sweep_writes_tables_and_figures(tmp_path, capsys):
-    from experiments.cli import main
+    from experiments.cli.main import main
     cfg = tmp_path / "c.toml"
     cfg.write_text('[sweep]\nname = "cli"\ntrials = 128\nstops = 32\nseed = 1\n'
                    '[parameters]\nnoise_V = {uniform = [0.0001, 0.001]}\n'

@@ -148,14 +148,14 @@ def _sky(args) -> int:
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
 
-    from ._clouds_cli import with_clouds
+    from .cloud_options import with_clouds
     params = _sky_params(args)
     refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
                               sidecar_path(args.out)), ("--plot", args.plot)],
                             [("--directions", args.directions)])
     sky = None
     if args.source == "moon":  # the night sky: the Moon as the source (experiments.moonlit_sky)
-        from .moonlit_sky import moon_sky
+        from experiments.moonlit_sky import moon_sky
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
     elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
@@ -199,7 +199,7 @@ def _sky(args) -> int:
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
         print(f"wrote {el.size} directions to {out}")
     if args.plot:
-        from .polar_maps import plot_polar_maps, sky_title
+        from experiments.polar_maps import plot_polar_maps, sky_title
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
@@ -250,7 +250,7 @@ def _sample(args) -> int:
     from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
-    from ._clouds_cli import with_clouds
+    from .cloud_options import with_clouds
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
@@ -346,7 +346,7 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
-    from ._clouds_cli import add_cloud_options
+    from .cloud_options import add_cloud_options
     fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,
