@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .figures import save_png
+from experiments.plotting.figures import save_png
 
 __all__ = ["AODS", "KREUTER2010", "aerosol_section", "principal_plane", "vertical_zeros"]
 

@@ -78,7 +78,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
     laid out as the sensor records it (row 0 at the top)."""
     from sensor.camera import local_meridian_aop
 
-    from .figures import pyplot, save_png
+    from experiments.plotting.figures import pyplot, save_png
     plt = pyplot()
     _, _, aop_m = local_meridian_aop(stokes, lens, attitude)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
@@ -407,7 +407,7 @@ def _write_outputs(out: Path, table, summary, skies, cam, size) -> None:
     from sensor.camera import camera_attitude, camera_stokes
     from skysim.io import atomic_write, write_json_atomic
 
-    from .figures import pyplot, save_png
+    from experiments.plotting.figures import pyplot, save_png
     out.mkdir(parents=True, exist_ok=True)
     (out / "figures").mkdir(exist_ok=True)
     atomic_write(out / "table.csv", lambda tmp: table.to_csv(tmp, index=False))

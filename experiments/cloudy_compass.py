@@ -52,7 +52,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["Config", "DEFAULT_SEED", "QUICK", "METHODS", "camera_errors", "clear_sky",
            "cloud_fields", "format_table", "register_reproduce", "ring_errors", "run",
@@ -344,7 +344,7 @@ def _example(out: Path, cfg: Config, clear, fields) -> None:
     from skysim.partly_cloudy import PartlyCloudySky
 
     from experiments.cli.commands import sky_grid
-    from .polar_maps import plot_polar_maps
+    from experiments.plotting.polar_maps import plot_polar_maps
     cover = sorted(cfg.covers)[len(cfg.covers) // 2]
     tau = max(cfg.taus)
     sky = PartlyCloudySky(clear, fields[(cover, tau)])

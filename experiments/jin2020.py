@@ -57,7 +57,7 @@ from skysim.sun import Site
 
 from experiments.cli.argtypes import output_dir, positive_int
 from experiments.cli.argtypes import seed as seed_type
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",

@@ -66,7 +66,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["Config", "DEFAULT_SEED", "QUICK", "SENSORS", "camera_errors", "format_summary",
            "format_table", "night_camera", "night_conditions",

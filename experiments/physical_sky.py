@@ -39,7 +39,7 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 
 from experiments.cli.argtypes import output_dir
-from .figures import save_png
+from experiments.plotting.figures import save_png
 
 __all__ = [
     "NATRAJ_FILE",
@@ -192,7 +192,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .polar_maps import plot_polar_maps
+    from experiments.plotting.polar_maps import plot_polar_maps
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
     for ax, col, label in [(axes[0], "dI_rel", "I/I_table - 1"),

@@ -26,7 +26,7 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 
 from experiments.cli.argtypes import output_dir
-from .figures import save_png
+from experiments.plotting.figures import save_png
 from .physical_sky import natraj_path, read_natraj
 
 __all__ = ["CALIBRATION_MU0", "NOISE_FLOOR", "cases_from_natraj", "register",

@@ -258,7 +258,7 @@ def _write_outputs(out: Path, result: dict, figures: bool, seed: int, model: Err
     write_json_atomic(out / "summary.json", result["summary"])
     _write_example_data(out, seed, model)
     if figures:
-        from .yang2014_figures import plot_error_vs_phi, plot_table1_bands
+        from experiments.plotting.yang2014_figures import plot_error_vs_phi, plot_table1_bands
         plot_error_vs_phi(result, out)
         plot_table1_bands(table1, out / "table1_bands.png")
 

@@ -199,7 +199,7 @@ def _sky(args) -> int:
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
         print(f"wrote {el.size} directions to {out}")
     if args.plot:
-        from experiments.polar_maps import plot_polar_maps, sky_title
+        from experiments.plotting.polar_maps import plot_polar_maps, sky_title
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
