@@ -374,7 +374,7 @@ def format_summary(table: pd.DataFrame) -> str:
 
 
 def register_reproduce(targets: dict) -> None:
-    from ._progress import reproduction
+    from experiments.workflows.progress import reproduction
     targets["cloudy-compass"] = reproduction(
         "cloudy-compass", "Cloudy compass — heading error vs cloud cover and optical thickness",
         run, lambda result: format_summary(result["table"]),

@@ -487,7 +487,7 @@ def format_summary(summary: dict) -> str:
 
 
 def register_reproduce(targets: dict) -> None:
-    from ._progress import reproduction
+    from experiments.workflows.progress import reproduction
     targets["moonlit-compass"] = reproduction(
         "moonlit-compass", "Moonlit compass — heading error vs lunar phase and Moon elevation",
         run, lambda result: format_summary(result["summary"]),

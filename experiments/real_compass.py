@@ -258,7 +258,7 @@ def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessi
     from calibration import diagnose
     from sensor.photodiodes_io import read_photodiodes
 
-    from .real_injection import inject
+    from experiments.workflows.real_injection import inject
     files = session_files(folder, "--real")[:n_sessions]
     rng = np.random.default_rng(seed)
     rows = []

@@ -387,8 +387,8 @@ def test_reproductions_refuse_trials_that_do_not_fit(target, tmp_path, capsys, m
 def test_huge_sweep_is_refused_at_once_and_planned_lazily(tmp_path, capsys):
     from dataclasses import replace
 
-    from experiments.sweep import plan_chunks
-    from experiments.sweep_config import load_config
+    from experiments.workflows.sweep import plan_chunks
+    from experiments.workflows.sweep_config import load_config
     cfg = tmp_path / "w.toml"
     cfg.write_text('[sweep]\nname = "w"\ntrials = 1000000000000\n[parameters]\n'
                    'noise_V = {uniform = [0.0001, 0.002]}\n')
@@ -413,8 +413,8 @@ def test_sweep_chunks_must_fit_beside_each_other(tmp_path, capsys, monkeypatch):
 def test_expected_trials_match_the_designs():
     from dataclasses import replace
 
-    from experiments.sweep import design, expected_trials
-    from experiments.sweep_config import load_config
+    from experiments.workflows.sweep import design, expected_trials
+    from experiments.workflows.sweep_config import load_config
     for name in ("sobol", "morris", "montecarlo"):
         c = load_config(EXAMPLES / f"sweep_{name}.toml")
         if name != "montecarlo":
@@ -497,7 +497,7 @@ def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
     import signal
     import threading
 
-    from experiments.sweep_backends import run_tasks
+    from experiments.workflows.sweep_backends import run_tasks
     tasks = [str(tmp_path / f"t{k}") for k in range(24)]
     started = threading.Event()
 
@@ -566,7 +566,7 @@ def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, 
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
     _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
            "100 time steps x 48 directions", "only 10 kB is free")
-    from experiments.sky_series import write_sky_series   # the library's writer checks too
+    from experiments.workflows.sky_series import write_sky_series   # the library's writer checks too
     from skysim.io import WriteError
     from skysim.sky import make_sky
     with pytest.raises(WriteError, match="1000 time steps x 2 directions would take about 80 kB"):
@@ -583,7 +583,7 @@ def test_sky_series_failed_write_names_the_file_and_leaves_nothing(suffix, capsy
     pytest.importorskip("h5netcdf")
     import errno
 
-    import experiments.sky_series as ss
+    import experiments.workflows.sky_series as ss
     out = tmp_path / f"s{suffix}"
     assert main([*SERIES, "--periods", "3", "--out", str(out)]) == 0
     before = out.read_bytes()
@@ -744,7 +744,7 @@ def test_gap_benchmark_size_is_refused_before_any_work(tmp_path, capsys, monkeyp
 
 
 def test_long_runs_state_their_expected_duration(capsys):
-    from experiments._progress import announce_duration, expected_reproduction_seconds
+    from experiments.workflows.progress import announce_duration, expected_reproduction_seconds
     assert expected_reproduction_seconds("sky-gap", False, None) == 840.0
     assert expected_reproduction_seconds("yang2014", False, 2000) == 10 * \
         expected_reproduction_seconds("yang2014", False, None)
@@ -800,7 +800,7 @@ def test_every_option_has_help_and_no_empty_default(name, parser, action):
 
 
 def test_durations_read_at_a_glance():
-    from experiments._progress import format_duration
+    from experiments.workflows.progress import format_duration
     assert [format_duration(s) for s in (45, 840, 9000, 5.3e5)] == [
         "45 s", "14 min", "2.5 h", "6 days"]
 

@@ -36,7 +36,7 @@ from calibration.photodiode_diagnosis.effects import (
 from calibration.photodiode_diagnosis.forward import Forward, SunTrack
 from calibration.photodiode_diagnosis.instrument import held_readings
 from calibration.photodiode_diagnosis.run import held_out_folds
-from experiments.real_injection import inject
+from experiments.workflows.real_injection import inject
 from sensor.compound_eye import ring_configuration
 from sensor.photodiodes_io import PhotodiodeData, PhotodiodeFormatError
 from skysim.sky import RayleighSky

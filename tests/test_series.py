@@ -10,7 +10,7 @@ import pandas as pd
 import pytest
 
 from experiments.cli.main import main
-from experiments.sky_series import SERIES_SCHEMA, write_sky_series
+from experiments.workflows.sky_series import SERIES_SCHEMA, write_sky_series
 from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
 from skysim.series import VALUES_PER_POINT, iter_sky_series, suns_per_block
 from skysim.sky import RayleighSky

@@ -80,9 +80,9 @@ def _run_target(targets: dict, args) -> int:
 
     Options the target does not use are errors; the memory of ``--trials`` is checked and
     the expected duration announced before any work; the output folder is replaced as a
-    whole (:func:`experiments._run_folder.replacing_folder`)."""
-    from experiments._progress import announce_duration, expected_reproduction_seconds
-    from experiments._run_folder import replacing_folder
+    whole (:func:`experiments.workflows.run_folder.replacing_folder`)."""
+    from experiments.workflows.progress import announce_duration, expected_reproduction_seconds
+    from experiments.workflows.run_folder import replacing_folder
     func = targets[args.target]
     for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
         if getattr(args, option) is not None and not getattr(func, attr, False):
@@ -209,7 +209,7 @@ def _quiet_stdout() -> None:
 
 def main(argv=None) -> int:
     """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
-    from experiments._progress import install_warning_format
+    from experiments.workflows.progress import install_warning_format
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
     install_warning_format()   # a library's warning as one line, not its source line

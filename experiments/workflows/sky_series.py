@@ -235,7 +235,7 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     from skysim.resources import check_memory, format_count
     from skysim.series import VALUES_PER_POINT
 
-    from ._progress import announce_duration
+    from .progress import announce_duration
     from experiments.cli.commands import SKY_BYTES_PER_DIRECTION
     directions = f"{format_count(n_directions)} directions"
     what = f"{format_count(n_times)} time steps x {directions}"

@@ -3,7 +3,7 @@
 ``skysim sweep CONFIG.toml [--backend local|dask] [--scheduler ADDRESS] [--out DIR]``
 
 Each *trial* is one sensor with its own error parameters (configuration:
-:mod:`experiments.sweep_config`) doing one turntable sweep of ``stops`` stops evenly over the
+:mod:`experiments.workflows.sweep_config`) doing one turntable sweep of ``stops`` stops evenly over the
 polarization azimuth ``phi`` in [-90, 90) under a fixed sun. Per trial and channel pair the
 sweep records the heading error of the ideal solve (eqs. 5-9 of Yang et al. 2014 [1]_, "raw")
 and, after a Gauss-Newton LSM calibration on the even stops (eqs. 10-14, with the DoP scale

@@ -56,7 +56,7 @@ from experiments.cli.argtypes import (
     positive_int,
     seed,
 )
-from .yang2014 import ERROR_MODEL, SITE
+from experiments.yang2014 import ERROR_MODEL, SITE
 
 __all__ = [
     "SESSION",
@@ -450,7 +450,7 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from .real_compass import run_real_benchmark
+    from experiments.real_compass import run_real_benchmark
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES
@@ -479,7 +479,7 @@ BENCHMARK_SECONDS_PER_SET = 1.5
 def _benchmark_cmd(args) -> int:
     from skysim.resources import check_memory
 
-    from ._progress import announce_duration
+    from .progress import announce_duration
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
