@@ -683,7 +683,7 @@ def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
 def _interrupting_target(monkeypatch, module: str):
     """Make ``module``'s reproduction write one file, then be interrupted (Ctrl-C)."""
     import importlib
-    mod = importlib.import_module(f"experiments.{module}")
+    mod = importlib.import_module(f"experiments.studies.{module}")
     real = mod._reproduce
 
     def interrupted(args):

@@ -14,7 +14,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.physical_sky import (NATRAJ_FILE, QUICK_CASES, natraj_path, read_natraj)
+from experiments.studies.physical_sky import (NATRAJ_FILE, QUICK_CASES, natraj_path, read_natraj)
 
 
 def test_shipped_rows_are_the_published_subset_unchanged(reference_dir):
@@ -38,7 +38,7 @@ def test_builder_reproduces_the_shipped_file_byte_for_byte(reference_dir, tmp_pa
 def test_shipped_rows_cover_both_reproductions():
     """Every case physical-sky and sky-gap use is present: 4 tau x 2 albedo x 7 suns, 14
     view cosines >= 0.1, 7 azimuths (0..180 step 30), in a file small enough to ship."""
-    from experiments.sky_gap import cases_from_natraj, natraj_table
+    from experiments.studies.sky_gap import cases_from_natraj, natraj_table
     d = read_natraj(NATRAJ_FILE)
     assert NATRAJ_FILE.stat().st_size < 100_000
     assert len(d) == 4 * 2 * 7 * 14 * 7

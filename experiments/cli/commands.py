@@ -154,8 +154,8 @@ def _sky(args) -> int:
                               sidecar_path(args.out)), ("--plot", args.plot)],
                             [("--directions", args.directions)])
     sky = None
-    if args.source == "moon":  # the night sky: the Moon as the source (experiments.moonlit_sky)
-        from experiments.moonlit_sky import moon_sky
+    if args.source == "moon":  # the night sky: the Moon as the source (experiments.studies.moonlit_sky)
+        from experiments.studies.moonlit_sky import moon_sky
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
     elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
@@ -295,7 +295,7 @@ def _sample(args) -> int:
 
 def _sensor_errors(spec: str, rng):
     """``--errors``: 'random' (the Yang 2014 error model), 'none' or a JSON file."""
-    from experiments.yang2014 import ERROR_MODEL
+    from experiments.studies.yang2014 import ERROR_MODEL
     from sensor.errors import OpponentErrors
     if spec == "none":
         return OpponentErrors()

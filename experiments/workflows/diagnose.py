@@ -17,7 +17,7 @@ starting every 30 min from 15:30 to 18:00 local time (sun elevation ~51 -> ~18 d
 illuminance falls ~2.5x and the sensor cools by a few kelvin: the slow effects have something
 to act on; the last sweep ends early enough that a one-hour clock error keeps the recorded
 sun above the horizon). Sensor errors, noise, DAQ and ``d_max`` follow
-:data:`experiments.yang2014.ERROR_MODEL`.
+:data:`experiments.studies.yang2014.ERROR_MODEL`.
 """
 
 from __future__ import annotations
@@ -56,7 +56,7 @@ from experiments.cli.argtypes import (
     positive_int,
     seed,
 )
-from experiments.yang2014 import ERROR_MODEL, SITE
+from experiments.studies.yang2014 import ERROR_MODEL, SITE
 
 __all__ = [
     "SESSION",
@@ -450,7 +450,7 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from experiments.real_compass import run_real_benchmark
+    from experiments.studies.real_compass import run_real_benchmark
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES

@@ -244,7 +244,7 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     from sensor.errors import OpponentErrors
     from sensor.opponent import OpponentSensor, zenith_polarization
 
-    from experiments.yang2014 import ERROR_MODEL
+    from experiments.studies.yang2014 import ERROR_MODEL
     rng = dataset_rng(seed, entry["name"])
     errors = entry.get("errors", "random")
     if errors == "random":

@@ -1,6 +1,6 @@
 """Aerosol skies beside the molecular one: principal-plane DoP, neutral points, max DoP vs AOD.
 
-Part of ``skysim reproduce physical-sky`` (:mod:`experiments.physical_sky`); writes to its
+Part of ``skysim reproduce physical-sky`` (:mod:`experiments.studies.physical_sky`); writes to its
 output folder:
 
 - ``aerosol_principal_plane.csv`` / ``.png``: signed DoP ``-Q/I`` along the solar vertical

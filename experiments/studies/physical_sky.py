@@ -15,7 +15,7 @@
   scattering, multiple scattering (black ground and albedo 0.25) and Berry, with the tables'
   numbers (0.72, 0.63, 0.53 at mu0 = 0.4);
 - ``aerosol_*.csv`` and ``.png``: aerosol skies beside the molecular one
-  (:mod:`experiments.aerosol_sky`: principal-plane DoP, neutral points and maximum DoP vs
+  (:mod:`experiments.studies.aerosol_sky`: principal-plane DoP, neutral points and maximum DoP vs
   AOD, with Kreuter et al. 2010);
 - ``summary.json``.
 
@@ -51,7 +51,7 @@ __all__ = [
     "zenith_dop_curves",
 ]
 
-NATRAJ_FILE = Path(__file__).with_name("data") / "natraj2009" / "natraj2009_transmitted.csv.gz"
+NATRAJ_FILE = Path(__file__).parents[1] / "data" / "natraj2009" / "natraj2009_transmitted.csv.gz"
 """The Natraj et al. (2009) rows shipped with skysim (transmitted field, mu >= 0.1; built by
 ``build_natraj2009_transmitted.py`` beside it from the published subset)."""
 NATRAJ_NAMES = ("natraj2009_subset.csv.gz", "natraj2009_transmitted.csv.gz")

@@ -45,7 +45,7 @@ from experiments.plotting.figures import pyplot, save_png
 __all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "compare", "measured_polarization",
            "moon_sky", "read_fors2", "register_reproduce", "run"]
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "moonskypol"
+DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "moonskypol"
 """The FORS2 moonlit-sky rows beside the checkout (``../shared/reference/moonskypol``)."""
 
 REQUIRED_COLUMNS = ("FIELD", "RA", "DEC", "MED OBS", "Q", "error Q", "U", "error U", "BAND",

@@ -42,8 +42,8 @@ MAP_MU0 = 0.4
 
 def natraj_table(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
     """The Natraj 2009 transmitted rows from ``reference`` (a table file or a folder holding
-    one, :func:`experiments.physical_sky.natraj_path`), by default the rows shipped with
-    skysim (:func:`experiments.physical_sky.read_natraj`)."""
+    one, :func:`experiments.studies.physical_sky.natraj_path`), by default the rows shipped with
+    skysim (:func:`experiments.studies.physical_sky.read_natraj`)."""
     return read_natraj(natraj_path(reference), min_mu)
 
 
