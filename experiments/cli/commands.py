@@ -295,16 +295,12 @@ def _sample(args) -> int:
 
 def _sensor_errors(spec: str, rng):
     """``--errors``: 'random' (the Yang 2014 error model), 'none' or a JSON file."""
-    from experiments.studies.yang2014 import ERROR_MODEL
     from sensor.errors import OpponentErrors
+    from sensor.yang2014 import ERROR_MODEL
     if spec == "none":
         return OpponentErrors()
     if spec == "random":
-        m = ERROR_MODEL
-        return OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
-                                   transmittance_sd=m.transmittance_sd,
-                                   noise_range_V=m.noise_range_V,
-                                   turntable_error_deg=m.turntable_error_deg)
+        return ERROR_MODEL.draw_errors(rng)
     path = existing_file_or_error(spec, "--errors")
     try:
         d = json.loads(path.read_text())

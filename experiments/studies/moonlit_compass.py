@@ -195,7 +195,7 @@ def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool 
     from skysim.geometry import wrap_axial_deg
 
     from .dark_current import Config as DarkConfig, _calibration_grid
-    from .yang2014 import ERROR_MODEL
+    from sensor.yang2014 import ERROR_MODEL
 
     daq = Daq(ERROR_MODEL.daq_bits, ERROR_MODEL.daq_range_V)
     params = PhotodiodeChannels.draw(rng)

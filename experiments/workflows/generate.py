@@ -243,16 +243,11 @@ def _measurement(entry: dict, site, seed: int, path: Path, where: str) -> None:
     from sensor.daq import Daq
     from sensor.errors import OpponentErrors
     from sensor.opponent import OpponentSensor, zenith_polarization
-
-    from experiments.studies.yang2014 import ERROR_MODEL
+    from sensor.yang2014 import ERROR_MODEL
     rng = dataset_rng(seed, entry["name"])
     errors = entry.get("errors", "random")
     if errors == "random":
-        m = ERROR_MODEL
-        errors = OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
-                                     transmittance_sd=m.transmittance_sd,
-                                     noise_range_V=m.noise_range_V,
-                                     turntable_error_deg=m.turntable_error_deg)
+        errors = ERROR_MODEL.draw_errors(rng)
     elif errors == "none":
         errors = OpponentErrors()
     elif isinstance(errors, dict):
