@@ -10,8 +10,7 @@ from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_fil
                        existing_file, float_in, nonnegative_float, output_file, positive_float,
                        positive_int, refuse_replacing_inputs, seed)
 
-__all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CONVENTION",
-           "MODEL_OPTIONS"]
+__all__ = ["register", "read_directions", "view_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
 
 MODEL_OPTIONS = {"rayleigh": ("dmax",),
                  "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
@@ -40,30 +39,6 @@ AOP_CONVENTION = (
     "i.e. clockwise as seen by an observer looking along the view direction, wrapped to "
     "[-90, 90). Q = I dop cos(2 aop), U = I dop sin(2 aop) in that basis. Azimuths are "
     "clockwise from geographic north; at the zenith the meridian is that of the row's azimuth.")
-
-
-def sky_grid_size(step_deg: float) -> int:
-    """Number of directions of :func:`sky_grid` with spacing ``step_deg`` [deg]."""
-    import math
-    return (math.floor(90.0 / step_deg + 1e-9) + 1) * math.ceil(360.0 / step_deg - 1e-9)
-
-
-def sky_grid(step_deg: float = 2.0):
-    """Default full-sky grid: elevations 0..90 and azimuths 0..360-step [deg], flattened.
-
-    Raises
-    ------
-    InvalidParameterError
-        If ``step_deg`` is not in (0, 90].
-    """
-    import numpy as np
-
-    from skysim.validation import check_in_range
-    check_in_range("grid step [deg]", step_deg, 0.0, 90.0, low_open=True)
-    el = np.arange(0.0, 90.0 + 1e-9, step_deg)
-    az = np.arange(0.0, 360.0, step_deg)
-    E, A = np.meshgrid(el, az, indexing="ij")
-    return E.ravel(), A.ravel()
 
 
 def read_directions(path):
@@ -130,7 +105,8 @@ def _flag(option: str) -> str:
 
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     """View directions [deg] from a CSV (:func:`read_directions`), or else the default
-    full-sky grid (:func:`sky_grid`), after checking its memory."""
+    full-sky grid (:func:`skysim.geometry.sky_grid`), after checking its memory."""
+    from skysim.geometry import sky_grid, sky_grid_size
     from skysim.resources import check_memory, format_count
     if directions_csv:
         return read_directions(directions_csv)

@@ -343,7 +343,7 @@ def _example(out: Path, cfg: Config, clear, fields) -> None:
     """DoP, AoP and radiance of the sky at the middle cover and the thickest clouds."""
     from skysim.partly_cloudy import PartlyCloudySky
 
-    from experiments.cli.commands import sky_grid
+    from skysim.geometry import sky_grid
     from experiments.plotting.polar_maps import plot_polar_maps
     cover = sorted(cfg.covers)[len(cfg.covers) // 2]
     tau = max(cfg.taus)

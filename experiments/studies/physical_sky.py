@@ -258,7 +258,7 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
     from skysim.neutral_points import neutral_points
     from skysim.sky import RayleighSky
 
-    from experiments.cli.commands import sky_grid
+    from skysim.geometry import sky_grid
 
     t0 = time.perf_counter()
     out = Path(out)

@@ -199,11 +199,11 @@ def _write(table, sidecar: dict, path: Path) -> None:
 def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
     import pandas as pd
 
+    from skysim.geometry import sky_grid, sky_grid_size
+    from skysim.resources import check_memory
     from skysim.sun import sun_position
 
-    from skysim.resources import check_memory
-
-    from experiments.cli.commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION, sky_grid, sky_grid_size
+    from experiments.cli.commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION
     sky = _cloudy(_sky(entry, where), entry, where)
     if "time" in entry:
         pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,

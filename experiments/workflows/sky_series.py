@@ -263,14 +263,13 @@ def _sky_series(args) -> int:
     import numpy as np
     import pandas as pd
 
+    from skysim.geometry import sky_grid_size
+    from skysim.io import sidecar_path
     from skysim.sky import make_sky
     from skysim.sun import Site, sun_position
 
-    from experiments.cli.commands import _sky_params, sky_grid_size, view_directions
-
-    from skysim.io import sidecar_path
-
     from experiments.cli.argtypes import refuse_replacing_inputs
+    from experiments.cli.commands import _sky_params, view_directions
     refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
                                                     sidecar_path(args.out))],
                             [("--directions", args.directions)])
