@@ -1,4 +1,4 @@
-"""The Natraj et al. (2009) rows shipped with skysim (``experiments/data/natraj2009/``).
+"""The Natraj et al. (2009) rows shipped with skysim (``skysim/data/natraj2009/``).
 
 The shipped file must be the published values unchanged (compared, when the project's shared
 reference folder is present, with the subset it was built from, and rebuilt byte for byte by
@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.studies.physical_sky import (NATRAJ_FILE, QUICK_CASES, natraj_path, read_natraj)
+from experiments.studies.physical_sky import QUICK_CASES
+from skysim.natraj import NATRAJ_FILE, natraj_path, read_natraj
 
 
 def test_shipped_rows_are_the_published_subset_unchanged(reference_dir):
