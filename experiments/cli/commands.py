@@ -1,4 +1,5 @@
-"""Foundation commands: ``skysim sky``, ``skysim sample`` and ``skysim calibrate``."""
+"""Foundation commands: ``skysim sky`` (lit by the Sun or the Moon), ``skysim sample`` and
+``skysim calibrate``."""
 
 from __future__ import annotations
 
@@ -116,6 +117,55 @@ def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     return sky_grid(grid_step_deg)
 
 
+# --------------------------------------------------------------------------- --source moon
+class _MoonlitSkyMap:
+    """``skysim sky --source moon``: the night sky of one time as the command's sky."""
+
+    def __init__(self, args, params: dict):
+        from skysim.sky import make_sky
+        from skysim.sun import Site
+        self.site = Site(args.lat, args.lon, args.alt)
+        self.time, self.band = args.time, args.band
+        if args.model == "multiple" and "tau" not in params and "wavelength_nm" not in params:
+            from skysim.bands import get_band
+            params = {**params, "wavelength_nm": get_band(args.band).wavelength_nm}
+        self.pattern = make_sky(args.model, **params)
+
+    def field(self, view_elevation_deg, view_azimuth_deg, *_source):
+        from skysim.night import night_sky
+        return night_sky(view_elevation_deg, view_azimuth_deg, self.time, self.site,
+                         self.band, self.pattern).field
+
+    def describe(self) -> dict:
+        return {"model": "night", "source": "moon", "band": self.band,
+                "pattern": self.pattern.describe(), "radiance_unit": "W m-2 nm-1 sr-1",
+                "radiance": "Krisciunas & Schaefer (1991) moonlit sky with ROLO lunar "
+                            "irradiance, the Sun's light added when up, night-sky background "
+                            "of the band (skysim.night)"}
+
+    def title(self, moon_elevation_deg: float, moon_azimuth_deg: float) -> str:
+        return (f"night sky ({self.pattern.name} pattern), {self.band} band; moon elevation "
+                f"{moon_elevation_deg:.1f}°, azimuth {moon_azimuth_deg:.1f}°")
+
+
+def moon_sky(args, params: dict):
+    """For ``skysim sky --source moon``: ``(sky, moon elevation, moon azimuth, info)``."""
+    if args.lat is None or args.lon is None or args.time is None:
+        raise ValueError("--source moon needs --lat --lon --time (timezone-aware ISO 8601)")
+    if args.sun_elevation is not None or args.sun_azimuth is not None:
+        raise ValueError("--sun-elevation/--sun-azimuth give the Sun; with --source moon the "
+                         "Moon's position follows from --lat --lon --time")
+    from skysim.moon import moon_position
+    sky = _MoonlitSkyMap(args, params)
+    pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
+                        sky.site.altitude_m).iloc[0]
+    info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
+            "elevation_deg": float(pos.elevation_deg), "azimuth_deg": float(pos.azimuth_deg),
+            "phase_angle_deg": float(pos.phase_angle_deg),
+            "illuminated_fraction": float(pos.illuminated_fraction)}
+    return sky, float(pos.elevation_deg), float(pos.azimuth_deg), info
+
+
 def _sky(args) -> int:
     # pandas, tqdm and the sun are imported only where needed: a Parquet sky map for given
     # sun angles starts in a fraction of the time
@@ -130,8 +180,7 @@ def _sky(args) -> int:
                               sidecar_path(args.out)), ("--plot", args.plot)],
                             [("--directions", args.directions)])
     sky = None
-    if args.source == "moon":  # the night sky: the Moon as the source (experiments.studies.moonlit_sky)
-        from experiments.studies.moonlit_sky import moon_sky
+    if args.source == "moon":  # the night sky: the Moon as the source (skysim.night)
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
     elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
