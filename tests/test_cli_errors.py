@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli.main import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED,
-                             build_parser, main)
+from experiments.cli.main import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED, build_parser,
+                                  main)
 
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -566,7 +566,8 @@ def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, 
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
     _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
            "100 time steps x 48 directions", "only 10 kB is free")
-    from experiments.workflows.sky_series import write_sky_series   # the library's writer checks too
+    # the library's writer checks too
+    from experiments.workflows.sky_series import write_sky_series
     from skysim.io import WriteError
     from skysim.sky import make_sky
     with pytest.raises(WriteError, match="1000 time steps x 2 directions would take about 80 kB"):

@@ -1,7 +1,8 @@
 """Gap diagnosis: estimator round trips, noise floor, blind verdicts, bad input, both schemas.
 
-Data come from :func:`experiments.workflows.diagnose.simulate_session` (the benchmark generator: Yang
-2014 error model, six sweeps over an afternoon); the diagnoser sees only the tables.
+Data come from :func:`experiments.workflows.diagnose.simulate_session` (the benchmark
+generator: Yang 2014 error model, six sweeps over an afternoon); the diagnoser sees only the
+tables.
 """
 
 import json

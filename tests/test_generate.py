@@ -13,7 +13,8 @@ import pytest
 
 from experiments.cli.main import main
 from experiments.workflows.generate import (AOP_MIN_DOP, CompareError, GenerateConfigError,
-                                  compare_paths, compare_tables, generate, load_generate_config)
+                                            compare_paths, compare_tables, generate,
+                                            load_generate_config)
 from sensor.measurement import read_measurement
 from sensor.photodiodes_io import read_photodiodes
 

@@ -152,8 +152,8 @@ def test_conditions_are_moonlit_nights(conditions):
 
 
 def test_zero_noise_limits_give_the_heading(conditions):
-    from experiments.studies.moonlit_compass import (QUICK, camera_errors, night_camera, ring_errors,
-                                             three_pair_errors)
+    from experiments.studies.moonlit_compass import (QUICK, camera_errors, night_camera,
+                                                     ring_errors, three_pair_errors)
     cfg = replace(QUICK, three_pair_trials=1, ring_trials=4, camera_trials=1, camera_px=128)
     rng = np.random.default_rng(5)
     tp = three_pair_errors(conditions, cfg, rng, noise_free=True)

@@ -10,12 +10,13 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from experiments.workflows.sweep import (BLOCK_TRIALS, SweepMemoryError, SweepStateError, block_seed,
-                               chunk_trials, evaluate_trials, opponent_outputs, plan_chunks,
-                               run_chunk, run_sweep, simulate_trials, tilted_axes,
-                               trial_parameters)
+from experiments.workflows.sweep import (BLOCK_TRIALS, SweepMemoryError, SweepStateError,
+                                         block_seed, chunk_trials, evaluate_trials,
+                                         opponent_outputs, plan_chunks, run_chunk, run_sweep,
+                                         simulate_trials, tilted_axes, trial_parameters)
 from experiments.workflows.sweep_backends import SchedulerUnreachableError, run_tasks
-from experiments.workflows.sweep_config import PARAMETERS, SweepConfigError, load_config, parse_config
+from experiments.workflows.sweep_config import (PARAMETERS, SweepConfigError, load_config,
+                                                parse_config)
 from sensor.daq import Daq
 from sensor.opponent import channel_outputs
 from skysim.geometry import direction_vector, wrap_axial_deg

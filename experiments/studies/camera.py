@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in, int_at_least,
-                       output_file, positive_float, seed)
+from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
+                                      int_at_least, output_file, positive_float, seed)
 
 __all__ = ["DEFAULT_SEED", "heading_trials", "run", "stokes_figure", "register",
            "register_reproduce"]

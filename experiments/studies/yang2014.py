@@ -6,7 +6,8 @@ a, b, c. Each group is a ~10-minute turntable sweep over phi in [-90, 90) deg. F
 and channel pair the paper reports 3 sigma of the heading error after least-squares
 compensation (Table 1) and shows the raw and compensated errors against phi (Figs. 3-5).
 
-What is simulated, and why (all magnitudes in :data:`sensor.yang2014.ERROR_MODEL`, never tuned per cell):
+What is simulated, and why (all magnitudes in :data:`sensor.yang2014.ERROR_MODEL`, never
+tuned per cell):
 
 - Sky: single-scattering Rayleigh (the paper's model, eq. 1) with ``d_max`` of a real clear
   sky, drawn per trial (one afternoon per trial, the same sky for a, b and c).

@@ -324,8 +324,9 @@ def _copy_sky_model_options(p) -> None:
 
 
 def register(sub) -> None:
-    from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
-                           output_file, positive_float, positive_int, time_step)
+    from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file,
+                                          float_in, output_file, positive_float, positive_int,
+                                          time_step)
     p = sub.add_parser("sky-series", help="time series of sky maps (many suns x many "
                        "directions), streamed to netCDF or Parquet",
                        description="Evaluate a sky model for every time step and view "
