@@ -517,9 +517,10 @@ def register(sub) -> None:
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
-                   "tilt,aureole,stray_light (default), and aerosol (asked for by name: its "
-                   "engine runs take minutes); for camera frames: lens,polarizer_angles,"
-                   "extinction_ratio,sky_dop (default) and crosstalk")
+                   "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
+                   "engine runs take minutes) and overcast (asked for by name: a cloud layer "
+                   "over the whole sky); for camera frames: lens,polarizer_angles,"
+                   "extinction_ratio,sky_dop,overcast (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
