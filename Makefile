@@ -3,7 +3,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 PIP    := $(BIN)/python -m pip
-# one BLAS thread per process (see experiments/cli.py): small batched systems, busy 2 cores
+# one BLAS thread per process (see experiments/cli/main.py): small batched systems, busy 2 cores
 export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1

@@ -1,1 +1,3 @@
-"""experiments: scripted reproductions, studies, figures and the ``skysim`` command line."""
+"""experiments: the ``skysim`` command line (:mod:`.cli`), the services behind its commands
+(:mod:`.workflows`), the reproductions and studies (:mod:`.studies`) and their figures
+(:mod:`.plotting`)."""

@@ -156,7 +156,7 @@ class BerrySky(Sky):
         :mod:`skysim.multiple` at tau = 0.25 (Babinet 19.5 deg above and Brewster 22.7 deg
         below a sun at 23.6 deg; Babinet 17.8 and Brewster 22.3 deg at 30 deg).
         :func:`skysim.neutral_points.neutral_points` gives the values for any sun, tau and
-        albedo (``experiments.physical_sky.berry_delta_from`` turns them into delta).
+        albedo (``experiments.studies.physical_sky.berry_delta_from`` turns them into delta).
     dmax : float
         Maximum degree of polarization, in (0, 1].
 

@@ -16,9 +16,15 @@ Rotations use :class:`scipy.spatial.transform.Rotation`.
 
 from __future__ import annotations
 
+import math
+
 import numpy as np
 
+from .validation import check_in_range
+
 __all__ = [
+    "sky_grid",
+    "sky_grid_size",
     "cos_sin_deg",
     "direction_vector",
     "elevation_azimuth",
@@ -29,6 +35,43 @@ __all__ = [
     "e_vector_from_aop",
     "aop_from_e_vector",
 ]
+
+
+def sky_grid_size(step_deg: float) -> int:
+    """Number of directions of :func:`sky_grid` with spacing ``step_deg`` [deg]: 90/step + 1
+    elevations times 360/step azimuths (without computing the grid)."""
+    return (math.floor(90.0 / step_deg + 1e-9) + 1) * math.ceil(360.0 / step_deg - 1e-9)
+
+
+def sky_grid(step_deg: float = 2.0) -> tuple[np.ndarray, np.ndarray]:
+    """Full-sky grid of view directions: a regular elevation-azimuth grid, flattened.
+
+    The default grid of the sky maps (``skysim sky``, ``skysim sky-series``, ``skysim
+    generate``) and of the studies' polar maps: elevations 0, step, ... up to 90 deg (the
+    horizon and the zenith included when ``step_deg`` divides 90) and azimuths 0, step, ...
+    below 360 deg (clockwise from north, the ENU convention of this module). The grid is
+    regular in angle, not in solid angle: the rows near the zenith are dense.
+
+    Parameters
+    ----------
+    step_deg : float
+        Spacing in elevation and azimuth [deg], in (0, 90].
+
+    Returns
+    -------
+    elevation_deg, azimuth_deg : ndarray, shape (:func:`sky_grid_size`,)
+        Elevation-major: all azimuths of the lowest elevation first.
+
+    Raises
+    ------
+    InvalidParameterError
+        If ``step_deg`` is not in (0, 90].
+    """
+    check_in_range("grid step [deg]", step_deg, 0.0, 90.0, low_open=True)
+    el = np.arange(0.0, 90.0 + 1e-9, step_deg)
+    az = np.arange(0.0, 360.0, step_deg)
+    E, A = np.meshgrid(el, az, indexing="ij")
+    return E.ravel(), A.ravel()
 
 
 def wrap_deg(angle_deg, low: float = -180.0):

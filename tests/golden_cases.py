@@ -45,7 +45,7 @@ def summary(report) -> dict:
 # ----------------------------------------------------------------------- three-pair sensor
 def _three_pair(label, seed, params, candidates):
     from calibration.diagnosis import diagnose
-    from experiments.diagnose import simulate_session
+    from experiments.workflows.diagnose import simulate_session
     ds = simulate_session(label, np.random.default_rng(seed), params=params)
     return diagnose(ds["data"], candidates)
 
@@ -98,7 +98,7 @@ def ring_yaw_scale_named():
     from test_photodiode_diagnosis import ring_session
 
     from calibration.diagnosis import diagnose
-    from experiments.real_injection import inject
+    from experiments.workflows.real_injection import inject
     data, _ = inject(ring_session(), "yaw_scale", np.random.default_rng(3))
     return diagnose(data, ("yaw_scale",), folds=3)
 

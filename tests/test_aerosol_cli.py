@@ -7,8 +7,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments import commands
-from experiments.cli import main
+from experiments.cli import commands
+from experiments.cli.main import main
 
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "180"]
 

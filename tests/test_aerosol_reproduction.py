@@ -1,11 +1,11 @@
-"""The neutral-point finder of the aerosol reproduction (experiments/aerosol_sky.py) on a
+"""The neutral-point finder of the aerosol reproduction (experiments/studies/aerosol_sky.py) on a
 solar vertical with known zeros."""
 
 import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.aerosol_sky import vertical_zeros
+from experiments.studies.aerosol_sky import vertical_zeros
 
 
 def _vertical(q_sun_side, q_anti_side, step=0.05):

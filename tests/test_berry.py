@@ -121,7 +121,7 @@ def test_zenith_e_vector_perpendicular_to_solar_meridian():
 
 
 def test_cli_sky_berry(tmp_path):
-    from experiments.cli import main
+    from experiments.cli.main import main
     out, png = tmp_path / "berry.parquet", tmp_path / "berry.png"
     assert main(["sky", "--model", "berry", "--delta-deg", "30", "--dmax", "0.8",
                  "--sun-elevation", "20", "--sun-azimuth", "90", "--grid-step", "10",

@@ -210,7 +210,7 @@ def test_bad_inputs_raise():
 def test_missing_tifffile_gives_install_hint(tmp_path, monkeypatch, capsys):
     import sys
 
-    from experiments.cli import main
+    from experiments.cli.main import main
     monkeypatch.setitem(sys.modules, "tifffile", None)  # import fails as if not installed
     assert main(["camera", "--lat", "34", "--lon", "108", "--time", "2013-05-22T12:00+08:00",
                  "--width", "32", "--height", "32", "--out", str(tmp_path / "x.tiff")]) == 2

@@ -5,7 +5,7 @@ import json
 import numpy as np
 import pytest
 
-from experiments.cli import main
+from experiments.cli.main import main
 
 pytest.importorskip("tifffile", reason="camera images need the 'camera' extra (tifffile)")
 
@@ -145,7 +145,7 @@ def test_readout_options_are_checked():
     with pytest.raises(ValueError, match="0, 90, 180, 270; got 45"):
         undo_readout(np.zeros((2, 2)), rotate_deg=45)
     # the command line's literals are the module's
-    from experiments.cli import build_parser
+    from experiments.cli.main import build_parser
     sub = next(a for a in build_parser()._actions if a.dest == "command")
     opts = {a.dest: a.choices for a in sub.choices["camera-heading"]._actions}
     assert tuple(opts["flip"]) == FLIPS and tuple(opts["rotate"]) == ROTATIONS_DEG

@@ -4,7 +4,7 @@ import json
 
 import pandas as pd
 
-from experiments.cli import main
+from experiments.cli.main import main
 
 
 def test_reproduce_camera_quick(tmp_path, capsys):

@@ -18,8 +18,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED,
-                             build_parser, main)
+from experiments.cli.main import (EXIT_BROKEN_PIPE, EXIT_INTERNAL, EXIT_INTERRUPTED, build_parser,
+                                  main)
 
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
@@ -387,8 +387,8 @@ def test_reproductions_refuse_trials_that_do_not_fit(target, tmp_path, capsys, m
 def test_huge_sweep_is_refused_at_once_and_planned_lazily(tmp_path, capsys):
     from dataclasses import replace
 
-    from experiments.sweep import plan_chunks
-    from experiments.sweep_config import load_config
+    from experiments.workflows.sweep import plan_chunks
+    from experiments.workflows.sweep_config import load_config
     cfg = tmp_path / "w.toml"
     cfg.write_text('[sweep]\nname = "w"\ntrials = 1000000000000\n[parameters]\n'
                    'noise_V = {uniform = [0.0001, 0.002]}\n')
@@ -413,8 +413,8 @@ def test_sweep_chunks_must_fit_beside_each_other(tmp_path, capsys, monkeypatch):
 def test_expected_trials_match_the_designs():
     from dataclasses import replace
 
-    from experiments.sweep import design, expected_trials
-    from experiments.sweep_config import load_config
+    from experiments.workflows.sweep import design, expected_trials
+    from experiments.workflows.sweep_config import load_config
     for name in ("sobol", "morris", "montecarlo"):
         c = load_config(EXAMPLES / f"sweep_{name}.toml")
         if name != "montecarlo":
@@ -425,7 +425,7 @@ def test_expected_trials_match_the_designs():
 # --------------------------------------------------------------------------- interrupts, pipes
 
 def test_ctrl_c_prints_one_line(monkeypatch, capsys):
-    import experiments.commands as commands
+    import experiments.cli.commands as commands
 
     def interrupted(args):
         raise KeyboardInterrupt
@@ -436,7 +436,7 @@ def test_ctrl_c_prints_one_line(monkeypatch, capsys):
 
 
 def test_a_bug_is_one_line_unless_the_traceback_is_asked_for(monkeypatch, capsys):
-    import experiments.commands as commands
+    import experiments.cli.commands as commands
 
     def buggy(args):
         raise TypeError("unsupported operand")
@@ -497,7 +497,7 @@ def test_ctrl_c_stops_the_workers_instead_of_draining_the_queue(tmp_path):
     import signal
     import threading
 
-    from experiments.sweep_backends import run_tasks
+    from experiments.workflows.sweep_backends import run_tasks
     tasks = [str(tmp_path / f"t{k}") for k in range(24)]
     started = threading.Event()
 
@@ -566,7 +566,8 @@ def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, 
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
     _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
            "100 time steps x 48 directions", "only 10 kB is free")
-    from experiments.sky_series import write_sky_series   # the library's writer checks too
+    # the library's writer checks too
+    from experiments.workflows.sky_series import write_sky_series
     from skysim.io import WriteError
     from skysim.sky import make_sky
     with pytest.raises(WriteError, match="1000 time steps x 2 directions would take about 80 kB"):
@@ -583,7 +584,7 @@ def test_sky_series_failed_write_names_the_file_and_leaves_nothing(suffix, capsy
     pytest.importorskip("h5netcdf")
     import errno
 
-    import experiments.sky_series as ss
+    import experiments.workflows.sky_series as ss
     out = tmp_path / f"s{suffix}"
     assert main([*SERIES, "--periods", "3", "--out", str(out)]) == 0
     before = out.read_bytes()
@@ -683,7 +684,7 @@ def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
 def _interrupting_target(monkeypatch, module: str):
     """Make ``module``'s reproduction write one file, then be interrupted (Ctrl-C)."""
     import importlib
-    mod = importlib.import_module(f"experiments.{module}")
+    mod = importlib.import_module(f"experiments.studies.{module}")
     real = mod._reproduce
 
     def interrupted(args):
@@ -744,7 +745,7 @@ def test_gap_benchmark_size_is_refused_before_any_work(tmp_path, capsys, monkeyp
 
 
 def test_long_runs_state_their_expected_duration(capsys):
-    from experiments._progress import announce_duration, expected_reproduction_seconds
+    from experiments.workflows.progress import announce_duration, expected_reproduction_seconds
     assert expected_reproduction_seconds("sky-gap", False, None) == 840.0
     assert expected_reproduction_seconds("yang2014", False, 2000) == 10 * \
         expected_reproduction_seconds("yang2014", False, None)
@@ -759,12 +760,12 @@ def test_warnings_are_one_readable_line():
     """A library's warning during a command: one line on stderr, no source line (run in a
     fresh interpreter: pytest records warnings itself)."""
     import subprocess
-    code = ("import warnings, experiments.commands as c\n"
+    code = ("import warnings, experiments.cli.commands as c\n"
             "def warns(args):\n"
             "    warnings.warn('invalid value encountered in\\n    arccos', RuntimeWarning)\n"
             "    return 0\n"
             "c._sky = warns\n"
-            "from experiments.cli import main\n"
+            "from experiments.cli.main import main\n"
             "raise SystemExit(main(['sky', '--sun-elevation', '30', '--sun-azimuth', '10']))\n")
     run = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
                          timeout=120)
@@ -800,7 +801,7 @@ def test_every_option_has_help_and_no_empty_default(name, parser, action):
 
 
 def test_durations_read_at_a_glance():
-    from experiments._progress import format_duration
+    from experiments.workflows.progress import format_duration
     assert [format_duration(s) for s in (45, 840, 9000, 5.3e5)] == [
         "45 s", "14 min", "2.5 h", "6 days"]
 
@@ -814,7 +815,7 @@ def test_sigterm_cleans_up_like_ctrl_c(tmp_path):
     out = tmp_path / "r"
     assert main(["reproduce", "compound-eye", "--trials", "2", "--out", str(out)]) == 0
     before = {p.name: p.read_bytes() for p in out.iterdir()}
-    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli", "reproduce", "camera",
+    proc = subprocess.Popen([sys.executable, "-m", "experiments.cli.main", "reproduce", "camera",
                              "--trials", "1000", "--out", str(out), "--force"],
                             stderr=subprocess.PIPE, text=True)
     deadline = time.time() + 120

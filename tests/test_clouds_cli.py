@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import main
+from experiments.cli.main import main
 
 SUN = ["--sun-elevation", "35", "--sun-azimuth", "120"]
 

@@ -1,4 +1,4 @@
-"""``skysim reproduce cloudy-compass`` (experiments.cloudy_compass): outputs, the clear-sky
+"""``skysim reproduce cloudy-compass`` (experiments.studies.cloudy_compass): outputs, the clear-sky
 floor, what clouds do to each sensor and method, seeds; and the camera heading's losses."""
 
 import json
@@ -8,8 +8,8 @@ import pytest
 
 pytest.importorskip("sasktran2", reason="the study's clear sky needs the 'rt' extra")
 
-from experiments import cloudy_compass as cc  # noqa: E402
-from experiments.cli import main  # noqa: E402
+from experiments.studies import cloudy_compass as cc  # noqa: E402
+from experiments.cli.main import main  # noqa: E402
 
 
 @pytest.fixture(scope="module")

@@ -173,7 +173,7 @@ def test_reproduce_compound_eye_cli(tmp_path, capsys):
     goal met (with 2 trials x 27 angles the RMS is a rough but sufficient check)."""
     import json
 
-    from experiments.cli import main
+    from experiments.cli.main import main
     assert main(["reproduce", "compound-eye", "--trials", "2", "--seed", "7",
                  "--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out

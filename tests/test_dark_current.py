@@ -224,7 +224,7 @@ def test_combined_bad_input():
 def test_cli_quick(tmp_path):
     import warnings
 
-    from experiments.dark_current import DEFAULT_SEED, run
+    from experiments.studies.dark_current import DEFAULT_SEED, run
     from sensor.illuminance import WATER_TYPES, DepthBeyondValidationWarning
     assert DEFAULT_SEED == 20210401
     with warnings.catch_warnings():  # the run marks those depths itself (dop_validated)

@@ -1,7 +1,8 @@
 """Gap diagnosis: estimator round trips, noise floor, blind verdicts, bad input, both schemas.
 
-Data come from :func:`experiments.diagnose.simulate_session` (the benchmark generator: Yang
-2014 error model, six sweeps over an afternoon); the diagnoser sees only the tables.
+Data come from :func:`experiments.workflows.diagnose.simulate_session` (the benchmark
+generator: Yang 2014 error model, six sweeps over an afternoon); the diagnoser sees only the
+tables.
 """
 
 import json
@@ -26,8 +27,8 @@ from calibration.diagnosis import (
     fit_model,
     noise_floor_V,
 )
-from experiments.cli import main
-from experiments.diagnose import run_benchmark, score_benchmark, simulate_session
+from experiments.cli.main import main
+from experiments.workflows.diagnose import run_benchmark, score_benchmark, simulate_session
 from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
 
 SENSOR_EFFECTS = ("dark_current", "sun_motion", "clock_offset", "tilt", "turntable_periodic",
@@ -224,7 +225,7 @@ def test_timezone_error_of_hours_found_by_the_half_hour_search():
     """Recorded times 8 h early (a timezone error): the coarse grid of whole and half hours
     finds it; the local refinement lands within 10 min (the data set's sun moves 0.25 deg/min,
     the fit's standard error is seconds)."""
-    from experiments.diagnose import simulate_session
+    from experiments.workflows.diagnose import simulate_session
     ds = simulate_session("clock_offset", np.random.default_rng(5), params=np.array([8 * 3600.0]))
     doc = diagnose(ds["data"], ("clock_offset", "multiple_scattering", "sun_motion"))
     assert doc.verdict.effect == "clock_offset"

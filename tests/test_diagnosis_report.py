@@ -262,7 +262,7 @@ def test_sun_track_within_its_stated_error_of_the_ephemeris():
 # ------------------------------------------------------------------------------ entry point
 @pytest.fixture(scope="module")
 def tilt_measurement():
-    from experiments.diagnose import simulate_session
+    from experiments.workflows.diagnose import simulate_session
     return simulate_session("tilt", np.random.default_rng(21), params=[1.2, -0.8])
 
 

@@ -16,7 +16,7 @@ import pytest
 from calibration import effects as E
 from calibration.effects.dark_current import E_REF_LX, clear_sky_illuminance_lx
 from calibration.effects.tilt import tilted_polarization
-from experiments.yang2014 import SITE
+from sensor.yang2014 import SITE
 from sensor.opponent import GAIN, channel_outputs, zenith_polarization
 from skysim import rayleigh
 from skysim.sky import RayleighSky

@@ -11,9 +11,10 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import main
-from experiments.generate import (AOP_MIN_DOP, CompareError, GenerateConfigError,
-                                  compare_paths, compare_tables, generate, load_generate_config)
+from experiments.cli.main import main
+from experiments.workflows.generate import (AOP_MIN_DOP, CompareError, GenerateConfigError,
+                                            compare_paths, compare_tables, generate,
+                                            load_generate_config)
 from sensor.measurement import read_measurement
 from sensor.photodiodes_io import read_photodiodes
 
@@ -155,7 +156,7 @@ def test_measurement_truth_against_pvlib_and_paper_equations(tmp_path, config_fi
     """An independent implementation: sun from pvlib's NREL SPA, phi = heading - sun azimuth,
     zenith DoP of a Rayleigh sky, channels by eqs. (2)-(3) of Yang et al. (2014) with no
     errors; it must pass the default tolerances (derived from the project's 0.01 deg SPA
-    agreement, see experiments.generate.TOLERANCES)."""
+    agreement, see experiments.workflows.generate.TOLERANCES)."""
     pvlib = pytest.importorskip("pvlib", reason="pvlib is the independent SPA reference")
     out = tmp_path / "gt"
     generate(load_generate_config(config_file), out)

@@ -6,8 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import build_parser, main
-from experiments.jin2020 import (
+from experiments.cli.main import build_parser, main
+from experiments.studies.jin2020 import (
     PAPER_SUN,
     QUICK,
     SITE,
@@ -96,7 +96,7 @@ def test_multiple_scattering_sky_biases_the_rayleigh_form_and_not_the_model_form
     pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
     from dataclasses import replace
 
-    from experiments.jin2020 import multiple_scattering_runs
+    from experiments.studies.jin2020 import multiple_scattering_runs
     sc = replace(QUICK, static_s=60.0, ms_taus=(0.25,))
     r = multiple_scattering_runs(4, np.random.default_rng(5), sc).set_index("form")
     assert r.loc["perpendicular", "aop_departure_max_deg"] > 1.0

@@ -10,8 +10,9 @@ import pytest
 
 pytest.importorskip("astropy", reason="the Moon's position needs astropy (extra 'moon')")
 
-from experiments.cli import main  # noqa: E402
-from experiments.moonlit_sky import compare, measured_polarization, read_fors2  # noqa: E402
+from experiments.cli.main import main  # noqa: E402
+from experiments.studies.moonlit_sky import (compare, measured_polarization,  # noqa: E402
+                                             read_fors2)
 
 DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "moonskypol"
 TABLE = DATA / "fors2_moonlit_sky_BV.csv"

@@ -283,7 +283,7 @@ def test_cli_sky_multiple_writes_table_normalised_stokes(tmp_path, reference_dir
     needs_engine()
     import json
 
-    from experiments.cli import main
+    from experiments.cli.main import main
     dirs = tmp_path / "dirs.csv"
     dirs.write_text("elevation_deg,azimuth_deg\n90,0\n30,120\n0,250\n")
     out = tmp_path / "sky.csv"

@@ -1,5 +1,5 @@
 """Sensors under the moonlit sky (sensor.night, skysim.night.MoonlitSky) and the moonlit-compass
-reproduction (experiments.moonlit_compass): photometric conversion against published
+reproduction (experiments.studies.moonlit_compass): photometric conversion against published
 numbers, noise against closed forms, zero-noise limits, seeds and bad input."""
 
 from dataclasses import replace
@@ -131,7 +131,7 @@ def test_three_pair_heading_sd_is_inverse_in_illuminance_when_dark_limited():
 # --------------------------------------------------------------------------- reproduction
 @pytest.fixture(scope="module")
 def conditions():
-    from experiments.moonlit_compass import QUICK, night_conditions
+    from experiments.studies.moonlit_compass import QUICK, night_conditions
     return night_conditions(QUICK)
 
 
@@ -152,8 +152,8 @@ def test_conditions_are_moonlit_nights(conditions):
 
 
 def test_zero_noise_limits_give_the_heading(conditions):
-    from experiments.moonlit_compass import (QUICK, camera_errors, night_camera, ring_errors,
-                                             three_pair_errors)
+    from experiments.studies.moonlit_compass import (QUICK, camera_errors, night_camera,
+                                                     ring_errors, three_pair_errors)
     cfg = replace(QUICK, three_pair_trials=1, ring_trials=4, camera_trials=1, camera_px=128)
     rng = np.random.default_rng(5)
     tp = three_pair_errors(conditions, cfg, rng, noise_free=True)
@@ -170,7 +170,7 @@ def test_zero_noise_limits_give_the_heading(conditions):
 
 
 def test_run_is_reproducible_and_writes_outputs(tmp_path):
-    from experiments.moonlit_compass import QUICK, run
+    from experiments.studies.moonlit_compass import QUICK, run
     cfg = replace(QUICK, night_step_days=8, elevations_deg=(30.0,), three_pair_trials=1,
                   ring_trials=3, camera_trials=1, camera_px=64, headings=6)
     a = run(cfg=cfg, seed=3, out=tmp_path / "a")
@@ -209,7 +209,7 @@ def test_bad_inputs_name_the_value():
         photocurrent_sd_A(1e-12, 0.0)
     with pytest.raises(InvalidParameterError, match="dark_A"):
         NightPhotodiode(dark_A=-1e-12)
-    from experiments.moonlit_compass import QUICK, night_conditions
+    from experiments.studies.moonlit_compass import QUICK, night_conditions
     with pytest.raises(ValueError, match="no time"):
         night_conditions(replace(QUICK, start="2024-06-06T12:00:00Z",
                                  end="2024-06-07T12:00:00Z"))

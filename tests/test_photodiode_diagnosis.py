@@ -37,7 +37,7 @@ from calibration.photodiode_diagnosis.effects import (
 from calibration.photodiode_diagnosis.forward import Forward, SunTrack
 from calibration.photodiode_diagnosis.instrument import held_readings
 from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
-from experiments.real_injection import inject
+from experiments.workflows.real_injection import inject
 from ring_sessions import SITE, ring_session
 from sensor.photodiodes_io import PhotodiodeData, PhotodiodeFormatError
 
@@ -385,7 +385,7 @@ def test_real_session_faults():
 
 def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
     """`skysim diagnose FILE` on a ring instrument writes the report with the schema's keys."""
-    from experiments.cli import main
+    from experiments.cli.main import main
     path = tmp_path / "ring.csv"
     session.write(path)
     out = tmp_path / "out"
@@ -411,7 +411,7 @@ def test_diagnose_command_on_a_photodiode_file(tmp_path, session):
 def test_diagnose_command_names_malformed_units(tmp_path, session, capsys, units):
     """A malformed sidecar ``units`` is the reader's one-line error, not a crash of the
     three-pair-sensor check that picks the diagnosis."""
-    from experiments.cli import main
+    from experiments.cli.main import main
     side = dict(session.sidecar, units=units)
     assert not is_three_pair_sensor(side)
     path = tmp_path / "ring.csv"
@@ -430,7 +430,7 @@ def test_diagnose_command_reports_a_broken_sidecar_before_the_effects(tmp_path, 
                                                                      capsys, text, match):
     """A sidecar that is not JSON, not an object or of another schema is the error shown,
     not an 'unknown effect' for a ring candidate checked against the wrong instrument."""
-    from experiments.cli import main
+    from experiments.cli.main import main
     path = tmp_path / "ring.csv"
     session.write(path)
     if text is None:

@@ -20,7 +20,7 @@ from pathlib import Path
 
 import pytest
 
-from experiments.cli import main
+from experiments.cli.main import main
 
 ROOT = Path(__file__).resolve().parents[1]
 README = ROOT / "README.md"
@@ -31,7 +31,7 @@ SLOW = {("reproduce", "sky-gap"), ("sky-gap",)}
 
 def _needs_data() -> dict:
     """Command prefixes that need data not shipped -> the folder they read by default."""
-    from experiments import moonlit_sky, real_compass
+    from experiments.studies import moonlit_sky, real_compass
     return {("reproduce", "real-sky-compass"): real_compass.DEFAULT_DATA,
             ("reproduce", "moonlit-sky"): moonlit_sky.DEFAULT_DATA}
 

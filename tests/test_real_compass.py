@@ -7,7 +7,7 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import main
+from experiments.cli.main import main
 
 SESSION = "tod_Thursday_12-05-22_09-08-12_CEST"
 

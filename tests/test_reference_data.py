@@ -1,4 +1,4 @@
-"""The Natraj et al. (2009) rows shipped with skysim (``experiments/data/natraj2009/``).
+"""The Natraj et al. (2009) rows shipped with skysim (``skysim/data/natraj2009/``).
 
 The shipped file must be the published values unchanged (compared, when the project's shared
 reference folder is present, with the subset it was built from, and rebuilt byte for byte by
@@ -14,7 +14,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.physical_sky import (NATRAJ_FILE, QUICK_CASES, natraj_path, read_natraj)
+from experiments.studies.physical_sky import QUICK_CASES
+from skysim.natraj import NATRAJ_FILE, natraj_path, read_natraj
 
 
 def test_shipped_rows_are_the_published_subset_unchanged(reference_dir):
@@ -38,7 +39,7 @@ def test_builder_reproduces_the_shipped_file_byte_for_byte(reference_dir, tmp_pa
 def test_shipped_rows_cover_both_reproductions():
     """Every case physical-sky and sky-gap use is present: 4 tau x 2 albedo x 7 suns, 14
     view cosines >= 0.1, 7 azimuths (0..180 step 30), in a file small enough to ship."""
-    from experiments.sky_gap import cases_from_natraj, natraj_table
+    from experiments.studies.sky_gap import cases_from_natraj, natraj_table
     d = read_natraj(NATRAJ_FILE)
     assert NATRAJ_FILE.stat().st_size < 100_000
     assert len(d) == 4 * 2 * 7 * 14 * 7
@@ -76,7 +77,7 @@ def test_reference_option_takes_a_file_or_a_folder(tmp_path):
 
 
 def test_reproduce_refuses_a_bad_reference_without_traceback(tmp_path, capsys):
-    from experiments.cli import main
+    from experiments.cli.main import main
     assert main(["reproduce", "physical-sky", "--reference", str(tmp_path),
                  "--out", str(tmp_path / "o")]) == 2
     err = capsys.readouterr().err

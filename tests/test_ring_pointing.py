@@ -111,7 +111,7 @@ def test_bad_calibrations_are_named(tmp_path, calibration_report):
 def test_diagnose_command_holds_the_pointing(tmp_path, calibration_report):
     """``skysim diagnose --pointing-from`` reads the reports and says the pointing is held;
     on a measurement table it is refused with the reason."""
-    from experiments.cli import main
+    from experiments.cli.main import main
     data = tilted_session("2022-05-12T15:00:00+02:00")
     path = tmp_path / "ring.csv"
     data.write(path)

@@ -9,8 +9,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.cli import main
-from experiments.sky_series import SERIES_SCHEMA, write_sky_series
+from experiments.cli.main import main
+from experiments.workflows.sky_series import SERIES_SCHEMA, write_sky_series
 from skysim.exceptions import InvalidParameterError, SunBelowHorizonError
 from skysim.series import VALUES_PER_POINT, iter_sky_series, suns_per_block
 from skysim.sky import RayleighSky
@@ -128,7 +128,7 @@ def _imported_by(code: str) -> set[str]:
 def test_command_line_start_up_imports_no_heavy_module(argv):
     """Start-up stays light (the speed itself is a benchmark): the parser and a command's help
     import neither pandas nor scipy, nor the sky models."""
-    mods = _imported_by("from experiments.cli import main\ntry:\n"
+    mods = _imported_by("from experiments.cli.main import main\ntry:\n"
                         f"    main({argv!r})\nexcept SystemExit:\n    pass")
     assert not {"pandas", "scipy", "scipy.signal", "calibration", "skysim.sun"} & mods
 
@@ -151,7 +151,7 @@ def test_sky_parquet_run_imports_no_pandas(tmp_path):
     """`skysim sky` with given sun angles writes Parquet through pyarrow alone; the table
     reads back as before."""
     out = tmp_path / "sky.parquet"
-    mods = _imported_by("from experiments.cli import main\n"
+    mods = _imported_by("from experiments.cli.main import main\n"
                         f"main(['sky', '--sun-elevation', '30', '--sun-azimuth', '275', "
                         f"'--grid-step', '10', '--out', {str(out)!r}])")
     assert "pandas" not in mods and "scipy" not in mods

@@ -153,7 +153,7 @@ def test_natraj_reader_conventions_thin_atmosphere_is_single_scattering(referenc
     below 0.02, while the opposite Q sign (the table's Q = I_r - I_l) would leave a gap ~ 1.
     No engine call."""
     from calibration.sky_gap import fit_dmax, predict_qu
-    from experiments.sky_gap import cases_from_natraj, natraj_table
+    from experiments.studies.sky_gap import cases_from_natraj, natraj_table
     t = natraj_table(reference_dir)
     c, mu0s = cases_from_natraj(t[(t.tau == 0.02) & (t.albedo == 0.0)])
     assert mu0s.tolist() == [0.1, 0.2, 0.4, 0.6, 0.8, 0.92, 1.0]

@@ -10,12 +10,13 @@ import pandas as pd
 import pytest
 from scipy.spatial.transform import Rotation
 
-from experiments.sweep import (BLOCK_TRIALS, SweepMemoryError, SweepStateError, block_seed,
-                               chunk_trials, evaluate_trials, opponent_outputs, plan_chunks,
-                               run_chunk, run_sweep, simulate_trials, tilted_axes,
-                               trial_parameters)
-from experiments.sweep_backends import SchedulerUnreachableError, run_tasks
-from experiments.sweep_config import PARAMETERS, SweepConfigError, load_config, parse_config
+from experiments.workflows.sweep import (BLOCK_TRIALS, SweepMemoryError, SweepStateError,
+                                         block_seed, chunk_trials, evaluate_trials,
+                                         opponent_outputs, plan_chunks, run_chunk, run_sweep,
+                                         simulate_trials, tilted_axes, trial_parameters)
+from experiments.workflows.sweep_backends import SchedulerUnreachableError, run_tasks
+from experiments.workflows.sweep_config import (PARAMETERS, SweepConfigError, load_config,
+                                                parse_config)
 from sensor.daq import Daq
 from sensor.opponent import channel_outputs
 from skysim.geometry import direction_vector, wrap_axial_deg
@@ -307,7 +308,7 @@ def test_salib_indices_find_the_only_influential_factor(tmp_path):
 
 
 def test_cli_sweep_writes_tables_and_figures(tmp_path, capsys):
-    from experiments.cli import main
+    from experiments.cli.main import main
     cfg = tmp_path / "c.toml"
     cfg.write_text('[sweep]\nname = "cli"\ntrials = 128\nstops = 32\nseed = 1\n'
                    '[parameters]\nnoise_V = {uniform = [0.0001, 0.001]}\n'
@@ -371,7 +372,7 @@ X
         return real(times, *args, **kwargs)
 
     monkeypatch.setattr(skysim.sun, "sun_position", counting)
-    from experiments.sweep import design
+    from experiments.workflows.sweep import design
     cfg = parse_config(SITE_DATE)
     n, X, cond = design(cfg)
     tasks = plan_chunks(cfg, tmp_path, cfg.digest(), n, X, cond)

@@ -6,7 +6,8 @@ import numpy as np
 import pandas as pd
 import pytest
 
-from experiments.yang2014 import ERROR_MODEL, GROUPS, PAPER_TABLE1, run, sweep_geometry
+from experiments.studies.yang2014 import GROUPS, PAPER_TABLE1, run, sweep_geometry
+from sensor.yang2014 import ERROR_MODEL
 
 
 @pytest.fixture(scope="module")

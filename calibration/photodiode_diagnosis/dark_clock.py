@@ -12,8 +12,9 @@ first:
    :data:`.run.CLOCK_START_MARGIN_DEG` over the whole session, the nominal instrument (unit
    gains, no offsets, a typical DoP scale) is oriented (:func:`.run.orient`: polarizer sense
    and offset, per-sweep headings from a 30-deg grid, then fitted) and scored by its sum of
-   squared relative residuals. Offsets whose scores lie within :data:`.run.CLOCK_TIE` of the best go
-   to the smallest: a sky symmetric about the solar meridian reads the same at the mirror time
+   squared relative residuals. Offsets whose scores lie within :data:`.run.CLOCK_TIE` of the
+   best go to the smallest, and then to the best score within :data:`BRANCH_S` of it: a sky
+   symmetric about the solar meridian reads the same at the mirror time
    about noon (relative yaw absorbs the sun's azimuth), and a clock a few hours off is likelier
    than one many hours off.
 2. **The diagnosis at the corrected times** (:func:`.run.diagnose_instrument`, every
@@ -41,7 +42,11 @@ from .fit import fit_headings
 from .forward import Forward, SunTrack
 from .instrument import Instrument
 
-__all__ = ["coarse_clock_search", "diagnose_dark_clock"]
+__all__ = ["BRANCH_S", "coarse_clock_search", "diagnose_dark_clock"]
+
+BRANCH_S = 3600.0
+"""Coarse offsets within this many seconds of each other belong to one branch of the clock
+search (its mirror about noon is hours away)."""
 
 
 def coarse_clock_search(inst: Instrument, sun: SunTrack) -> tuple[float, list]:
@@ -74,7 +79,12 @@ def coarse_clock_search(inst: Instrument, sun: SunTrack) -> tuple[float, list]:
                              "within +-14 h puts the sun above the twilight limit")
     best = min(s for _, s in scored)
     close = [dt for dt, s in scored if s <= best * (1.0 + CLOCK_TIE)]
-    return min(close, key=abs), scored
+    # ties between branches (the mirror time hours away) go to the smaller offset; within
+    # a branch the best score wins (neighbouring half hours tie at a low sun, where the
+    # nominal instrument's cost changes by 0.1 % per half hour)
+    near = min(close, key=abs)
+    branch = [(dt, s) for dt, s in scored if abs(dt - near) <= BRANCH_S]
+    return min(branch, key=lambda x: x[1])[0], scored
 
 
 def diagnose_dark_clock(inst: Instrument, effects, too_low: SunTooLowError, *, n_folds: int,

@@ -33,7 +33,7 @@ def import_times(code: str, cwd=None) -> dict[str, float]:
 def command_import_s(argv, cwd=None) -> tuple[float, dict[str, float]]:
     """Import seconds of ``skysim argv`` beyond the interpreter's own, and the per-module map."""
     bare = import_times("pass", cwd)
-    code = ("import sys\nfrom experiments.cli import main\n"
+    code = ("import sys\nfrom experiments.cli.main import main\n"
             f"try:\n    main({list(argv)!r})\nexcept SystemExit:\n    pass\n")
     times = {k: v for k, v in import_times(code, cwd).items() if k not in bare}
     return sum(times.values()), times

@@ -104,7 +104,7 @@ _COMMAND = ["camera", "--lat", "34.14", "--lon", "108.55", "--time", "2013-05-22
             "--yaw", "40", "--width", str(W), "--height", str(H)]
 # the child's own peak: VmHWM of its memory map (getrusage's ru_maxrss keeps the forking
 # parent's peak across exec on Linux, here the benchmark session's)
-_CHILD = ("import re, sys\nfrom experiments.cli import main\nrc = main(sys.argv[1:])\n"
+_CHILD = ("import re, sys\nfrom experiments.cli.main import main\nrc = main(sys.argv[1:])\n"
           "print('PEAK_KB', re.search(r'VmHWM:\\s*(\\d+)', open('/proc/self/status').read())[1])\n"
           "sys.exit(rc)")
 
@@ -124,7 +124,7 @@ def test_floor_write_frame(benchmark, image, tmp_path, suffix):
 @pytest.mark.parametrize("suffix", [".tiff", ".png"])
 @pytest.mark.benchmark(group="camera command 2448x2048")
 def test_camera_command_in_process(benchmark, tmp_path, capsys, suffix):
-    from experiments.cli import main
+    from experiments.cli.main import main
     pytest.importorskip("tifffile" if suffix == ".tiff" else "cv2")
     benchmark.extra_info.update(items=W * H,
                                 **({"goal": {"max_floor_ratio": 5.0}} if suffix == ".png"

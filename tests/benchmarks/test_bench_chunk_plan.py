@@ -10,8 +10,8 @@ chunks).
 
 from dataclasses import replace
 
-from experiments.sweep import ChunkTask, chunk_trials, plan_chunks
-from experiments.sweep_config import parse_config
+from experiments.workflows.sweep import ChunkTask, chunk_trials, plan_chunks
+from experiments.workflows.sweep_config import parse_config
 
 TRIALS = 64 * 1_000_000
 CFG = replace(parse_config({"sweep": {"name": "plan", "trials": TRIALS, "stops": 16},

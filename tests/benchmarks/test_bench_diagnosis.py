@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 from calibration.diagnosis import DEFAULT_CANDIDATES, diagnose
-from experiments.diagnose import Session, run_benchmark, simulate_session
+from experiments.workflows.diagnose import Session, run_benchmark, simulate_session
 
 SESSION_10K = Session(n_sweeps=10, n_stops=1000, sweep_spacing_min=15.0)
 """10 sweeps x 1,000 stops = 10,000 samples, 15:30..17:45 local."""

@@ -11,7 +11,7 @@ import pytest
 
 from calibration.lsq import fit_pair, fit_pairs
 from calibration.solve import solve_pair
-from experiments.yang2014 import run
+from experiments.studies.yang2014 import run
 from sensor.opponent import channel_outputs
 from skysim.sky import RayleighSky
 from skysim.sun import sun_position

@@ -144,7 +144,7 @@ def test_sky_series_1000_suns_10000_directions(benchmark):
 def test_sky_series_write_netcdf_200_suns(benchmark, tmp_path):
     """200 suns x 10,000 directions written block by block to netCDF (5 x 16 MB)."""
     pytest.importorskip("h5netcdf", reason="h5netcdf (extra skysim[series]) not installed")
-    from experiments.sky_series import write_sky_series
+    from experiments.workflows.sky_series import write_sky_series
     sky = RayleighSky(DMAX)
     benchmark.extra_info.update(items=200 * N_DIRS)
     benchmark.pedantic(write_sky_series, args=(tmp_path / "s.nc", sky, SERIES_EL, SERIES_AZ,

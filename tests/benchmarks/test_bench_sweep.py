@@ -16,10 +16,10 @@ import pytest
 
 from calibration.lsq import fit_pair
 from calibration.solve import PAIRS, solve_pair
-from experiments.sweep import (common_noise, plan_chunks, run_chunk, run_sweep,
-                               simulate_trials, trial_parameters)
-from experiments.sweep_backends import run_tasks
-from experiments.sweep_config import parse_config
+from experiments.workflows.sweep import (common_noise, plan_chunks, run_chunk, run_sweep,
+                                         simulate_trials, trial_parameters)
+from experiments.workflows.sweep_backends import run_tasks
+from experiments.workflows.sweep_config import parse_config
 from sensor.daq import Daq
 from sensor.opponent import channel_outputs
 from skysim.sky import make_sky

@@ -32,7 +32,7 @@ def main() -> None:
     from calibration.diagnosis import diagnose
     from calibration.photodiode_diagnosis import diagnose_photodiodes
     from calibration.sky_gap import diagnose_sky
-    from experiments.diagnose import simulate_session
+    from experiments.workflows.diagnose import simulate_session
     from skysim.sky import RayleighSky
 
     ds = simulate_session("tilt", np.random.default_rng(21), params=[1.2, -0.8])

@@ -3,8 +3,8 @@
 ``skysim sweep CONFIG.toml [--backend local|dask] [--scheduler ADDRESS] [--out DIR]``
 
 Each *trial* is one sensor with its own error parameters (configuration:
-:mod:`experiments.sweep_config`) doing one turntable sweep of ``stops`` stops evenly over the
-polarization azimuth ``phi`` in [-90, 90) under a fixed sun. Per trial and channel pair the
+:mod:`experiments.workflows.sweep_config`) doing one turntable sweep of ``stops`` stops evenly
+over the polarization azimuth ``phi`` in [-90, 90) under a fixed sun. Per trial and channel pair the
 sweep records the heading error of the ideal solve (eqs. 5-9 of Yang et al. 2014 [1]_, "raw")
 and, after a Gauss-Newton LSM calibration on the even stops (eqs. 10-14, with the DoP scale
 fitted), of the compensated solve on the odd (held-out) stops; "3 sigma" is 3 x RMS about
@@ -56,8 +56,8 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError, SkysimError
 
-from .argtypes import existing_file, output_dir, positive_int
-from .figures import pyplot, save_png
+from experiments.cli.argtypes import existing_file, output_dir, positive_int
+from experiments.plotting.figures import pyplot, save_png
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",

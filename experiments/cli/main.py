@@ -1,12 +1,13 @@
 """The ``skysim`` command line.
 
-Sub-commands are contributed by modules of the :mod:`experiments` package: every module that
-defines ``register(subparsers)`` adds its commands (and ``reproduce`` targets via
+Sub-commands are contributed by the modules of the :mod:`experiments` package and its
+subpackages (``cli``, ``workflows``, ``studies``): every module that defines
+``register(subparsers)`` adds its commands (and ``reproduce`` targets via
 ``register_reproduce(targets)``, a dict name -> function(args)). Modules keep heavy imports
 inside their command functions so that ``skysim --help`` stays fast.
 
 Errors have one path (:func:`main`). Options are checked when parsed
-(:mod:`experiments.argtypes`). Whatever a command raises for bad input (``ValueError`` and
+(:mod:`experiments.cli.argtypes`). Whatever a command raises for bad input (``ValueError`` and
 its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
 ``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
 that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
@@ -37,7 +38,7 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import experiments
-from experiments.argtypes import output_dir, positive_int, seed
+from experiments.cli.argtypes import output_dir, positive_int, seed
 
 __all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
            "EXIT_BROKEN_PIPE", "EXIT_INTERNAL"]
@@ -55,8 +56,19 @@ EXIT_INTERNAL = 70
 
 
 def _module_names() -> list[str]:
-    return sorted(info.name for info in pkgutil.iter_modules(experiments.__path__)
-                  if info.name != "cli" and not info.name.startswith("_"))
+    """Names, relative to :mod:`experiments` (``"workflows.sweep"``), of the modules that may
+    contribute commands: those of the package and of its subpackages, except this one and
+    private (``_``) modules."""
+    root = Path(experiments.__path__[0])
+    names = []
+    for info in pkgutil.iter_modules([str(root)]):
+        if info.ispkg:
+            names += [f"{info.name}.{sub.name}"
+                      for sub in pkgutil.iter_modules([str(root / info.name)])
+                      if not sub.ispkg and not sub.name.startswith("_")]
+        elif not info.name.startswith("_"):
+            names.append(info.name)
+    return sorted(n for n in names if n != "cli.main")
 
 
 DEFAULT_SEED = 20140601
@@ -68,9 +80,9 @@ def _run_target(targets: dict, args) -> int:
 
     Options the target does not use are errors; the memory of ``--trials`` is checked and
     the expected duration announced before any work; the output folder is replaced as a
-    whole (:func:`experiments._run_folder.replacing_folder`)."""
-    from ._progress import announce_duration, expected_reproduction_seconds
-    from ._run_folder import replacing_folder
+    whole (:func:`experiments.workflows.run_folder.replacing_folder`)."""
+    from experiments.workflows.progress import announce_duration, expected_reproduction_seconds
+    from experiments.workflows.run_folder import replacing_folder
     func = targets[args.target]
     for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
         if getattr(args, option) is not None and not getattr(func, attr, False):
@@ -110,7 +122,7 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
     names = _module_names()
     wanted, index = names, None
     if command != "":
-        from ._command_index import read_index
+        from .command_index import read_index
         index = read_index(Path(experiments.__path__[0]), names)
         wanted = index.modules_for(command)
         wanted = names if wanted is None else wanted
@@ -197,7 +209,7 @@ def _quiet_stdout() -> None:
 
 def main(argv=None) -> int:
     """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
-    from ._progress import install_warning_format
+    from experiments.workflows.progress import install_warning_format
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
     install_warning_format()   # a library's warning as one line, not its source line

@@ -1,6 +1,6 @@
 """Aerosol skies beside the molecular one: principal-plane DoP, neutral points, max DoP vs AOD.
 
-Part of ``skysim reproduce physical-sky`` (:mod:`experiments.physical_sky`); writes to its
+Part of ``skysim reproduce physical-sky`` (:mod:`experiments.studies.physical_sky`); writes to its
 output folder:
 
 - ``aerosol_principal_plane.csv`` / ``.png``: signed DoP ``-Q/I`` along the solar vertical
@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .figures import save_png
+from experiments.plotting.figures import save_png
 
 __all__ = ["AODS", "KREUTER2010", "aerosol_section", "principal_plane", "vertical_zeros"]
 

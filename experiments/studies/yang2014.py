@@ -6,7 +6,8 @@ a, b, c. Each group is a ~10-minute turntable sweep over phi in [-90, 90) deg. F
 and channel pair the paper reports 3 sigma of the heading error after least-squares
 compensation (Table 1) and shows the raw and compensated errors against phi (Figs. 3-5).
 
-What is simulated, and why (all magnitudes in :data:`ERROR_MODEL`, never tuned per cell):
+What is simulated, and why (all magnitudes in :data:`sensor.yang2014.ERROR_MODEL`, never
+tuned per cell):
 
 - Sky: single-scattering Rayleigh (the paper's model, eq. 1) with ``d_max`` of a real clear
   sky, drawn per trial (one afternoon per trial, the same sky for a, b and c).
@@ -25,7 +26,7 @@ from __future__ import annotations
 
 import json
 import time
-from dataclasses import asdict, dataclass
+from dataclasses import asdict
 from pathlib import Path
 
 import numpy as np
@@ -34,25 +35,20 @@ import pandas as pd
 from calibration.lsq import fit_pairs
 from calibration.solve import PAIRS, heading_error_deg, solve_pair
 from sensor.daq import Daq
-from sensor.errors import OpponentErrors
 from sensor.opponent import OpponentSensor, channel_outputs, zenith_polarization
+from sensor.yang2014 import ERROR_MODEL, SITE, ErrorModel
 from skysim.io import atomic_write, write_json_atomic
 from skysim.sky import RayleighSky
-from skysim.sun import Site
 
-__all__ = ["SITE", "GROUPS", "PAPER_TABLE1", "ERROR_MODEL", "ErrorModel", "sweep_geometry",
-           "draw_trial_errors", "run", "register_reproduce", "format_table1"]
-
-SITE = Site(latitude_deg=34 + 8 / 60 + 41 / 3600, longitude_deg=108 + 32 / 60 + 48 / 3600,
-            altitude_m=400.0, name="Xi'an rooftop (Yang et al. 2014)")
-"""Site of the experiment; altitude ~400 m (Xi'an city elevation; the paper gives none)."""
+__all__ = ["GROUPS", "PAPER_TABLE1", "sweep_geometry", "draw_trial_errors", "run",
+           "register_reproduce", "format_table1"]
 
 DEFAULT_SEED = 20140601
+"""Master seed of ``skysim reproduce yang2014`` (the paper's publication month)."""
 MEMORY_PER_TRIAL_BYTES = 70_000
 """Peak memory per Monte-Carlo trial [bytes] (all trials are simulated and calibrated at once:
 ~34 kB measured with tracemalloc between 20 and 220 trials, doubled for the copies numpy makes
 around the batched solves); ``skysim reproduce`` refuses --trials that would not fit."""
-"""Master seed of ``skysim reproduce yang2014`` (the paper's publication month)."""
 
 GROUPS = {"a": "2013-05-22T17:10:00+08:00", "b": "2013-05-22T17:30:00+08:00",
           "c": "2013-05-22T18:00:00+08:00"}
@@ -62,41 +58,6 @@ PAPER_TABLE1 = {("a", (1, 2)): 0.15, ("a", (1, 3)): 0.18, ("a", (2, 3)): 0.24,
                 ("b", (1, 2)): 0.18, ("b", (1, 3)): 0.16, ("b", (2, 3)): 0.18,
                 ("c", (1, 2)): 0.11, ("c", (1, 3)): 0.13, ("c", (2, 3)): 0.19}
 """3 sigma of the compensated heading error [deg], Table 1 of Yang et al. (2014)."""
-
-
-@dataclass(frozen=True)
-class ErrorModel:
-    """Injected error magnitudes, each with its physical motivation.
-
-    misalignment_max_deg : polarizer film assembly error, U(-1, 1) deg per polarizer. The
-        paper calls the mounting error "less than 1 deg"; hand assembly of film polarizers
-        on a holder is typically at that level.
-    transmittance_sd : 2 % (1 sigma) spread of each photodiode path's transmittance x
-        responsivity: polarizer-film transmittance (~1-2 %) and photodiode responsivity
-        (~1-3 % within a batch) combine to a few percent.
-    noise_range_V : total output noise of each channel, referred to the log-amplifier output,
-        drawn per channel and trial from U(0.25, 0.55) mV: the USB-4716's input noise
-        (~1-2 LSB rms at +/-10 V, 0.3-0.6 mV) dominates the log amplifier's own noise
-        (tens of uV) and the photocurrent shot noise (uV); the spread stands for unit-to-unit
-        differences and for the paper not reporting its noise.
-    daq : 16-bit, +/-10 V (Advantech USB-4716, as in the paper).
-    turntable_error_deg : 0.01 deg (1 sigma) reading error of a precision turntable.
-    dmax_range : d_max of a clear sky, U(0.6, 0.8) per trial (multiple scattering, aerosols
-        and ground reflection keep real skies below the single-scattering value of ~0.94).
-    """
-
-    misalignment_max_deg: float = 1.0
-    transmittance_sd: float = 0.02
-    noise_range_V: tuple = (0.25e-3, 0.55e-3)
-    daq_bits: int = 16
-    daq_range_V: float = 10.0
-    turntable_error_deg: float = 0.01
-    dmax_range: tuple = (0.6, 0.8)
-    n_stops: int = 181
-    sweep_duration_s: float = 600.0
-
-
-ERROR_MODEL = ErrorModel()
 
 
 def sweep_geometry(start: str, model: ErrorModel = ERROR_MODEL):
@@ -258,7 +219,7 @@ def _write_outputs(out: Path, result: dict, figures: bool, seed: int, model: Err
     write_json_atomic(out / "summary.json", result["summary"])
     _write_example_data(out, seed, model)
     if figures:
-        from .yang2014_figures import plot_error_vs_phi, plot_table1_bands
+        from experiments.plotting.yang2014_figures import plot_error_vs_phi, plot_table1_bands
         plot_error_vs_phi(result, out)
         plot_table1_bands(table1, out / "table1_bands.png")
 
@@ -266,10 +227,7 @@ def _write_outputs(out: Path, result: dict, figures: bool, seed: int, model: Err
 def _write_example_data(out: Path, seed: int, model: ErrorModel):
     """One simulated sensor's sweeps as measurement tables, for ``skysim calibrate``."""
     rng = np.random.default_rng(seed)
-    errors = OpponentErrors.draw(rng, misalignment_max_deg=model.misalignment_max_deg,
-                                 transmittance_sd=model.transmittance_sd,
-                                 noise_range_V=model.noise_range_V,
-                                 turntable_error_deg=model.turntable_error_deg)
+    errors = model.draw_errors(rng)
     sensor = OpponentSensor(errors, daq=Daq(model.daq_bits, model.daq_range_V))
     sky = RayleighSky(dmax=float(np.mean(model.dmax_range)))
     for g, start in GROUPS.items():

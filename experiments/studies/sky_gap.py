@@ -24,10 +24,10 @@ import numpy as np
 import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
+from skysim.natraj import natraj_path, read_natraj
 
-from .argtypes import output_dir
-from .figures import save_png
-from .physical_sky import natraj_path, read_natraj
+from experiments.cli.argtypes import output_dir
+from experiments.plotting.figures import save_png
 
 __all__ = ["CALIBRATION_MU0", "NOISE_FLOOR", "cases_from_natraj", "register",
            "register_reproduce", "run"]
@@ -42,8 +42,8 @@ MAP_MU0 = 0.4
 
 def natraj_table(reference: Path | None = None, min_mu: float = 0.1) -> pd.DataFrame:
     """The Natraj 2009 transmitted rows from ``reference`` (a table file or a folder holding
-    one, :func:`experiments.physical_sky.natraj_path`), by default the rows shipped with
-    skysim (:func:`experiments.physical_sky.read_natraj`)."""
+    one, :func:`skysim.natraj.natraj_path`), by default the rows shipped with skysim
+    (:func:`skysim.natraj.read_natraj`)."""
     return read_natraj(natraj_path(reference), min_mu)
 
 

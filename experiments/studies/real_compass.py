@@ -19,7 +19,7 @@ from skysim.io import atomic_write, write_json_atomic
 __all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
            "run_real_benchmark"]
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
+DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "gkanias2023"
 DEFAULT_SEED = 2023
 QUICK_EFFECTS = ("yaw_scale", "occlusion")
 
@@ -258,7 +258,7 @@ def run_real_benchmark(folder, effects_to_inject, candidates, out: Path, n_sessi
     from calibration import diagnose
     from sensor.photodiodes_io import read_photodiodes
 
-    from .real_injection import inject
+    from experiments.workflows.real_injection import inject
     files = session_files(folder, "--real")[:n_sessions]
     rng = np.random.default_rng(seed)
     rows = []

@@ -1,5 +1,5 @@
-"""Which module of :mod:`experiments` defines which ``skysim`` sub-command, read without
-importing the modules.
+"""Which module of :mod:`experiments` (or of its subpackages) defines which ``skysim``
+sub-command, read without importing the modules.
 
 Building the full parser imports every command module, and with them numpy, pandas, scipy
 and the sky models: about a second before ``skysim --help`` prints anything. This index reads
@@ -48,10 +48,13 @@ def _literal(node) -> str | None:
 
 
 def read_index(package_dir: Path, module_names) -> CommandIndex:
-    """Scan ``package_dir/<name>.py`` for each module name; see the module docstring."""
+    """Scan the source of each module name (relative to ``package_dir``, dotted for a
+    subpackage's module: ``"workflows.sweep"`` is ``package_dir/workflows/sweep.py``); see the
+    module docstring."""
     index = CommandIndex()
     for name in module_names:
-        source = (package_dir / f"{name}.py").read_text(encoding="utf-8")
+        source = (package_dir.joinpath(*name.split(".")).with_suffix(".py")
+                  .read_text(encoding="utf-8"))
         for match in _FUNCTION.finditer(source):
             try:
                 tree = ast.parse(match.group(0))

@@ -66,7 +66,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["Config", "DEFAULT_SEED", "QUICK", "SENSORS", "camera_errors", "format_summary",
            "format_table", "night_camera", "night_conditions",
@@ -195,7 +195,7 @@ def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool 
     from skysim.geometry import wrap_axial_deg
 
     from .dark_current import Config as DarkConfig, _calibration_grid
-    from .yang2014 import ERROR_MODEL
+    from sensor.yang2014 import ERROR_MODEL
 
     daq = Daq(ERROR_MODEL.daq_bits, ERROR_MODEL.daq_range_V)
     params = PhotodiodeChannels.draw(rng)
@@ -487,7 +487,7 @@ def format_summary(summary: dict) -> str:
 
 
 def register_reproduce(targets: dict) -> None:
-    from ._progress import reproduction
+    from experiments.workflows.progress import reproduction
     targets["moonlit-compass"] = reproduction(
         "moonlit-compass", "Moonlit compass — heading error vs lunar phase and Moon elevation",
         run, lambda result: format_summary(result["summary"]),

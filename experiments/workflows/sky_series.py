@@ -35,7 +35,7 @@ _CHUNK_BYTES = 4 * 2**20  # netCDF chunks of ~4 MiB: whole time steps, cheap to 
 def _metadata(sky, times, n_directions, n_suns) -> dict:
     from skysim import __version__
 
-    from .commands import AOP_CONVENTION
+    from experiments.cli.commands import AOP_CONVENTION
     return {"schema": SERIES_SCHEMA, "sky": sky.describe(), "aop_convention": AOP_CONVENTION,
             "n_times": int(n_suns), "n_directions": int(n_directions),
             "times": "given" if times is not None else "none (index of the sun positions)",
@@ -208,7 +208,7 @@ def _count_times(args) -> int:
     """Number of time steps the options ask for, computed without building them."""
     import pandas as pd
 
-    from .argtypes import PANDAS_YEARS
+    from experiments.cli.argtypes import PANDAS_YEARS
     if args.periods is None and args.end is None:
         raise ValueError("give the times as --start with --end or --periods")
     if args.periods is not None and args.end is not None:
@@ -235,8 +235,8 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     from skysim.resources import check_memory, format_count
     from skysim.series import VALUES_PER_POINT
 
-    from ._progress import announce_duration
-    from .commands import SKY_BYTES_PER_DIRECTION
+    from .progress import announce_duration
+    from experiments.cli.commands import SKY_BYTES_PER_DIRECTION
     directions = f"{format_count(n_directions)} directions"
     what = f"{format_count(n_times)} time steps x {directions}"
     n_directions = float(min(n_directions, 10**300))
@@ -263,14 +263,13 @@ def _sky_series(args) -> int:
     import numpy as np
     import pandas as pd
 
+    from skysim.geometry import sky_grid_size
+    from skysim.io import sidecar_path
     from skysim.sky import make_sky
     from skysim.sun import Site, sun_position
 
-    from .commands import _sky_params, sky_grid_size, view_directions
-
-    from skysim.io import sidecar_path
-
-    from .argtypes import refuse_replacing_inputs
+    from experiments.cli.argtypes import refuse_replacing_inputs
+    from experiments.cli.commands import _sky_params, view_directions
     refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
                                                     sidecar_path(args.out))],
                             [("--directions", args.directions)])
@@ -312,8 +311,8 @@ def _sky_series(args) -> int:
 def _copy_sky_model_options(p) -> None:
     """Add ``skysim sky``'s sky-model options (``--model``, ``--dmax``, ``--tau``, ...) to
     ``p``: one definition, so a model or option added there is offered here too."""
-    from .commands import MODEL_OPTIONS
-    from .commands import register as register_foundation
+    from experiments.cli.commands import MODEL_OPTIONS
+    from experiments.cli.commands import register as register_foundation
     probe = argparse.ArgumentParser(add_help=False)
     register_foundation(probe.add_subparsers())
     sky = next(a for a in probe._actions if a.choices and "sky" in a.choices).choices["sky"]
@@ -325,8 +324,9 @@ def _copy_sky_model_options(p) -> None:
 
 
 def register(sub) -> None:
-    from .argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
-                           output_file, positive_float, positive_int, time_step)
+    from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file,
+                                          float_in, output_file, positive_float, positive_int,
+                                          time_step)
     p = sub.add_parser("sky-series", help="time series of sky maps (many suns x many "
                        "directions), streamed to netCDF or Parquet",
                        description="Evaluate a sky model for every time step and view "

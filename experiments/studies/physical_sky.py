@@ -15,16 +15,16 @@
   scattering, multiple scattering (black ground and albedo 0.25) and Berry, with the tables'
   numbers (0.72, 0.63, 0.53 at mu0 = 0.4);
 - ``aerosol_*.csv`` and ``.png``: aerosol skies beside the molecular one
-  (:mod:`experiments.aerosol_sky`: principal-plane DoP, neutral points and maximum DoP vs
+  (:mod:`experiments.studies.aerosol_sky`: principal-plane DoP, neutral points and maximum DoP vs
   AOD, with Kreuter et al. 2010);
 - ``summary.json``.
 
 Nothing is fitted to the tables: the engine set-up is fixed by convergence studies
 (``docs/physical_sky.md``); Berry's delta is set from the multiple-scattering neutral points.
 
-The tables ship with skysim (``experiments/data/natraj2009/``: the transmitted rows of the
-subset, view cosines >= 0.1, with the script that builds them); ``--reference`` reads
-another copy of the tables.
+The tables ship with skysim (:mod:`skysim.natraj`, ``skysim/data/natraj2009/``: the
+transmitted rows of the subset, view cosines >= 0.1, with the script that builds them);
+``--reference`` reads another copy of the tables.
 """
 
 from __future__ import annotations
@@ -37,12 +37,12 @@ import numpy as np
 import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
+from skysim.natraj import NATRAJ_FILE, natraj_path, read_natraj
 
-from .argtypes import output_dir
-from .figures import save_png
+from experiments.cli.argtypes import output_dir
+from experiments.plotting.figures import save_png
 
 __all__ = [
-    "NATRAJ_FILE",
     "neutral_point_curves",
     "register",
     "register_reproduce",
@@ -51,67 +51,8 @@ __all__ = [
     "zenith_dop_curves",
 ]
 
-NATRAJ_FILE = Path(__file__).with_name("data") / "natraj2009" / "natraj2009_transmitted.csv.gz"
-"""The Natraj et al. (2009) rows shipped with skysim (transmitted field, mu >= 0.1; built by
-``build_natraj2009_transmitted.py`` beside it from the published subset)."""
-NATRAJ_NAMES = ("natraj2009_subset.csv.gz", "natraj2009_transmitted.csv.gz")
-NATRAJ_COLUMNS = ("tau", "albedo", "mu0", "mu", "phi", "I", "Q", "U", "field")
 MU0_04_ELEVATION_DEG = float(np.degrees(np.arcsin(0.4)))
 QUICK_CASES = [(0.02, 0.0, 0.4), (0.25, 0.0, 0.4), (0.25, 0.25, 0.4), (1.0, 0.25, 0.1)]
-
-
-def natraj_path(reference=None) -> Path:
-    """The Natraj table file: the shipped one (``reference`` None), the file ``reference``, or
-    the first of :data:`NATRAJ_NAMES` in the folder ``reference`` or its ``natraj2009/``.
-
-    Raises
-    ------
-    FileNotFoundError
-        If ``reference`` is neither such a file nor a folder holding one.
-    """
-    if reference is None:
-        return NATRAJ_FILE
-    ref = Path(reference)
-    if ref.is_file():
-        return ref
-    for folder in (ref, ref / "natraj2009"):
-        for name in NATRAJ_NAMES:
-            if (folder / name).is_file():
-                return folder / name
-    raise FileNotFoundError(f"--reference {ref}: no Natraj table there; give the table file or "
-                            f"a folder holding {' or '.join(NATRAJ_NAMES)} (directly or in "
-                            "natraj2009/)")
-
-
-def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
-    """Transmitted-field rows of the Natraj et al. (2009) subset with view cosine ``mu >= min_mu``
-    (Natraj's sign conventions: ``Q_table = -Q``, ``U_table = U``; docs/conventions.md).
-
-    Raises
-    ------
-    FileNotFoundError
-        If the table is missing.
-    ValueError
-        If it is not a readable CSV with the columns :data:`NATRAJ_COLUMNS`, or holds no
-        transmitted rows at ``mu >= min_mu``.
-    """
-    path = Path(table_path)
-    if not path.is_file():
-        raise FileNotFoundError(f"no Natraj table {path}; give --reference with the table file "
-                                f"or a folder holding {' or '.join(NATRAJ_NAMES)}")
-    try:
-        d = pd.read_csv(path)
-    except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
-            EOFError) as exc:
-        raise ValueError(f"{path}: not a readable Natraj table ({exc})") from None
-    missing = [c for c in NATRAJ_COLUMNS if c not in d.columns]
-    if missing:
-        raise ValueError(f"{path}: missing column(s) {missing} of a Natraj table; found "
-                         f"{list(d.columns)}")
-    d = d[(d.field == "transmitted") & (d.mu >= min_mu)]
-    if d.empty:
-        raise ValueError(f"{path}: no transmitted-field rows with mu >= {min_mu}")
-    return d
 
 
 def validate_against_natraj(table_path=NATRAJ_FILE, cases=None, min_mu: float = 0.1):
@@ -192,7 +133,7 @@ def _figures(out: Path, per_case, points, npts, zen, maps):
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from .polar_maps import plot_polar_maps
+    from experiments.plotting.polar_maps import plot_polar_maps
 
     fig, axes = plt.subplots(1, 2, figsize=(9, 3.4))
     for ax, col, label in [(axes[0], "dI_rel", "I/I_table - 1"),
@@ -258,7 +199,7 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
     from skysim.neutral_points import neutral_points
     from skysim.sky import RayleighSky
 
-    from .commands import sky_grid
+    from skysim.geometry import sky_grid
 
     t0 = time.perf_counter()
     out = Path(out)

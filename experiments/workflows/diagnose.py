@@ -17,7 +17,7 @@ starting every 30 min from 15:30 to 18:00 local time (sun elevation ~51 -> ~18 d
 illuminance falls ~2.5x and the sensor cools by a few kelvin: the slow effects have something
 to act on; the last sweep ends early enough that a one-hour clock error keeps the recorded
 sun above the horizon). Sensor errors, noise, DAQ and ``d_max`` follow
-:data:`experiments.yang2014.ERROR_MODEL`.
+:data:`sensor.yang2014.ERROR_MODEL`.
 """
 
 from __future__ import annotations
@@ -42,13 +42,13 @@ from calibration.diagnosis import (
 from calibration.effects import EFFECT_NAMES, Context, base_vector, forward, get_effect
 from calibration.effects.dark_current import clear_sky_illuminance_lx
 from sensor.daq import Daq
-from sensor.errors import OpponentErrors
 from sensor.measurement import MEASUREMENT_SCHEMA, Measurement
 from sensor.opponent import OpponentSensor
+from sensor.yang2014 import ERROR_MODEL, SITE
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from .argtypes import (
+from experiments.cli.argtypes import (
     DefaultsHelpFormatter,
     existing_file,
     int_at_least,
@@ -56,7 +56,6 @@ from .argtypes import (
     positive_int,
     seed,
 )
-from .yang2014 import ERROR_MODEL, SITE
 
 __all__ = [
     "SESSION",
@@ -106,10 +105,7 @@ def simulate_session(effect: str | None, rng: np.random.Generator, *, params=Non
     correct timestamps), ``truth`` (label and parameters, never given to the diagnoser) and
     ``data``/``clean_data`` (:class:`DiagnosisData` built from the tables alone).
     """
-    errors = OpponentErrors.draw(rng, misalignment_max_deg=model.misalignment_max_deg,
-                                 transmittance_sd=model.transmittance_sd,
-                                 noise_range_V=model.noise_range_V,
-                                 turntable_error_deg=model.turntable_error_deg)
+    errors = model.draw_errors(rng)
     dmax = rng.uniform(*model.dmax_range)
     eff = None if effect is None else get_effect(effect)
     p = None if eff is None else (eff.draw(rng) if params is None else np.asarray(params, float))
@@ -450,7 +446,7 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from .real_compass import run_real_benchmark
+    from experiments.studies.real_compass import run_real_benchmark
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES
@@ -479,7 +475,7 @@ BENCHMARK_SECONDS_PER_SET = 1.5
 def _benchmark_cmd(args) -> int:
     from skysim.resources import check_memory
 
-    from ._progress import announce_duration
+    from .progress import announce_duration
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
@@ -521,9 +517,10 @@ def register(sub) -> None:
     d.add_argument("--effects", help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
-                   "tilt,aureole,stray_light (default), and aerosol (asked for by name: its "
-                   "engine runs take minutes); for camera frames: lens,polarizer_angles,"
-                   "extinction_ratio,sky_dop (default) and crosstalk")
+                   "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
+                   "engine runs take minutes) and overcast (asked for by name: a cloud layer "
+                   "over the whole sky); for camera frames: lens,polarizer_angles,"
+                   "extinction_ratio,sky_dop,overcast (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")

@@ -3,7 +3,7 @@
 Monte-Carlo over simulated sensors (:meth:`sensor.photodiode.PhotodiodeChannels.draw`: mounting
 errors, responsivity spread, dark currents 20-100 pA (~0.4-2 lx equivalent), film-polarizer
 extinction ratios, log-amplifier gain and offset errors; channel noise U(0.25, 0.55) mV as in
-:data:`experiments.yang2014.ERROR_MODEL`; photocurrent shot noise; 16-bit DAQ). Per trial:
+:data:`sensor.yang2014.ERROR_MODEL`; photocurrent shot noise; 16-bit DAQ). Per trial:
 
 - calibration set (integrating sphere [1]_): intensity levels :attr:`Config.cal_levels_lx`,
   36 reference polarization angles over [-90, 90) and DoP 0.3 and 0.7 at each level;
@@ -68,11 +68,11 @@ from calibration.solve import PAIRS, heading_error_deg
 from sensor.daq import Daq
 from sensor.illuminance import WATER_TYPES, DepthBeyondValidationWarning, underwater_light
 from sensor.photodiode import PhotodiodeChannels
+from sensor.yang2014 import ERROR_MODEL
 from skysim.sky import RayleighSky
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from .yang2014 import ERROR_MODEL
 
 __all__ = ["Config", "DEFAULT_SEED", "run", "register_reproduce", "format_summary",
            "underwater_conditions"]
@@ -96,7 +96,7 @@ class Config:
     sweep_lx : evaluation illuminances, 1e4 lx (overcast daylight) down to 1 lx (deep dusk;
         in the underwater scenario 8-470 m of water, depending on the water type).
     dop : zenith DoP of the evaluated sky (a clear dusk sky).
-    noise_range_V : channel output noise, as in experiments.yang2014.ERROR_MODEL.
+    noise_range_V : channel output noise, as in sensor.yang2014.ERROR_MODEL.
     bandwidth_Hz : readout bandwidth for the shot noise.
     sun_elevation_deg, sky_dmax : the underwater scenario's clear sky (Rayleigh, d_max 0.8:
         zenith DoP 0.48 at 30 deg sun elevation).

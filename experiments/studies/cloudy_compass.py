@@ -52,7 +52,7 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["Config", "DEFAULT_SEED", "QUICK", "METHODS", "camera_errors", "clear_sky",
            "cloud_fields", "format_table", "register_reproduce", "ring_errors", "run",
@@ -343,8 +343,8 @@ def _example(out: Path, cfg: Config, clear, fields) -> None:
     """DoP, AoP and radiance of the sky at the middle cover and the thickest clouds."""
     from skysim.partly_cloudy import PartlyCloudySky
 
-    from .commands import sky_grid
-    from .polar_maps import plot_polar_maps
+    from skysim.geometry import sky_grid
+    from experiments.plotting.polar_maps import plot_polar_maps
     cover = sorted(cfg.covers)[len(cfg.covers) // 2]
     tau = max(cfg.taus)
     sky = PartlyCloudySky(clear, fields[(cover, tau)])
@@ -374,7 +374,7 @@ def format_summary(table: pd.DataFrame) -> str:
 
 
 def register_reproduce(targets: dict) -> None:
-    from ._progress import reproduction
+    from experiments.workflows.progress import reproduction
     targets["cloudy-compass"] = reproduction(
         "cloudy-compass", "Cloudy compass — heading error vs cloud cover and optical thickness",
         run, lambda result: format_summary(result["table"]),

@@ -1,4 +1,5 @@
-"""Foundation commands: ``skysim sky``, ``skysim sample`` and ``skysim calibrate``."""
+"""Foundation commands: ``skysim sky`` (lit by the Sun or the Moon), ``skysim sample`` and
+``skysim calibrate``."""
 
 from __future__ import annotations
 
@@ -10,8 +11,7 @@ from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_fil
                        existing_file, float_in, nonnegative_float, output_file, positive_float,
                        positive_int, refuse_replacing_inputs, seed)
 
-__all__ = ["register", "sky_grid", "read_directions", "view_directions", "AOP_CONVENTION",
-           "MODEL_OPTIONS"]
+__all__ = ["register", "read_directions", "view_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
 
 MODEL_OPTIONS = {"rayleigh": ("dmax",),
                  "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
@@ -40,30 +40,6 @@ AOP_CONVENTION = (
     "i.e. clockwise as seen by an observer looking along the view direction, wrapped to "
     "[-90, 90). Q = I dop cos(2 aop), U = I dop sin(2 aop) in that basis. Azimuths are "
     "clockwise from geographic north; at the zenith the meridian is that of the row's azimuth.")
-
-
-def sky_grid_size(step_deg: float) -> int:
-    """Number of directions of :func:`sky_grid` with spacing ``step_deg`` [deg]."""
-    import math
-    return (math.floor(90.0 / step_deg + 1e-9) + 1) * math.ceil(360.0 / step_deg - 1e-9)
-
-
-def sky_grid(step_deg: float = 2.0):
-    """Default full-sky grid: elevations 0..90 and azimuths 0..360-step [deg], flattened.
-
-    Raises
-    ------
-    InvalidParameterError
-        If ``step_deg`` is not in (0, 90].
-    """
-    import numpy as np
-
-    from skysim.validation import check_in_range
-    check_in_range("grid step [deg]", step_deg, 0.0, 90.0, low_open=True)
-    el = np.arange(0.0, 90.0 + 1e-9, step_deg)
-    az = np.arange(0.0, 360.0, step_deg)
-    E, A = np.meshgrid(el, az, indexing="ij")
-    return E.ravel(), A.ravel()
 
 
 def read_directions(path):
@@ -130,7 +106,8 @@ def _flag(option: str) -> str:
 
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     """View directions [deg] from a CSV (:func:`read_directions`), or else the default
-    full-sky grid (:func:`sky_grid`), after checking its memory."""
+    full-sky grid (:func:`skysim.geometry.sky_grid`), after checking its memory."""
+    from skysim.geometry import sky_grid, sky_grid_size
     from skysim.resources import check_memory, format_count
     if directions_csv:
         return read_directions(directions_csv)
@@ -138,6 +115,55 @@ def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
                  f"{format_count(sky_grid_size(grid_step_deg))} sky directions (--grid-step "
                  f"{grid_step_deg:g})", "use a coarser --grid-step")
     return sky_grid(grid_step_deg)
+
+
+# --------------------------------------------------------------------------- --source moon
+class _MoonlitSkyMap:
+    """``skysim sky --source moon``: the night sky of one time as the command's sky."""
+
+    def __init__(self, args, params: dict):
+        from skysim.sky import make_sky
+        from skysim.sun import Site
+        self.site = Site(args.lat, args.lon, args.alt)
+        self.time, self.band = args.time, args.band
+        if args.model == "multiple" and "tau" not in params and "wavelength_nm" not in params:
+            from skysim.bands import get_band
+            params = {**params, "wavelength_nm": get_band(args.band).wavelength_nm}
+        self.pattern = make_sky(args.model, **params)
+
+    def field(self, view_elevation_deg, view_azimuth_deg, *_source):
+        from skysim.night import night_sky
+        return night_sky(view_elevation_deg, view_azimuth_deg, self.time, self.site,
+                         self.band, self.pattern).field
+
+    def describe(self) -> dict:
+        return {"model": "night", "source": "moon", "band": self.band,
+                "pattern": self.pattern.describe(), "radiance_unit": "W m-2 nm-1 sr-1",
+                "radiance": "Krisciunas & Schaefer (1991) moonlit sky with ROLO lunar "
+                            "irradiance, the Sun's light added when up, night-sky background "
+                            "of the band (skysim.night)"}
+
+    def title(self, moon_elevation_deg: float, moon_azimuth_deg: float) -> str:
+        return (f"night sky ({self.pattern.name} pattern), {self.band} band; moon elevation "
+                f"{moon_elevation_deg:.1f}°, azimuth {moon_azimuth_deg:.1f}°")
+
+
+def moon_sky(args, params: dict):
+    """For ``skysim sky --source moon``: ``(sky, moon elevation, moon azimuth, info)``."""
+    if args.lat is None or args.lon is None or args.time is None:
+        raise ValueError("--source moon needs --lat --lon --time (timezone-aware ISO 8601)")
+    if args.sun_elevation is not None or args.sun_azimuth is not None:
+        raise ValueError("--sun-elevation/--sun-azimuth give the Sun; with --source moon the "
+                         "Moon's position follows from --lat --lon --time")
+    from skysim.moon import moon_position
+    sky = _MoonlitSkyMap(args, params)
+    pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
+                        sky.site.altitude_m).iloc[0]
+    info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
+            "elevation_deg": float(pos.elevation_deg), "azimuth_deg": float(pos.azimuth_deg),
+            "phase_angle_deg": float(pos.phase_angle_deg),
+            "illuminated_fraction": float(pos.illuminated_fraction)}
+    return sky, float(pos.elevation_deg), float(pos.azimuth_deg), info
 
 
 def _sky(args) -> int:
@@ -148,14 +174,13 @@ def _sky(args) -> int:
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
 
-    from ._clouds_cli import with_clouds
+    from .cloud_options import with_clouds
     params = _sky_params(args)
     refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
                               sidecar_path(args.out)), ("--plot", args.plot)],
                             [("--directions", args.directions)])
     sky = None
-    if args.source == "moon":  # the night sky: the Moon as the source (experiments.moonlit_sky)
-        from .moonlit_sky import moon_sky
+    if args.source == "moon":  # the night sky: the Moon as the source (skysim.night)
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
     elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
@@ -199,7 +224,7 @@ def _sky(args) -> int:
                                            lambda p: p.write_text(json.dumps(sidecar, indent=2)))])
         print(f"wrote {el.size} directions to {out}")
     if args.plot:
-        from .polar_maps import plot_polar_maps, sky_title
+        from experiments.plotting.polar_maps import plot_polar_maps, sky_title
         maps = {"DoP": (table["dop"], "viridis", (0, 1)),
                 "AoP [deg]": (table["aop_deg"], "twilight", (-90, 90))}
         marks = None
@@ -250,7 +275,7 @@ def _sample(args) -> int:
     from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
-    from ._clouds_cli import with_clouds
+    from .cloud_options import with_clouds
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
@@ -295,16 +320,12 @@ def _sample(args) -> int:
 
 def _sensor_errors(spec: str, rng):
     """``--errors``: 'random' (the Yang 2014 error model), 'none' or a JSON file."""
-    from experiments.yang2014 import ERROR_MODEL
     from sensor.errors import OpponentErrors
+    from sensor.yang2014 import ERROR_MODEL
     if spec == "none":
         return OpponentErrors()
     if spec == "random":
-        m = ERROR_MODEL
-        return OpponentErrors.draw(rng, misalignment_max_deg=m.misalignment_max_deg,
-                                   transmittance_sd=m.transmittance_sd,
-                                   noise_range_V=m.noise_range_V,
-                                   turntable_error_deg=m.turntable_error_deg)
+        return ERROR_MODEL.draw_errors(rng)
     path = existing_file_or_error(spec, "--errors")
     try:
         d = json.loads(path.read_text())
@@ -346,7 +367,7 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
-    from ._clouds_cli import add_cloud_options
+    from .cloud_options import add_cloud_options
     fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,

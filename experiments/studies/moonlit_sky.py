@@ -1,4 +1,4 @@
-"""The moonlit sky against FORS2 polarimetry at Paranal, and ``skysim sky --source moon``.
+"""The moonlit sky against FORS2 polarimetry at Paranal (``skysim reproduce moonlit-sky``).
 
 ``skysim reproduce moonlit-sky [--data DIR]`` reads the FORS2 sky-background polarization
 table (default ``../shared/reference/moonskypol`` beside the checkout: the rows of
@@ -40,12 +40,12 @@ import pandas as pd
 
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "compare", "measured_polarization",
-           "moon_sky", "read_fors2", "register_reproduce", "run"]
+           "read_fors2", "register_reproduce", "run"]
 
-DEFAULT_DATA = Path(__file__).resolve().parents[2] / "shared" / "reference" / "moonskypol"
+DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "moonskypol"
 """The FORS2 moonlit-sky rows beside the checkout (``../shared/reference/moonskypol``)."""
 
 REQUIRED_COLUMNS = ("FIELD", "RA", "DEC", "MED OBS", "Q", "error Q", "U", "error U", "BAND",
@@ -294,55 +294,6 @@ def run(data, out, with_multiple: bool = True) -> dict:
                "residuals": summarize(result), "elapsed_s": time.perf_counter() - t0}
     write_json_atomic(out / "summary.json", summary)
     return summary
-
-
-# --------------------------------------------------------------------------- skysim sky
-class _MoonlitSkyMap:
-    """``skysim sky --source moon``: the night sky of one time as the command's sky."""
-
-    def __init__(self, args, params: dict):
-        from skysim.sky import make_sky
-        from skysim.sun import Site
-        self.site = Site(args.lat, args.lon, args.alt)
-        self.time, self.band = args.time, args.band
-        if args.model == "multiple" and "tau" not in params and "wavelength_nm" not in params:
-            from skysim.bands import get_band
-            params = {**params, "wavelength_nm": get_band(args.band).wavelength_nm}
-        self.pattern = make_sky(args.model, **params)
-
-    def field(self, view_elevation_deg, view_azimuth_deg, *_source):
-        from skysim.night import night_sky
-        return night_sky(view_elevation_deg, view_azimuth_deg, self.time, self.site,
-                         self.band, self.pattern).field
-
-    def describe(self) -> dict:
-        return {"model": "night", "source": "moon", "band": self.band,
-                "pattern": self.pattern.describe(), "radiance_unit": "W m-2 nm-1 sr-1",
-                "radiance": "Krisciunas & Schaefer (1991) moonlit sky with ROLO lunar "
-                            "irradiance, the Sun's light added when up, night-sky background "
-                            "of the band (skysim.night)"}
-
-    def title(self, moon_elevation_deg: float, moon_azimuth_deg: float) -> str:
-        return (f"night sky ({self.pattern.name} pattern), {self.band} band; moon elevation "
-                f"{moon_elevation_deg:.1f}°, azimuth {moon_azimuth_deg:.1f}°")
-
-
-def moon_sky(args, params: dict):
-    """For ``skysim sky --source moon``: ``(sky, moon elevation, moon azimuth, info)``."""
-    if args.lat is None or args.lon is None or args.time is None:
-        raise ValueError("--source moon needs --lat --lon --time (timezone-aware ISO 8601)")
-    if args.sun_elevation is not None or args.sun_azimuth is not None:
-        raise ValueError("--sun-elevation/--sun-azimuth give the Sun; with --source moon the "
-                         "Moon's position follows from --lat --lon --time")
-    from skysim.moon import moon_position
-    sky = _MoonlitSkyMap(args, params)
-    pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
-                        sky.site.altitude_m).iloc[0]
-    info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
-            "elevation_deg": float(pos.elevation_deg), "azimuth_deg": float(pos.azimuth_deg),
-            "phase_angle_deg": float(pos.phase_angle_deg),
-            "illuminated_fraction": float(pos.illuminated_fraction)}
-    return sky, float(pos.elevation_deg), float(pos.azimuth_deg), info
 
 
 # --------------------------------------------------------------------------- command line

@@ -14,7 +14,7 @@ rows the two reproductions use; the values are copied unchanged (same columns, s
 
 Usage (from the repository root)::
 
-    python experiments/data/natraj2009/build_natraj2009_transmitted.py \
+    python skysim/data/natraj2009/build_natraj2009_transmitted.py \
         ../shared/reference/natraj2009/natraj2009_subset.csv.gz
 
 The output is byte-identical for the same input (gzip without a time stamp).

@@ -16,8 +16,8 @@ from pathlib import Path
 
 import numpy as np
 
-from .argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in, int_at_least,
-                       output_file, positive_float, seed)
+from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
+                                      int_at_least, output_file, positive_float, seed)
 
 __all__ = ["DEFAULT_SEED", "heading_trials", "run", "stokes_figure", "register",
            "register_reproduce"]
@@ -78,7 +78,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
     laid out as the sensor records it (row 0 at the top)."""
     from sensor.camera import local_meridian_aop
 
-    from .figures import pyplot, save_png
+    from experiments.plotting.figures import pyplot, save_png
     plt = pyplot()
     _, _, aop_m = local_meridian_aop(stokes, lens, attitude)
     fig, axes = plt.subplots(1, 3, figsize=(13, 4.2))
@@ -103,7 +103,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
 def _make_sky(args):
     from skysim.sky import make_sky
 
-    from ._clouds_cli import with_clouds
+    from experiments.cli.cloud_options import with_clouds
     if args.sky == "multiple":
         return with_clouds(make_sky("multiple", tau=args.tau, albedo=args.albedo), args)
     if args.sky == "rayleigh" and args.clouds is None:
@@ -207,7 +207,7 @@ def _heading_command(args) -> int:
 
 
 def register(sub) -> None:
-    from ._clouds_cli import add_cloud_options
+    from experiments.cli.cloud_options import add_cloud_options
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
                        "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "
@@ -407,7 +407,7 @@ def _write_outputs(out: Path, table, summary, skies, cam, size) -> None:
     from sensor.camera import camera_attitude, camera_stokes
     from skysim.io import atomic_write, write_json_atomic
 
-    from .figures import pyplot, save_png
+    from experiments.plotting.figures import pyplot, save_png
     out.mkdir(parents=True, exist_ok=True)
     (out / "figures").mkdir(exist_ok=True)
     atomic_write(out / "table.csv", lambda tmp: table.to_csv(tmp, index=False))

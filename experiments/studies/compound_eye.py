@@ -28,7 +28,7 @@ import pandas as pd
 from skysim.geometry import wrap_deg
 from skysim.io import atomic_write, write_json_atomic
 
-from .figures import pyplot, save_png
+from experiments.plotting.figures import pyplot, save_png
 from skysim.sun import Site
 
 __all__ = ["SITE", "SCENARIO", "Scenario", "run", "format_table", "register_reproduce"]

@@ -3,7 +3,7 @@
 A task is a picklable object; ``fn(task)`` computes one chunk, writes its file atomically and
 returns a small report dict. The backends only schedule: results never depend on the backend,
 the number of workers or the order of completion (each chunk's random numbers come from its
-own seed blocks, see :mod:`experiments.sweep`).
+own seed blocks, see :mod:`experiments.workflows.sweep`).
 
 - ``local``: :class:`concurrent.futures.ProcessPoolExecutor` with one process per core (one
   task in-process when there is a single task or worker, avoiding the process start-up).
