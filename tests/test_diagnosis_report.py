@@ -19,6 +19,7 @@ from calibration.diagnosis import (
     InsufficientDataError,
     ReportFormatError,
     Thresholds,
+    ThresholdsError,
     UnsupportedInstrumentError,
     assign_folds,
     core,
@@ -117,9 +118,9 @@ def test_partial_explanation_option_with_block_consistency():
     assert not core.explains(g_5 + 1e-6, g0, floor, t, blocks_improved=1.0)
     assert not core.explains(g_5 - 1e-9, g0, floor, t, blocks_improved=0.7)
     assert not core.explains(1.0, g0, floor, t, blocks_improved=1.0, null_excluded=False)
-    with pytest.raises(ValueError, match="blocks_improved"):
+    with pytest.raises(ThresholdsError, match="blocks_improved"):
         core.explains(2.0, g0, floor, t)
-    with pytest.raises(ValueError, match="residual_excess=1.5"):
+    with pytest.raises(ThresholdsError, match="residual_excess=1.5"):
         Thresholds(residual_excess=1.5)
     # the default rule needs no block count, and is unchanged by a consistency of 0
     assert core.explains(np.sqrt(1 + 0.02 * 8.0), g0, floor, Thresholds())

@@ -23,6 +23,7 @@ from .errors import (
     MissingSiteError,
     ReportFormatError,
     SingleHeadingError,
+    ThresholdsError,
     UnsupportedInstrumentError,
 )
 from .fit_result import FitResult
@@ -69,6 +70,7 @@ __all__ = [
     "SingleHeadingError",
     "Slice",
     "Thresholds",
+    "ThresholdsError",
     "UnsupportedInstrumentError",
     "Verdict",
     "assign_folds",

@@ -61,7 +61,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .errors import InsufficientDataError
+from .errors import InsufficientDataError, ThresholdsError
 from .report import Candidate, Slice
 
 __all__ = ["Thresholds", "assign_folds", "blocks_improved", "decide", "excess_removed",
@@ -92,6 +92,12 @@ class Thresholds:
 
     The ring (photodiode) instruments use ``residual_excess=0.95, block_consistency=0.75``
     (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there).
+
+    Raises
+    ------
+    ThresholdsError
+        For a negative margin, or a ``residual_excess`` or ``block_consistency`` outside
+        [0, 1].
     """
 
     none_margin: float = 0.10
@@ -102,11 +108,12 @@ class Thresholds:
     def __post_init__(self):
         for name in ("none_margin", "explained_margin"):
             if not getattr(self, name) >= 0:
-                raise ValueError(f"Thresholds.{name}={getattr(self, name)!r}: expected >= 0")
+                raise ThresholdsError(f"Thresholds.{name}={getattr(self, name)!r}: expected "
+                                      ">= 0")
         for name in ("residual_excess", "block_consistency"):
             if not 0 <= getattr(self, name) <= 1:
-                raise ValueError(f"Thresholds.{name}={getattr(self, name)!r}: expected a "
-                                 "fraction in [0, 1]")
+                raise ThresholdsError(f"Thresholds.{name}={getattr(self, name)!r}: expected "
+                                      "a fraction in [0, 1]")
 
     def to_dict(self) -> dict:
         return {"none_margin": self.none_margin, "explained_margin": self.explained_margin,
@@ -263,14 +270,14 @@ def explains(gap: float, gap_base: float, floor: float, thresholds: Thresholds, 
 
     Raises
     ------
-    ValueError
+    ThresholdsError
         For ``thresholds.block_consistency > 0`` without ``blocks_improved``.
     """
     if gap_base <= floor * (1 + thresholds.none_margin):
         return False
     if thresholds.block_consistency > 0:
         if blocks_improved is None:
-            raise ValueError("thresholds.block_consistency="
+            raise ThresholdsError("thresholds.block_consistency="
                              f"{thresholds.block_consistency!r} needs the candidate's "
                              "blocks_improved")
         if blocks_improved < thresholds.block_consistency:

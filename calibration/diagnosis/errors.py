@@ -13,7 +13,7 @@ from ..exceptions import CalibrationError, RankDeficientError, TooFewSamplesErro
 
 __all__ = ["AllNaNChannelError", "DiagnosisError", "EffectUnavailableError",
            "InsufficientDataError", "MissingSiteError", "ReportFormatError",
-           "SingleHeadingError", "UnsupportedInstrumentError"]
+           "SingleHeadingError", "ThresholdsError", "UnsupportedInstrumentError"]
 
 
 class DiagnosisError(CalibrationError):
@@ -43,6 +43,11 @@ class UnsupportedInstrumentError(DiagnosisError, ValueError):
 class EffectUnavailableError(DiagnosisError, RuntimeError):
     """A candidate effect cannot be evaluated here (a missing optional engine or table, a sun
     outside the range its model holds for); the diagnosis lists it as unavailable."""
+
+
+class ThresholdsError(DiagnosisError, ValueError):
+    """Decision thresholds out of range, or a rule option used without the value it needs
+    (:class:`calibration.diagnosis.core.Thresholds`)."""
 
 
 class ReportFormatError(DiagnosisError, ValueError):
