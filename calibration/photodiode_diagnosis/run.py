@@ -726,10 +726,13 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             if refine_clock and \
                     abs(rows[-1]["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
                 _refine_clock(inst, rows[-1], n_folds=n_folds, seed=seed, max_iter=max_iter)
-        # a clock offset within twice its uncertainty is no finding, however it fits
+        # a clock offset within twice its uncertainty is no finding, however it fits; nor is
+        # an effect fitted at its null in every fold (its refit found a better optimum of the
+        # instrument's own parameters, not the effect: an overcast of thickness 0 on an
+        # open-sky session)
         rows[-1]["explained"] = core.explains(
             gc, g0, floor, RING_THRESHOLDS, blocks_improved=rows[-1]["sweeps_improved"],
-            null_excluded=rows[-1].get("significant", True))
+            null_excluded=rows[-1].get("significant", True) and not _at_null(e, P))
     ranked = core.rank([Candidate.from_dict(r) for r in rows])
     verdict, reason = core.decide(ranked, g0, floor, RING_THRESHOLDS)
     rows = [c.to_dict() for c in ranked]
@@ -785,6 +788,16 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         "split": {"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
                   "held_out_readings": n_ho},
         "seed": seed}
+
+
+def _at_null(effect, P) -> bool:
+    """True when every fold fitted every parameter of ``effect`` within its finite-difference
+    step of its null (``P``: (folds, k))."""
+    P = np.asarray(P, float)
+    if P.size == 0:
+        return False
+    null = np.asarray(effect.null, float)
+    return bool(np.all(np.abs(P - null) <= np.asarray(effect.fd_step, float)))
 
 
 def _fold_params(effect, P, sds) -> dict:
