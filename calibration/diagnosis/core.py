@@ -104,6 +104,8 @@ class Thresholds:
     explained_margin: float = 0.07
     residual_excess: float = 0.02
     block_consistency: float = 0.0
+    block_name: str = "blocks"
+    """What a held-out block is called in verdict reasons (the ring's are sweeps)."""
 
     def __post_init__(self):
         for name in ("none_margin", "explained_margin"):
@@ -314,7 +316,8 @@ def decide(candidates, gap_before: float, floor: float,
     best = rows[0]
     removed = excess_removed(best.gap_after, gap_before, floor)
     consistent = (f" and lowers the gap in at least {100 * thresholds.block_consistency:.0f} % "
-                  "of the held-out blocks" if thresholds.block_consistency > 0 else "")
+                  f"of the held-out {thresholds.block_name}"
+                  if thresholds.block_consistency > 0 else "")
     if best.explained and best.score < 0:
         if best.gap_after <= floor * (1 + thresholds.explained_margin):
             return best.effect, ("best-ranked candidate brings the held-out gap to the "

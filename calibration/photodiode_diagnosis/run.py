@@ -34,7 +34,7 @@ from .instrument import Instrument, instrument_from_photodiodes
 __all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "orient",
            "decode_headings", "clock_mirror", "solar_noon_s"]
 
-RING_THRESHOLDS = Thresholds(residual_excess=0.95, block_consistency=0.75)
+RING_THRESHOLDS = Thresholds(residual_excess=0.95, block_consistency=0.75, block_name="sweeps")
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.explains`):
 a candidate with a negative held-out score is named when it removes at least 5 % of the excess
 held-out variance ``G_0^2 - floor^2`` (or reaches the floor) and lowers the held-out gap in at
