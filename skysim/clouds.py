@@ -322,8 +322,17 @@ def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
                    n_zenith: int = 17, azimuth_step_deg: float = 15.0,
                    depolarization_ratio: float = 0.0,
                    settings: EngineSettings = DEFAULT_SETTINGS) -> AzimuthModes:
-    """Azimuth modes of the sky below a Rayleigh slab with a cloud layer (one engine call,
-    cached per arguments).
+    """Azimuth modes of the multiply scattered light below a Rayleigh slab with a cloud
+    layer: the engine's total minus its own single scatter at the nodes (two engine calls,
+    the second a single-scatter one of a few hundredths of a second; cached per arguments).
+
+    The single scatter holds the droplets' forward peak (the aureole: ``P11`` falls by three
+    decades over the first 10 deg), which no series of 13 azimuths and 17 zenith nodes can
+    follow; it is added back in closed form at every direction
+    (:func:`overcast_single_scatter`). What is left has been scattered at least twice, through
+    the engine's phase matrix truncated to ``settings.n_streams`` moments (delta-M), and
+    varies over tens of degrees: the modes interpolate it (error measured in
+    ``tests/test_clouds.py``).
 
     Parameters
     ----------
@@ -344,13 +353,48 @@ def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
         mu = np.clip(np.cos(np.radians(zenith_nodes_deg(int(n_zenith)))), MU_MIN, MU_MAX)
         az = fit_azimuths_deg(azimuth_step_deg)
         M, P = np.meshgrid(mu, az, indexing="ij")
-        st = layered_particle_stokes_cases(tau, albedo, [cloud.tau], cloud.particle_layer(),
-                                           float(mu0), M.ravel(), P.ravel(),
-                                           depolarization_ratio=depolarization_ratio,
-                                           settings=settings)[0]
+        st = [layered_particle_stokes_cases(tau, albedo, [cloud.tau], cloud.particle_layer(),
+                                            float(mu0), M.ravel(), P.ravel(),
+                                            depolarization_ratio=depolarization_ratio,
+                                            settings=settings, multiple_scatter=ms)[0]
+              for ms in (True, False)]
         _OVERCAST_CACHE[key] = AzimuthModes.from_samples(np.degrees(np.arccos(mu)),
-                                                         st.reshape(M.shape + (3,)))
+                                                         (st[0] - st[1]).reshape(M.shape + (3,)))
     return _OVERCAST_CACHE[key]
+
+
+def overcast_single_scatter(tau: float, cloud: CloudLayer, view_elevation_deg,
+                            view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg, *,
+                            depolarization_ratio: float = 0.0,
+                            settings: EngineSettings = DEFAULT_SETTINGS):
+    """Singly scattered ``(I, Q, U)`` below the Rayleigh slab with its cloud layer, in closed
+    form (:func:`skysim.slab_single_scatter.single_scatter_weights`) on the engine's own
+    levels (:func:`skysim.rt_sasktran.particle_layer_profile`), with the droplets' Mie phase
+    matrix (:func:`cloud_optics`) and the Rayleigh one with depolarization (Hansen & Travis
+    1974, eq. (2.15) [1]_): the engine's single scatter at any direction, its forward peak
+    (the aureole) included. Broadcast over the directions [deg]."""
+    from .rayleigh import meridian_components, scattering_angle_deg
+    from .rt_sasktran import (MU_MAX, MU_MIN, delta_m_truncation, particle_layer_profile,
+                              rayleigh_depolarization_factor)
+    from .slab_single_scatter import (perpendicular_stokes, phase_at_angle,
+                                      single_scatter_weights)
+    o = cloud.optics()
+    w = o.single_scattering_albedo
+    z, k_r, k_p = particle_layer_profile(tau, [cloud.tau], cloud.particle_layer(), settings)
+    scat = np.column_stack([k_r[:, 0], w * k_p[:, 0]])
+    # the truncated forward peak stays in the beam: attenuation by the scaled extinction
+    k_p = k_p * (1.0 - w * delta_m_truncation(o.greek, settings.n_streams)[1])
+    vel, sel = np.asarray(view_elevation_deg, float), np.asarray(sun_elevation_deg, float)
+    mu = np.clip(np.sin(np.radians(vel)), MU_MIN, MU_MAX)
+    a_r, a_p = 0.25 * single_scatter_weights(z, scat, k_r[:, 0] + k_p[:, 0], mu,
+                                             np.sin(np.radians(sel)))
+    gam = scattering_angle_deg(vel, view_azimuth_deg, sel, sun_azimuth_deg)
+    p11, p12 = phase_at_angle(o.angle_deg, o.p11, o.p12, gam)
+    delta = rayleigh_depolarization_factor(depolarization_ratio)
+    c2 = np.cos(np.radians(gam)) ** 2
+    r11, r12 = delta * 0.75 * (1.0 + c2) + (1.0 - delta), delta * 0.75 * (1.0 - c2)
+    a, b = meridian_components(vel, view_azimuth_deg, sel, sun_azimuth_deg)
+    return perpendicular_stokes(a_r * r11 + a_p * p11, a_r * r12 + a_p * p12, a, b)
 
 
 class CloudySky(MultipleScatteringSky):
@@ -399,11 +443,19 @@ class CloudySky(MultipleScatteringSky):
         self.azimuth_step_deg = float(azimuth_step_deg)
 
     def modes(self, sun_elevation_deg: float) -> AzimuthModes:
-        """Azimuth modes for one sun elevation [deg] (cached)."""
+        """Azimuth modes of the multiply scattered light for one sun elevation [deg] (cached;
+        :func:`overcast_modes`)."""
         return overcast_modes(self.tau, self.albedo, self.cloud, _mu0(sun_elevation_deg),
                               n_zenith=self.n_zenith, azimuth_step_deg=self.azimuth_step_deg,
                               depolarization_ratio=self.depolarization_ratio,
                               settings=self.settings)
+
+    def _stokes(self, vel, vaz, sel, saz):
+        multiple = super()._stokes(vel, vaz, sel, saz)
+        single = overcast_single_scatter(self.tau, self.cloud, vel, vaz, sel, saz,
+                                         depolarization_ratio=self.depolarization_ratio,
+                                         settings=self.settings)
+        return tuple(m + s for m, s in zip(multiple, single, strict=True))
 
     def describe(self) -> dict:
         out = super().describe()
