@@ -183,10 +183,11 @@ def _around_sun(sun_elevation_deg, radii_deg, n_position_angles=8):
 def test_closed_form_single_scatter_is_the_engines_own():
     # The engine's single scatter alone (exact phase matrix, delta-M-scaled attenuation: the
     # truncated forward peak stays in the beam) against overcast_single_scatter, at 3-20 deg
-    # from the sun and elsewhere, views above 10 deg. Tolerance 1 % in I and 2e-3 of I in
+    # from the sun and elsewhere, views above 10 deg. Tolerance 1.5 % in I and 2e-3 of I in
     # Q, U: the engine integrates along the line of sight on its 101 levels, and that
     # quadrature converges to the closed form as levels are added (checked below on the
-    # grazing views where it errs most); above 10 deg it errs by at most 0.6 % (measured)
+    # grazing views where it errs most); under cloud tau 2 and a 20-deg sun it errs by 1.2 %
+    # at 10 deg elevation, 0.6 % at 15 deg, and by less under thinner clouds (measured)
     from skysim.clouds import overcast_single_scatter
     for tau_c, sun in ((0.25, 40.0), (2.0, 20.0), (1.0, 60.0)):
         cloud = CloudLayer(tau_c)
@@ -200,7 +201,7 @@ def test_closed_form_single_scatter_is_the_engines_own():
                                             np.sin(np.radians(sun)), np.sin(np.radians(el)),
                                             az, multiple_scatter=False)[0]
         I, Q, U = overcast_single_scatter(0.1, cloud, el, az, sun, 0.0)
-        np.testing.assert_allclose(I / ref[:, 0], 1.0, atol=0.01)
+        np.testing.assert_allclose(I / ref[:, 0], 1.0, atol=0.015)
         np.testing.assert_allclose((Q - ref[:, 1]) / ref[:, 0], 0.0, atol=2e-3)
         np.testing.assert_allclose((U - ref[:, 2]) / ref[:, 0], 0.0, atol=2e-3)
 
@@ -243,11 +244,13 @@ def test_overcast_sky_matches_the_engine_off_its_nodes(tau_c, sun):
     # The model (closed-form single scatter + the multiple scatter interpolated from 25 x 25
     # engine rays) against exact engine runs at directions that are not nodes: 3, 5, 10 and
     # 20 deg from the sun (8 position angles) and 40 random ones. Measured over cloud tau
-    # 0.25, 1, 2 and suns 20, 40, 60 deg (docs/clouds.md): I within 0.9 %, DoP within
-    # 3e-3, AoP within 0.5 deg where DoP > 0.02. Tolerances: I 1.5 % (the 1 % of the
-    # engine's own single scatter above, where its line-of-sight quadrature errs, plus the
-    # interpolation), DoP 5e-3 and AoP 1 deg where DoP > 0.02 (a camera's polarimetric
-    # noise is about 1e-2 in DoP and a degree in AoP)
+    # 0.25, 1, 2 and suns 20, 40, 60 deg (docs/clouds.md): I within 1.2 % (RMS <= 0.25 %),
+    # DoP within 3.2e-3, AoP within 0.2 deg where DoP > 0.02. Tolerances: I 1.5 % (up to
+    # 0.6 % from the engine's own line-of-sight quadrature of the single scatter, above,
+    # plus the spline between zenith nodes 5.9 deg apart near the zenith), DoP 5e-3 and AoP
+    # 1 deg where DoP > 0.02 (a polarization camera's noise is about 1e-2 in DoP and a
+    # degree in AoP); before, with the single scatter interpolated: I off by a factor 350
+    # at 5 deg from the sun
     cloud = CloudLayer(tau_c)
     el, az = _around_sun(sun, [3.0, 5.0, 10.0, 20.0])
     rng = np.random.default_rng(7)
