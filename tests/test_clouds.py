@@ -180,6 +180,17 @@ def _around_sun(sun_elevation_deg, radii_deg, n_position_angles=8):
     return np.degrees(np.arcsin(v[:, 2])), np.degrees(np.arctan2(v[:, 0], v[:, 1])) % 360.0
 
 
+def _test_directions(sun_elevation_deg, lowest_deg, n_random, seed):
+    """3, 5, 10, 20 deg from the sun (8 position angles) and ``n_random`` random directions,
+    all above ``lowest_deg`` elevation."""
+    el, az = _around_sun(sun_elevation_deg, [3.0, 5.0, 10.0, 20.0])
+    rng = np.random.default_rng(seed)
+    el = np.concatenate([el, rng.uniform(lowest_deg, 88.0, n_random)])
+    az = np.concatenate([az, rng.uniform(0.0, 360.0, n_random)])
+    keep = el > lowest_deg
+    return el[keep], az[keep]
+
+
 def test_closed_form_single_scatter_is_the_engines_own():
     # The engine's single scatter alone (exact phase matrix, delta-M-scaled attenuation: the
     # truncated forward peak stays in the beam) against overcast_single_scatter, at 3-20 deg
@@ -191,12 +202,7 @@ def test_closed_form_single_scatter_is_the_engines_own():
     from skysim.clouds import overcast_single_scatter
     for tau_c, sun in ((0.25, 40.0), (2.0, 20.0), (1.0, 60.0)):
         cloud = CloudLayer(tau_c)
-        el, az = _around_sun(sun, [3.0, 5.0, 10.0, 20.0])
-        rng = np.random.default_rng(5)
-        el = np.concatenate([el, rng.uniform(10.0, 88.0, 30)])
-        az = np.concatenate([az, rng.uniform(0.0, 360.0, 30)])
-        keep = el > 10.0
-        el, az = el[keep], az[keep]
+        el, az = _test_directions(sun, 10.0, 30, 5)
         ref = layered_particle_stokes_cases(0.1, 0.1, [tau_c], cloud.particle_layer(),
                                             np.sin(np.radians(sun)), np.sin(np.radians(el)),
                                             az, multiple_scatter=False)[0]
@@ -252,12 +258,7 @@ def test_overcast_sky_matches_the_engine_off_its_nodes(tau_c, sun):
     # degree in AoP); before, with the single scatter interpolated: I off by a factor 350
     # at 5 deg from the sun
     cloud = CloudLayer(tau_c)
-    el, az = _around_sun(sun, [3.0, 5.0, 10.0, 20.0])
-    rng = np.random.default_rng(7)
-    el = np.concatenate([el, rng.uniform(5.0, 88.0, 40)])
-    az = np.concatenate([az, rng.uniform(0.0, 360.0, 40)])
-    keep = el > 5.0
-    el, az = el[keep], az[keep]
+    el, az = _test_directions(sun, 5.0, 40, 7)
     sky = CloudySky(cloud, tau=0.1, albedo=0.1)
     nodes = sky.modes(sun).theta_deg
     phi = (az + 180.0) % 360.0 - 180.0
