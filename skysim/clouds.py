@@ -20,6 +20,10 @@ clouds this model is verified for are thinner (:data:`CLOUD_TAU_RANGE`), and
 ``tests/test_clouds.py`` checks that their DoP falls and their AoP pattern keeps to the clear
 sky's (Pomozi, Horváth & Wehner 2001 [5]_).
 
+The sky is the single scatter in closed form at every direction (the droplets' sharp
+forward peak, the aureole: :func:`overcast_single_scatter`) plus the multiply scattered
+light interpolated from engine rays (:func:`overcast_modes`).
+
 References
 ----------
 .. [1] J. E. Hansen, L. D. Travis, "Light scattering in planetary atmospheres", Space Sci.
@@ -33,6 +37,9 @@ References
    J. Opt. Soc. Am. A 24:2347-2356 (2007), doi:10.1364/JOSAA.24.002347.
 .. [5] G. Pomozi, G. Horváth, R. Wehner, "How the clear-sky angle of polarization pattern
    continues underneath clouds", J. Exp. Biol. 204:2933-2942 (2001).
+.. [6] T. Nakajima, M. Tanaka, "Algorithms for radiative intensity calculations in
+   moderately thick atmospheres using a truncation approximation", J. Quant. Spectrosc.
+   Radiat. Transfer 40:51-69 (1988), doi:10.1016/0022-4073(88)90031-3.
 """
 
 from __future__ import annotations
@@ -328,8 +335,9 @@ def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
 
     The single scatter holds the droplets' forward peak (the aureole: ``P11`` falls by three
     decades over the first 10 deg), which no series of a few tens of azimuths and zenith
-    nodes can follow (with 13 azimuths, I = 198 at 5 deg from the sun where the radiative
-    transfer gives 1.1, and negative radiance 20 deg off the sun's azimuth); it is added back in closed form at every direction
+    nodes can follow (interpolated over 13 azimuths it gives I = 198 at 5 deg from the sun
+    where the radiative transfer gives 1.1, and negative radiance 20 deg off the sun's
+    azimuth); it is added back in closed form at every direction
     (:func:`overcast_single_scatter`). What is left has been scattered at least twice, through
     the engine's phase matrix truncated to ``settings.n_streams`` moments (delta-M), and
     varies over tens of degrees: the modes interpolate it (error measured in
@@ -369,11 +377,36 @@ def overcast_single_scatter(tau: float, cloud: CloudLayer, view_elevation_deg,
                             depolarization_ratio: float = 0.0,
                             settings: EngineSettings = DEFAULT_SETTINGS):
     """Singly scattered ``(I, Q, U)`` below the Rayleigh slab with its cloud layer, in closed
-    form (:func:`skysim.slab_single_scatter.single_scatter_weights`) on the engine's own
-    levels (:func:`skysim.rt_sasktran.particle_layer_profile`), with the droplets' Mie phase
-    matrix (:func:`cloud_optics`) and the Rayleigh one with depolarization (Hansen & Travis
-    1974, eq. (2.15) [1]_): the engine's single scatter at any direction, its forward peak
-    (the aureole) included. Broadcast over the directions [deg]."""
+    form: the engine's single scatter at any direction, its forward peak (the aureole)
+    included.
+
+    The weights of :func:`skysim.slab_single_scatter.single_scatter_weights` on the
+    engine's own levels (:func:`skysim.rt_sasktran.particle_layer_profile`), the droplets'
+    Mie phase matrix (:func:`cloud_optics`, whole) and the Rayleigh one with depolarization
+    (Hansen & Travis 1974, eq. (2.15) [1]_). As in the engine (its delta-M scaling with the
+    single-scatter correction of Nakajima & Tanaka 1988 [6]_) the beam and the scattered
+    light are attenuated by the droplets' extinction less the share ``f`` of their
+    scattering in the truncated forward peak (:func:`skysim.rt_sasktran.delta_m_truncation`
+    at ``settings.n_streams``): light scattered into the peak is counted as going on.
+
+    Parameters
+    ----------
+    tau : float
+        Rayleigh optical thickness of the slab.
+    cloud : CloudLayer
+    view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg : array-like
+        Directions [deg], broadcast together; views and sun above the horizon.
+    depolarization_ratio : float
+        Molecular depolarization ratio.
+    settings : EngineSettings
+        The engine set-up whose levels and truncation are followed.
+
+    Returns
+    -------
+    I, Q, U : ndarray
+        In the unit of an incident solar flux ``pi``, local-meridian basis
+        (``docs/conventions.md``), direct beam excluded.
+    """
     from .rayleigh import meridian_components, scattering_angle_deg
     from .rt_sasktran import (MU_MAX, MU_MIN, delta_m_truncation, particle_layer_profile,
                               rayleigh_depolarization_factor)
@@ -431,8 +464,8 @@ class CloudySky(MultipleScatteringSky):
     with ``sun_step_deg`` only the second is interpolated between sun nodes. Against exact
     engine runs off the nodes the radiance is within 1.2 % (RMS 0.05-0.25 %), the DoP within
     3.2e-3 and the AoP within 0.2 deg (cloud tau 0.25-2, suns 20-60 deg, views above 5 deg,
-    including 3-20 deg from the sun; ``tests/test_clouds.py``, ``docs/clouds.md``). Two engine calls (some
-    seconds) per sun elevation and cloud.
+    including 3-20 deg from the sun; ``tests/test_clouds.py``, ``docs/clouds.md``). Two
+    engine calls (some seconds) per sun elevation and cloud.
     """
 
     name = "cloudy"

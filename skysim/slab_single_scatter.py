@@ -43,7 +43,7 @@ __all__ = ["perpendicular_stokes", "phase_at_angle", "single_scatter_weights"]
 _GAUSS_NODES = 8
 
 
-def _runs(altitudes, k):
+def _runs(k):
     """Split the level intervals into runs of constant extinction (every constituent) and
     ramp intervals. Returns ``(runs, ramps)``: index pairs ``(i0, i1)`` of the levels that
     bound each constant run, and the indices ``i`` of the intervals ``[i, i + 1]`` that ramp."""
@@ -106,7 +106,7 @@ def single_scatter_weights(altitudes, scattering, extinction, mu, mu0) -> np.nda
     m, m0 = mu[..., None], mu0[..., None]
     c = 1.0 / m0 - 1.0 / m
     out = np.zeros((ks.shape[1],) + mu.shape)
-    runs, ramps = _runs(z, np.column_stack([ks, ke]))
+    runs, ramps = _runs(np.column_stack([ks, ke]))
     if runs:
         i0, i1 = np.array(runs).T
         ta, tb = t[i1], t[i0]                # top and bottom of each run (t grows downwards)
