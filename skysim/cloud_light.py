@@ -71,6 +71,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .forward_lobe import forward_lobe, lobe_multiple_radiance
 from .rayleigh import slab_transmission
 from .slab_single_scatter import perpendicular_stokes
 from .validation import check_in_range
@@ -157,29 +158,33 @@ def two_stream_transmittance(tau, mu0, g: float | None = None) -> np.ndarray:
     return 1.0 - r
 
 
-def single_scatter_factor(tau, mu, mu0) -> np.ndarray:
-    """``s = w h' / (4 (1 - f))`` (module docstring): the droplets' singly scattered light is
-    ``I_1 = P11 s`` and polarized ``P12 s`` perpendicular to the scattering plane
+def single_scatter_factor(tau, mu, mu0, share: float | None = None) -> np.ndarray:
+    """``s = w h' / (4 (1 - f))`` (module docstring): the light the droplets' wide part
+    scatters once out of a beam that keeps the share ``f`` of their scattering (default:
+    the forward lobe's, :func:`skysim.forward_lobe.forward_lobe`) is ``P11 s``
     (broadcast)."""
-    f = DIFFRACTION_SHARE
+    f = forward_lobe().share if share is None else float(share)
     w = droplet_phase().single_scattering_albedo
     return 0.25 * w / (1.0 - f) * slab_transmission((1.0 - f) * np.asarray(tau, float), mu,
                                                     mu0)
 
 
 def diffuse_radiance(tau, mu, mu0) -> np.ndarray:
-    """Multiply scattered radiance leaving the cloud base along ``mu`` [flux-``pi`` unit],
-    unpolarized: the two-stream source-function method ([6]_) on the delta-Eddington
-    solution for conservative scattering ([4]_).
+    """Multiply scattered radiance leaving the cloud base along ``mu`` [flux-``pi`` unit] of
+    light scattered at least once through the droplets' wide part, unpolarized: the
+    two-stream source-function method ([6]_) on the Eddington solution for conservative
+    scattering, delta-scaled with the forward lobe as the peak (Potter 1970, Joseph et al.
+    [4]_; :mod:`skysim.forward_lobe`).
 
-    With ``tau' = (1 - g^2) tau``, ``g' = g / (1 + g)``, ``a = 3 mu0 / 4`` (``F0 = pi``) the
+    With ``tau' = (1 - f) tau`` and ``g'`` the wide part's asymmetry parameter
+    (:func:`skysim.forward_lobe.forward_lobe`), ``a = 3 mu0 / 4`` (``F0 = pi``) the
     diffuse field is ``I(t, mu) = I0(t) + mu I1(t)`` with ``I1 = a e^(-t/mu0) + C1``,
     ``I0 = C0 + (1 - g') C1 t - a mu0 e^(-t/mu0)``; no diffuse light entering at the top and
     none coming up from a black ground (Marshak's conditions) give
     ``C1 = -a (mu0 (1 - e') + 2/3 (1 + e')) / (4/3 + (1 - g') tau')`` (``e' = e^(-tau'/mu0)``)
-    and ``C0 = a mu0 + 2a/3 + 2 C1 / 3`` (its transmitted flux is
-    :func:`two_stream_transmittance`, tested). The diffuse field scattered once more, the
-    source ``I0(t) - g' mu I1(t)``, integrated along the ray to the base:
+    and ``C0 = a mu0 + 2a/3 + 2 C1 / 3`` (with ``f = g^2``, ``g' = g / (1 + g)`` its flux is
+    the delta-Eddington :func:`two_stream_transmittance`). The diffuse field scattered once
+    more, the source ``I0(t) - g' mu I1(t)``, integrated along the ray to the base:
 
     ``I_m = (C0 - g' mu C1) E + (1 - g') C1 (tau' - mu E) - a (mu0 + g' mu) h'``,
     ``E = 1 - e^(-tau'/mu)``, ``h' = slab_transmission(tau', mu, mu0)``.
@@ -187,10 +192,10 @@ def diffuse_radiance(tau, mu, mu0) -> np.ndarray:
     Of second order in a thin cloud; in a thick one it tends to the Eddington law of
     darkening ``~ (2 + 3 mu)``. Broadcast; ``mu, mu0`` in (0, 1].
     """
-    g = droplet_phase().asymmetry_parameter
+    lobe = forward_lobe()
     tau, mu, mu0 = np.broadcast_arrays(*(np.asarray(x, float) for x in (tau, mu, mu0)))
-    gp = g / (1.0 + g)
-    ts = (1.0 - g * g) * tau
+    gp = lobe.wide_asymmetry
+    ts = (1.0 - lobe.share) * tau
     a = 0.75 * mu0
     e = np.exp(-ts / mu0)
     c1 = -a * (mu0 * (1.0 - e) + 2.0 / 3.0 * (1.0 + e)) / (4.0 / 3.0 + (1.0 - gp) * ts)
@@ -224,5 +229,14 @@ def cloud_stokes(tau, mu, mu0, cos_scattering, a, b):
     theta = np.degrees(np.arccos(np.clip(cos_scattering, -1.0, 1.0)))
     p11 = np.interp(theta, ph.angle_deg, ph.p11)
     p12 = np.interp(theta, ph.angle_deg, ph.p12)
-    s = single_scatter_factor(tau, mu, mu0)
-    return perpendicular_stokes(s * p11 + diffuse_radiance(tau, mu, mu0), s * p12, a, b)
+    lobe = forward_lobe().taper_at(theta)
+    # once scattered: through the wide part out of the beam that keeps its lobe light, or
+    # through the lobe out of the beam itself (every scattering removes from it)
+    lobe_once = lobe * 0.25 * ph.single_scattering_albedo * slab_transmission(tau, mu, mu0)
+    once = (1.0 - lobe) * single_scatter_factor(tau, mu, mu0) + lobe_once
+    # polarized: only out of the beam still within its diffraction peak of the sun; light
+    # turned by the lobe's wider angles comes from all around the sun, and its scattering
+    # planes, hence its polarization, spread out
+    polarized = (1.0 - lobe) * single_scatter_factor(tau, mu, mu0, DIFFRACTION_SHARE) + lobe_once
+    return perpendicular_stokes(once * p11 + lobe_multiple_radiance(tau, mu0, theta)
+                                + diffuse_radiance(tau, mu, mu0), polarized * p12, a, b)
