@@ -7,27 +7,36 @@ is treated as a plane-parallel layer of its own (the independent pixel approxima
 Cahalan et al. [1]_). Below it, looking up at a zenith-angle cosine ``mu``, in the unit of
 :mod:`skysim.multiple` (incident solar flux ``pi`` per unit area normal to the beam):
 
-- **Single scattering** by the droplets ([2]_, sect. 3). A droplet much larger than the
-  wavelength (size parameter 114 here) puts half of the light it scatters into its narrow
-  diffraction lobe (the extinction paradox, van de Hulst [3]_, sect. 8.22; in the droplets'
-  phase function half of the scattering lies within 6.7 deg of the forward direction,
-  tested). Light scattered into the lobe keeps going with the beam, so the beam weakens as
-  ``exp(-tau'/mu0)``, ``tau' = (1 - f) tau``, ``f = 1/2`` (:data:`DIFFRACTION_SHARE`; the
-  scaling of Joseph et al. [4]_ with the lobe as the truncated part), and
-  ``I_1 = P11(Theta) s``, ``(Q_1, U_1) = P12(Theta) s (cos 2chi, sin 2chi)`` with
+- **The forward lobe**: three quarters of what these droplets scatter stays within 27 deg
+  of the forward direction, half within 6.7 deg (their diffraction peak: the extinction
+  paradox, van de Hulst [3]_, sect. 8.22; tested). The phase function is split into that
+  lobe, ``f = 0.64`` of the scattering (the diffraction peak, tapering off by 30 deg), and a
+  wide part (:mod:`skysim.forward_lobe`).
+- **Single scattering** by the droplets ([2]_, sect. 3), ``I_1 = P11(Theta) s``,
+  ``(Q_1, U_1) = P12(Theta) s_p (cos 2chi, sin 2chi)``, ``Theta`` the scattering angle and
+  ``chi`` the AoP of the direction perpendicular to the scattering plane. Through the wide
+  part, the beam weakens only by what the wide part takes from it (the lobe's light keeps
+  going with it, the delta-function scaling of Potter and of Joseph et al. [4]_):
   ``s = w h' / (4 (1 - f))`` (:func:`single_scatter_factor`),
-  ``h' = mu0 (exp(-tau'/mu0) - exp(-tau'/mu)) / (mu0 - mu)``
-  (:func:`skysim.rayleigh.slab_transmission`; ``tau P11 / (4 mu)`` for a thin cloud),
-  ``Theta`` the scattering angle and ``chi`` the AoP of the direction perpendicular to the
-  scattering plane. ``P11`` and ``P12`` are the Mie phase matrix of the default droplets of
+  ``h' = mu0 (exp(-tau'/mu0) - exp(-tau'/mu)) / (mu0 - mu)``, ``tau' = (1 - f) tau``
+  (:func:`skysim.rayleigh.slab_transmission`; ``tau P11 / (4 mu)`` for a thin cloud);
+  through the lobe, by every scattering, ``s = w h(tau) / 4``; in between, weighted by the
+  lobe's taper. The polarized part ``s_p`` counts, for the wide part, only the beam still
+  within the diffraction peak (``f = 1/2`` in ``s``: light the lobe has turned by tens of
+  degrees is scattered in planes spread around the sun, and its polarization cancels).
+  ``P11`` and ``P12`` are the Mie phase matrix of the default droplets of
   :mod:`skysim.clouds` (:func:`droplet_phase`, a table built with sasktran2's Mie code and
   checked against miepython). ``P12 > 0`` polarizes perpendicular to the scattering plane,
   as the clear sky; at 20-70 deg from the sun ``P12 < 0``: the 90-deg turned AoP of some
-  clouds seen by Pust & Shaw [5]_. This part holds the cloud's aureole and its polarization.
-- **Multiple scattering**, unpolarized (:func:`diffuse_radiance`): the two-stream
-  source-function method of Toon et al. [6]_ on the delta-Eddington solution for
-  conservative scattering (Joseph et al. [4]_; its flux is eq. (24) of Meador & Weaver [7]_,
-  :func:`two_stream_transmittance`).
+  clouds seen by Pust & Shaw [5]_.
+- **Multiple scattering through the lobe**, unpolarized: the small-angle approximation of
+  Zege, Ivanov & Katsev [8]_ (:func:`skysim.forward_lobe.lobe_multiple_radiance`), the
+  bright, wide aureole of a thin cloud.
+- **Multiple scattering through the wide part**, unpolarized (:func:`diffuse_radiance`):
+  the two-stream source-function method of Toon et al. [6]_ on the Eddington solution for
+  conservative scattering, delta-scaled with the lobe as the peak ([4]_; its flux is
+  eq. (24) of Meador & Weaver [7]_, :func:`two_stream_transmittance` for the
+  delta-Eddington scaling).
 - **Light behind the cloud** (the sky above it, or the sunbeam for the air below it) comes
   through as a pattern: in the small-angle approximation of multiple forward scattering a
   cloud of slant optical thickness ``tau / mu`` multiplies the ``l``-th angular harmonic of
@@ -84,8 +93,10 @@ PHASE_FILE = Path(__file__).with_name("data") / "water_cloud_phase_550nm.csv"
 """The droplets' phase matrix (builder ``skysim/data/build_water_cloud_phase.py``)."""
 
 DIFFRACTION_SHARE = 0.5
-"""Share ``f`` of the droplets' scattering in their diffraction lobe (van de Hulst [3]_,
-sect. 8.22), which keeps going with the beam (module docstring)."""
+"""Share of the droplets' scattering in their diffraction peak (van de Hulst [3]_,
+sect. 8.22): the forward lobe is whole out to the angle that holds it
+(:mod:`skysim.forward_lobe`), and the beam that carries the single scatter's polarization
+keeps it (module docstring)."""
 
 
 @dataclass(frozen=True)
