@@ -72,6 +72,7 @@ from pathlib import Path
 import numpy as np
 
 from .rayleigh import slab_transmission
+from .slab_single_scatter import perpendicular_stokes
 from .validation import check_in_range
 
 __all__ = ["DIFFRACTION_SHARE", "PHASE_FILE", "DropletPhase", "cloud_stokes",
@@ -224,8 +225,4 @@ def cloud_stokes(tau, mu, mu0, cos_scattering, a, b):
     p11 = np.interp(theta, ph.angle_deg, ph.p11)
     p12 = np.interp(theta, ph.angle_deg, ph.p12)
     s = single_scatter_factor(tau, mu, mu0)
-    s2 = a * a + b * b
-    with np.errstate(invalid="ignore", divide="ignore"):
-        pol = np.where(s2 > 0.0, s * p12 / s2, 0.0)
-    return (s * p11 + diffuse_radiance(tau, mu, mu0), pol * (a * a - b * b),
-            pol * 2.0 * a * b)
+    return perpendicular_stokes(s * p11 + diffuse_radiance(tau, mu, mu0), s * p12, a, b)

@@ -72,6 +72,7 @@ __all__ = [
     "check_verified_tau",
     "delta_m_truncation",
     "layered_particle_stokes_cases",
+    "particle_layer_profile",
     "layered_stokes_cases",
     "lru_take",
     "rayleigh_greek_coefficients",
@@ -515,10 +516,44 @@ def delta_m_truncation(greek, n_streams: int):
     return out, f
 
 
+def particle_layer_profile(tau: float, particle_taus, layer: ParticleLayer,
+                           settings: EngineSettings = DEFAULT_SETTINGS):
+    """The engine's altitude levels and extinction profiles of a Rayleigh slab holding a
+    particle layer (:func:`layered_particle_stokes_cases`).
+
+    The slab's ``settings.n_levels`` equally spaced levels plus levels through the layer;
+    the particle extinction is constant on the levels inside the layer and zero outside, so
+    under the engine's linear interpolation between levels it ramps up over the level
+    interval below the base and down over the one above the top, and is scaled so that the
+    layer's optical thickness (trapezoid rule: exact for linear interpolation) is the case's.
+
+    Returns
+    -------
+    altitudes : ndarray (n,)
+        Levels [m], increasing from 0 to ``settings.slab_height_m``.
+    k_r : ndarray (n, 1)
+        Rayleigh extinction [1/m].
+    k_p : ndarray (n, m)
+        Particle extinction [1/m] of each case.
+    """
+    ptau = np.atleast_1d(np.asarray(particle_taus, float))
+    H = settings.slab_height_m
+    base, top = layer.base_fraction * H, layer.top_fraction * H
+    inside = np.linspace(base, top, max(11, settings.n_levels // 5))
+    altitudes = np.unique(np.concatenate([np.linspace(0.0, H, settings.n_levels), inside]))
+    in_layer = ((altitudes >= base) & (altitudes <= top)).astype(float)
+    # optical thickness of a unit-extinction profile under linear interpolation (trapezoid)
+    unit_tau = float(np.sum(0.5 * (in_layer[1:] + in_layer[:-1]) * np.diff(altitudes)))
+    k_r = np.full((altitudes.size, 1), float(tau) / H)
+    k_p = in_layer[:, None] * (ptau[None, :] / unit_tau)                    # (levels, cases)
+    return altitudes, k_r, k_p
+
+
 def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
                                   layer: ParticleLayer, mu0: float, mu, phi_deg, *,
                                   depolarization_ratio: float = 0.0,
-                                  settings: EngineSettings = DEFAULT_SETTINGS) -> np.ndarray:
+                                  settings: EngineSettings = DEFAULT_SETTINGS,
+                                  multiple_scatter: bool = True) -> np.ndarray:
     """Diffuse Stokes below a Rayleigh slab holding a particle layer, one engine call for
     several particle optical thicknesses (each case one "wavelength" of the engine).
 
@@ -543,6 +578,9 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     layer : ParticleLayer
     mu0, mu, phi_deg, depolarization_ratio, settings
         As :func:`transmitted_stokes_cases`.
+    multiple_scatter : bool
+        False: the engine's single scatter alone (its exact single-scatter source with the
+        whole phase expansion; no multiple-scatter source).
 
     Returns
     -------
@@ -559,19 +597,13 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     n_moments = max(greek.shape[1], settings.n_streams + 1)
     w_p = float(layer.single_scattering_albedo)
     sk = require_sasktran2()
-    H = settings.slab_height_m
-    base, top = layer.base_fraction * H, layer.top_fraction * H
-    inside = np.linspace(base, top, max(11, settings.n_levels // 5))
-    altitudes = np.unique(np.concatenate([np.linspace(0.0, H, settings.n_levels), inside]))
+    altitudes, k_r, k_p = particle_layer_profile(tau, ptau, layer, settings)
     cfg, geometry, viewing = _engine_setup(sk, settings, mu0, mu, phi, altitudes)
+    if not multiple_scatter:
+        cfg.multiple_scatter_source = sk.MultipleScatterSource.NoSource
     cfg.delta_m_scaling = True
     cfg.num_singlescatter_moments = n_moments
     atmosphere = sk.Atmosphere(geometry, cfg, numwavel=ptau.size, calculate_derivatives=False)
-    in_layer = ((altitudes >= base) & (altitudes <= top)).astype(float)
-    # optical thickness of a unit-extinction profile under linear interpolation (trapezoid)
-    unit_tau = float(np.sum(0.5 * (in_layer[1:] + in_layer[:-1]) * np.diff(altitudes)))
-    k_r = np.full((altitudes.size, 1), float(tau) / H)
-    k_p = in_layer[:, None] * (ptau[None, :] / unit_tau)                    # (levels, cases)
     atmosphere.storage.total_extinction[:] = k_r + k_p
     scat = k_r + w_p * k_p
     atmosphere.storage.ssa[:] = scat / (k_r + k_p)

@@ -137,9 +137,9 @@ def test_rayleigh_radiance_unit_matches_the_thin_multiple_scattering_sky():
 @pytest.fixture(scope="module")
 def overcast_reference():
     """Radiative transfer of an overcast layer (1-2 km, cloud tau 1 and 2) in a Rayleigh sky
-    of tau 0.1 over albedo 0.1, at the engine's own ray directions (its zenith nodes between
-    5 and 85 deg elevation and relative azimuths every 15 deg, where the interpolation of
-    the modes is exact): two suns not used in the design of the model."""
+    of tau 0.1 over albedo 0.1 (within 1.2 % of exact engine runs, tests/test_clouds.py), on
+    13 elevations between 5 and 85 deg and relative azimuths every 15 deg: two suns not used
+    in the design of the model."""
     pytest.importorskip("sasktran2", reason="the radiative transfer needs the 'rt' extra")
     from skysim.clouds import CloudLayer, CloudySky
     from skysim.multiple import MultipleScatteringSky, zenith_nodes_deg
@@ -161,18 +161,20 @@ def overcast_reference():
 
 
 def test_overcast_polarization_follows_the_radiative_transfer(overcast_reference):
-    # Beyond 45 deg from the sun (closer, the engine's azimuth series rings on the cloud's
-    # aureole): where the radiative transfer's DoP exceeds 0.02 the AoP of at least 90 % of
-    # the directions agrees within 10 deg (measured 95-100 %; the rest lie where the
-    # droplets' parallel and the air's perpendicular polarization cancel), the DoP within
-    # 0.1 RMS (measured 0.05-0.08), and the radiance is low by 20-60 % (measured ratio
-    # 0.40-0.81: the multiply scattered light near the sun's side is missing, docs/clouds.md)
+    # Where the radiative transfer's DoP exceeds 0.02 the AoP of at least 90 % of the
+    # directions agrees within 10 deg (measured 98-100 %; the rest lie where the droplets'
+    # parallel and the air's perpendicular polarization cancel) and the DoP within 0.1 RMS
+    # (measured 0.028-0.048), the sun's side included. Beyond 45 deg from the sun the
+    # radiance is low by 20-60 % (measured ratio 0.37-0.79: the light scattered more than
+    # once through the droplets' forward lobe is missing, docs/clouds.md); closer, the
+    # model's single scatter, attenuated by half the cloud's optical thickness where the
+    # engine's is attenuated by its delta-M-scaled one, lifts the ratio up to 1.4
     for (sun, tau), (E, A, rt, model) in overcast_reference.items():
         far = rayleigh.scattering_angle_deg(E, A, sun, 0.0) > 45.0
-        measurable = far & (rt.dop > 0.02)
+        measurable = rt.dop > 0.02
         assert measurable.sum() > 40
         assert np.mean(_aop_diff(model.aop_deg, rt.aop_deg)[measurable] < 10.0) >= 0.90
-        assert np.sqrt(np.mean((model.dop - rt.dop)[far] ** 2)) < 0.10
+        assert np.sqrt(np.mean((model.dop - rt.dop) ** 2)) < 0.10
         ratio = (model.I / rt.I)[far]
         assert 0.3 < ratio.min() and ratio.max() < 1.0
 
