@@ -71,7 +71,7 @@ __all__ = [
 ]
 
 EFFECT_NAMES = ("dark_current", "sun_motion", "clock_offset", "tilt", "turntable_periodic",
-                "extinction_ratio", "thermal_drift", "multiple_scattering")
+                "extinction_ratio", "thermal_drift", "multiple_scattering", "overcast")
 """The registered effects, each in the module of the same name."""
 
 BASE_NAMES = ("dtheta_1_deg", "dtheta_2_deg", "dtheta_3_deg", "dtheta_4_deg", "dtheta_5_deg",
