@@ -36,6 +36,31 @@ def test_clock_hours_off_after_dusk_is_found_first(evening):
     assert "at_corrected_times" in v
 
 
+def test_deep_twilight_with_a_clock_hours_off_is_found():
+    """The same evening session stamped 1 h 40 min late: the recorded times put the sun at
+    -7.7 to -8.2 deg, inside the model's range but within 3 deg of its limit, where a clock
+    fit from the recorded times walks below the limit. The coarse search, the recorded times
+    among its offsets, finds the clock."""
+    s = ring_session(start="2022-05-12T19:30:00+02:00", n_sweeps=3, per_sweep=60)
+    t = s.table.copy()
+    t["time"] = t["time"] + pd.Timedelta(minutes=100)
+    doc = diagnose_photodiodes(PhotodiodeData(t, s.sidecar), ("clock_offset",), n_folds=3)
+    v = doc["verdict"]
+    assert v["effect"] == "clock_offset" and "deep twilight" in v["reason"]
+    assert v["params"]["clock_offset_s"]["value"] == pytest.approx(-6000.0, abs=600.0)
+
+
+def test_deep_twilight_with_the_right_clock_is_diagnosed_as_it_is():
+    """A session at sun -7.7 to -8.2 deg with its clock right: the recorded times win the
+    coarse search, the session is diagnosed at them and no clock is named."""
+    s = ring_session(start="2022-05-12T21:10:00+02:00", n_sweeps=3, per_sweep=60)
+    doc = diagnose_photodiodes(s, ("clock_offset",), n_folds=3)
+    assert doc["verdict"]["effect"] != "clock_offset"
+    assert "dark_clock" not in doc
+    row = next(c for c in doc["candidates"] if c["effect"] == "clock_offset")
+    assert abs(row["params"]["clock_offset_s"]["value"]) < 600.0
+
+
 def test_without_the_clock_candidate_the_twilight_error_stands(evening):
     with pytest.raises(SunTooLowError, match="below the twilight limit"):
         diagnose_photodiodes(evening, ("yaw_scale",), n_folds=3)

@@ -281,12 +281,15 @@ class Forward:
         yo = np.where(w, self.y - off, 0.0)
         b0w, b1w = np.where(w, b0, 0.0), np.where(w, b1, 0.0)
         M = self.member.T
-        a00, a01, a11 = (b0w * b0w) @ M, (b0w * b1w) @ M, (b1w * b1w) @ M
-        c0, c1 = (yo * b0w) @ M, (yo * b1w) @ M
-        det = np.maximum(a00 * a11 - a01 * a01, 1e-300)
-        radiance = (a11 * c0 - a01 * c1) / det
-        polarized = (a00 * c1 - a01 * c0) / det
-        return radiance[:, u] * b0 + polarized[:, u] * b1 + off, radiance
+        # a trial step of a fit to gains of e^700 overflows here; its cost is then not finite
+        # and the step is rejected (:func:`.fit.fit`), so the overflow is not reported
+        with np.errstate(over="ignore", invalid="ignore"):
+            a00, a01, a11 = (b0w * b0w) @ M, (b0w * b1w) @ M, (b1w * b1w) @ M
+            c0, c1 = (yo * b0w) @ M, (yo * b1w) @ M
+            det = np.maximum(a00 * a11 - a01 * a01, 1e-300)
+            radiance = (a11 * c0 - a01 * c1) / det
+            polarized = (a00 * c1 - a01 * c0) / det
+            return radiance[:, u] * b0 + polarized[:, u] * b1 + off, radiance
 
     def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:
         """Relative residuals (n, P): ``(r - r_hat) / unit mean``, 0 where not usable."""

@@ -592,6 +592,15 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         from .dark_clock import diagnose_dark_clock
         return diagnose_dark_clock(inst, effects, too_low, n_folds=n_folds, seed=seed,
                                    max_iter=max_iter)
+    if sun_el.min() < TWILIGHT_LIMIT_DEG + CLOCK_START_MARGIN_DEG and refine_clock \
+            and "clock_offset" in effects:
+        # deep twilight: clock starts that keep the sun up are scored against the recorded
+        # times first (a fit from the recorded times walks below the limit)
+        from .dark_clock import diagnose_dark_clock
+        doc = diagnose_dark_clock(inst, effects, None, n_folds=n_folds, seed=seed,
+                                  max_iter=max_iter)
+        if doc is not None:
+            return doc
     finite = np.isfinite(inst.readings)
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
