@@ -279,3 +279,17 @@ def test_blind_verdicts_hold_over_seeds(effect):
     got = [diagnosis.diagnose(_frame(s, **INJECTED[effect]), seed=0).verdict.effect
            for s in SEEDS]
     assert got == [effect] * len(SEEDS)
+
+
+@pytest.mark.parametrize("inject,withheld", [
+    ({"lens_shift": (3.0, -2.0, 1.0)}, "lens"),
+    ({"angle_offsets": (2.0, -1.5, 0.0, 1.0)}, "polarizer_angles")])
+def test_withheld_effect_is_unexplained_not_misattributed(inject, withheld):
+    """Leave one out, as the other adapters are checked: with the true effect withheld from
+    the candidates, no other candidate takes the gap to the floor, so the verdict is
+    ``unexplained``, not a wrong effect."""
+    frame = _frame(2, **inject)
+    others = [c for c in ("lens", "polarizer_angles", "extinction_ratio", "sky_dop",
+                          "overcast") if c != withheld]
+    rep = diagnosis.diagnose(frame, others, seed=0)
+    assert rep.verdict.effect == "unexplained", rep.verdict
