@@ -294,7 +294,7 @@ class CompoundEyeSensor:
                rng: np.random.Generator, *, attitude_noise_deg: float = 0.0,
                accel_noise_mps2: float = 0.0, yaw_reference: str = "north",
                yaw_offset_deg: float = 0.0, include_truth: bool = True, seed=None,
-               sweep=None) -> PhotodiodeData:
+               sweep=None, source: str = "sun") -> PhotodiodeData:
         """Simulate raw photodiode data (schema "skysim.photodiodes/1").
 
         Parameters
@@ -318,10 +318,19 @@ class CompoundEyeSensor:
             Add ``true_yaw_deg``, ``true_pitch_deg``, ``true_roll_deg`` (metadata columns).
         seed : optional
             Recorded in the sidecar.
+        source : {"sun", "moon"}
+            The body that lights ``sky`` (the position handed to its field): the Moon for a
+            moonlit sky (:class:`skysim.night.MoonlitSky`).
         """
         if yaw_reference not in ("north", "relative"):
             raise ValueError(f"yaw_reference must be 'north' or 'relative'; got {yaw_reference!r}")
-        sun, idx = sun_vector(times, site)
+        if source == "sun":
+            sun, idx = sun_vector(times, site)
+        elif source == "moon":
+            from skysim.moon import moon_vector
+            sun, idx = moon_vector(times, site)
+        else:
+            raise ValueError(f"source must be 'sun' or 'moon'; got {source!r}")
         n = len(idx)
         yaw, pitch, roll = (np.broadcast_to(check_finite(k, v), (n,)).astype(float) for k, v in (
             ("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)))
@@ -354,7 +363,7 @@ class CompoundEyeSensor:
                       "from forward",
             "generator": {
                 "package": "skysim", "version": __version__, "sky": sky.describe(),
-                "sensor": "sensor.compound_eye.CompoundEyeSensor",
+                "source": source, "sensor": "sensor.compound_eye.CompoundEyeSensor",
                 "installation_error_deg": [float(x) for x in self.installation_error_deg],
                 "unit_installation_error_deg": [[float(x) for x in u.installation_error_deg]
                                                 for u in self.units],

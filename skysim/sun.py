@@ -636,7 +636,12 @@ class SunTrack:
         t = np.arange(t_min_s - margin_s, t_max_s + margin_s + step_s, step_s)
         times = pd.to_datetime(np.round(t * 1e9).astype(np.int64), unit="ns", utc=True)
         self.t_s = t
-        self.vectors, _ = sun_vector(times, site)
+        self.vectors = self._vectors(times, site)
+
+    @staticmethod
+    def _vectors(times, site) -> np.ndarray:
+        """ENU unit vectors of the source at the knot ``times`` (the Sun's here)."""
+        return sun_vector(times, site)[0]
 
     def __call__(self, t_s) -> np.ndarray:
         """Unit sun vectors in ENU, shape ``(n, 3)``, at times ``t_s`` [s since epoch, UTC]."""

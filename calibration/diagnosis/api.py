@@ -5,6 +5,7 @@ from __future__ import annotations
 from pathlib import Path
 
 from .camera import CameraAdapter
+from .errors import UnsupportedInstrumentError
 from .report import DiagnosisReport
 from .rings import RingAdapter
 from .sky import SkyAdapter
@@ -24,7 +25,6 @@ def adapter_for(data, sidecar: dict | None = None):
     UnsupportedInstrumentError
         When none does (the message lists what is read).
     """
-    from .errors import UnsupportedInstrumentError
     for a in ADAPTERS:
         if a.accepts(data, sidecar):
             return a
@@ -57,7 +57,9 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
     **options
         Passed to the adapter: ``thresholds`` (three-pair), ``sidecar`` (DataFrame input),
         ``noise_floor``, ``calibration_cases``, ``settings``, ``n_grid``, ``xatol`` (sky),
-        ``dmax``, ``min_elevation_deg``, ``min_signal_dn``, ``block_superpixels`` (camera).
+        ``dmax``, ``min_elevation_deg``, ``min_signal_dn``, ``block_superpixels`` (camera),
+        ``where``, ``pointing``, ``pointing_from``, ``light`` ("sun" or "moon": a night
+        session under the moonlit sky) (photodiode instruments).
 
     Returns
     -------
@@ -88,6 +90,11 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
     else:
         data = _as_photodiodes(data_or_path, options)
         adapter = adapter_for(data, options.get("sidecar"))
+    if not isinstance(adapter, RingAdapter) and options.pop("light", "sun") != "sun":
+        raise UnsupportedInstrumentError(
+            "light='moon' (a night session under the moonlit sky) applies to photodiode "
+            "instruments with several units; the other instruments' diagnoses are of sunlit "
+            "skies")
     return adapter.diagnose(data, adapter.candidates(candidates), folds=folds, seed=seed,
                             **options)
 

@@ -97,7 +97,7 @@ def pointing_from_reports(reports, n_units: int | None = None):
 
 def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
                    where: str = "photodiode data", pointing=None,
-                   pointing_from=None) -> DiagnosisReport:
+                   pointing_from=None, light: str = "sun") -> DiagnosisReport:
     """Diagnose a photodiode instrument.
 
     Parameters
@@ -114,6 +114,9 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     pointing_from : sequence, optional
         Reports (objects, dicts or paths) of other sessions of this instrument to calibrate
         ``pointing`` from (:func:`pointing_from_reports`).
+    light : {"sun", "moon"}
+        The body that lights the session's sky: ``"moon"`` for a session under the moonlit
+        night sky (the Moon takes the Sun's place in every model).
 
     Returns
     -------
@@ -126,9 +129,17 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     SunTooLowError, InstrumentDataError, InsufficientDataError, UnknownEffectError
         As :func:`calibration.photodiode_diagnosis.diagnose_instrument`.
     """
+    from dataclasses import replace
+
     from ..photodiode_diagnosis import diagnose_instrument, instrument_from_photodiodes
+    from ..photodiode_diagnosis.errors import InstrumentDataError
     from ..photodiode_diagnosis.instrument import Instrument
+    from ..photodiode_diagnosis.run import LIGHTS
+    if light not in LIGHTS:
+        raise InstrumentDataError(f"{where}: light must be one of {', '.join(LIGHTS)}; "
+                                  f"got {light!r}")
     inst = data if isinstance(data, Instrument) else instrument_from_photodiodes(data, where)
+    inst = replace(inst, light=light)
     if pointing_from is not None:
         pointing = pointing_from_reports(pointing_from, n_units=inst.n_units)
     doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
@@ -165,6 +176,6 @@ class RingAdapter:
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
                  where: str = "photodiode data", pointing=None,
-                 pointing_from=None) -> DiagnosisReport:
+                 pointing_from=None, light: str = "sun") -> DiagnosisReport:
         return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where,
-                              pointing=pointing, pointing_from=pointing_from)
+                              pointing=pointing, pointing_from=pointing_from, light=light)

@@ -81,6 +81,10 @@ class Instrument:
         offsets, from other diagnoses of the same instrument
         (:func:`calibration.photodiode_diagnosis.calibrated_pointing`). Every fit then holds
         the pointing there (NaN: a unit not calibrated, fitted); ``None`` (default) fits all.
+    light : {"sun", "moon"}
+        The body whose light the sky scatters: ``"moon"`` for a session under the moonlit
+        night sky (the Moon takes the Sun's place in every model, as in
+        :class:`skysim.night.MoonlitSky`).
     """
 
     sensor: CompoundEyeSensor
@@ -100,6 +104,7 @@ class Instrument:
     source: dict = field(default_factory=dict)
     held: np.ndarray | None = None
     pointing_deg: np.ndarray | None = None
+    light: str = "sun"
 
     @property
     def n(self) -> int:

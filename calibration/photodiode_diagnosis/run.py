@@ -577,23 +577,25 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     path = inst.source.get("path", "photodiode data")
     if pointing is not None:
         inst = replace(inst, pointing_deg=_checked_pointing(pointing, inst.n_units))
-    sun = SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
+    sun = light_track(inst)
     from skysim.geometry import elevation_azimuth
     sun_el, _ = elevation_azimuth(sun(inst.t_s))
+    if inst.light == "moon":
+        _check_moonlit(inst, sun_el, path)
     if sun_el.min() < TWILIGHT_LIMIT_DEG:
         i = int(np.argmin(sun_el))
         too_low = SunTooLowError(
             f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
             f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
             "Check the times and their UTC offset, or drop the night samples")
-        if not (refine_clock and "clock_offset" in effects):
+        if not (refine_clock and "clock_offset" in effects) or inst.light != "sun":
             raise too_low
         # a lit sky stamped after dusk is a clock hours off: searched first
         from .dark_clock import diagnose_dark_clock
         return diagnose_dark_clock(inst, effects, too_low, n_folds=n_folds, seed=seed,
                                    max_iter=max_iter)
     if sun_el.min() < TWILIGHT_LIMIT_DEG + CLOCK_START_MARGIN_DEG and refine_clock \
-            and "clock_offset" in effects:
+            and "clock_offset" in effects and inst.light == "sun":
         # deep twilight: clock starts that keep the sun up are scored against the recorded
         # times first (a fit from the recorded times walks below the limit)
         from .dark_clock import diagnose_dark_clock
@@ -971,10 +973,65 @@ def _base_fit_report(theta, L, fwd, inst, sign):
 
 
 def diagnose_photodiodes(data: PhotodiodeData, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
-                         seed: int = 0, where: str = "photodiode data", pointing=None) -> dict:
-    """:func:`diagnose_instrument` of a photodiode file."""
-    return diagnose_instrument(instrument_from_photodiodes(data, where), effects,
-                               n_folds=n_folds, seed=seed, pointing=pointing)
+                         seed: int = 0, where: str = "photodiode data", pointing=None,
+                         light: str = "sun") -> dict:
+    """:func:`diagnose_instrument` of a photodiode file; ``light="moon"`` for a session under
+    the moonlit night sky.
+
+    Raises
+    ------
+    InstrumentDataError
+        For ``light`` other than "sun" or "moon".
+    """
+    if light not in LIGHTS:
+        raise InstrumentDataError(f"{where}: light must be one of {', '.join(LIGHTS)}; "
+                                  f"got {light!r}")
+    inst = replace(instrument_from_photodiodes(data, where), light=light)
+    return diagnose_instrument(inst, effects, n_folds=n_folds, seed=seed, pointing=pointing)
+
+
+LIGHTS = ("sun", "moon")
+"""The bodies whose light a ring session's sky may scatter."""
+
+MOONLIT_SUN_LIMIT_DEG = -18.0
+"""Highest sun elevation [deg] for a moonlit session: astronomical twilight ends at -18 deg,
+below which the Sun adds no scattered light to the night sky (Krisciunas & Schaefer 1991,
+PASP 103:1033, whose moonlit-sky model assumes it); above, the twilight sky outshines the
+moonlit pattern of all but a full Moon."""
+
+
+def light_track(inst: Instrument) -> SunTrack:
+    """The track of the body that lights the session's sky (:attr:`Instrument.light`)."""
+    if inst.light == "moon":
+        from skysim.moon import MoonTrack
+        return MoonTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
+    return SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(), margin_s=15 * 3600.0)
+
+
+def _check_moonlit(inst: Instrument, moon_el, path: str) -> None:
+    """A moonlit session needs the Moon up and the Sun below astronomical twilight.
+
+    Raises
+    ------
+    SunTooLowError
+        With the Moon at or below the horizon at a sample.
+    InstrumentDataError
+        With the Sun above :data:`MOONLIT_SUN_LIMIT_DEG` at a sample.
+    """
+    from skysim.geometry import elevation_azimuth
+    if moon_el.min() <= 0.0:
+        i = int(np.argmin(moon_el))
+        raise SunTooLowError(f"{path}: the Moon is at {moon_el[i]:.2f} deg at sample {i}: a Moon "
+                             "below the horizon lights no sky; check the times and their UTC "
+                             "offset, or drop those samples")
+    sun_el, _ = elevation_azimuth(SunTrack(inst.site, inst.t_s.min(), inst.t_s.max(),
+                                           margin_s=0.0)(inst.t_s))
+    if sun_el.max() > MOONLIT_SUN_LIMIT_DEG:
+        i = int(np.argmax(sun_el))
+        raise InstrumentDataError(
+            f"{path}: the Sun is at {sun_el[i]:.2f} deg at sample {i}, above "
+            f"{MOONLIT_SUN_LIMIT_DEG:g} deg: twilight, not moonlight, lights that sky; "
+            "diagnose it with the Sun as the light")
 
 
 POINTING_LIMIT_DEG = 20.0

@@ -421,6 +421,8 @@ def _diagnose_cmd(args) -> int:
     if getattr(args, "pointing_from", None):
         options["pointing_from"] = [x.strip() for x in args.pointing_from.split(",")
                                     if x.strip()]
+    if getattr(args, "light", "sun") != "sun":
+        options["light"] = args.light
     report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
     written = write_diagnosis(report, out)
@@ -531,6 +533,10 @@ def register(sub) -> None:
                         "sessions of the same instrument whose clocks are right; their fitted "
                         "unit pointing (median per unit) is held, so that a clock error is "
                         "not taken up by a common tilt of the units")
+    d.add_argument("--light", choices=("sun", "moon"), default="sun",
+                   help="photodiode instruments: the body whose light the session's sky "
+                        "scatters; moon for a night session under the moonlit sky (the Moon "
+                        "up, the Sun below -18 deg)")
     d.set_defaults(func=_diagnose_cmd)
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)
