@@ -59,6 +59,7 @@ def _fails(argv, capsys, *needles) -> str:
     (["reproduce", "yang2014", "--trials", "0"], ["--trials", "'0'"]),
     (["reproduce", "yang2014", "--trials", "-5"], ["--trials", "'-5'"]),
     (["jin2020", "--trials", "0"], ["--trials", "'0'"]),
+    (["diagnose", str(EXAMPLES / "sweep_montecarlo.toml"), "--time-uncertainty", "-60"], ["--time-uncertainty", "'-60'"]),
     (["sweep", str(EXAMPLES / "sweep_montecarlo.toml"), "--workers", "0"],
      ["--workers", "'0'"]),
 ])

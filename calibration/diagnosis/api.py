@@ -59,7 +59,8 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
         ``noise_floor``, ``calibration_cases``, ``settings``, ``n_grid``, ``xatol`` (sky),
         ``dmax``, ``min_elevation_deg``, ``min_signal_dn``, ``block_superpixels`` (camera),
         ``where``, ``pointing``, ``pointing_from``, ``light`` ("sun" or "moon": a night
-        session under the moonlit sky) (photodiode instruments).
+        session under the moonlit sky), ``time_uncertainty_s`` (of the recorded times, in
+        the clock's uncertainty) (photodiode instruments).
 
     Returns
     -------
@@ -95,6 +96,11 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
             "light='moon' (a night session under the moonlit sky) applies to photodiode "
             "instruments with several units; the other instruments' diagnoses are of sunlit "
             "skies")
+    if not isinstance(adapter, RingAdapter) and options.pop("time_uncertainty_s", 0.0):
+        raise UnsupportedInstrumentError(
+            "time_uncertainty_s (of recorded times, in the fitted clock's uncertainty) applies "
+            "to photodiode instruments with several units, whose diagnosis fits a clock "
+            "offset with an uncertainty")
     return adapter.diagnose(data, adapter.candidates(candidates), folds=folds, seed=seed,
                             **options)
 

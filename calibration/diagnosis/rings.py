@@ -97,7 +97,8 @@ def pointing_from_reports(reports, n_units: int | None = None):
 
 def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
                    where: str = "photodiode data", pointing=None,
-                   pointing_from=None, light: str = "sun") -> DiagnosisReport:
+                   pointing_from=None, light: str = "sun",
+                   time_uncertainty_s: float = 0.0) -> DiagnosisReport:
     """Diagnose a photodiode instrument.
 
     Parameters
@@ -117,6 +118,11 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     light : {"sun", "moon"}
         The body that lights the session's sky: ``"moon"`` for a session under the moonlit
         night sky (the Moon takes the Sun's place in every model).
+    time_uncertainty_s : float
+        Standard uncertainty [s] of the recorded times (>= 0; 0, the default, for a logged
+        clock): times reconstructed after the fact (a start from a photograph and a nominal
+        cadence) are uncertain by that much, and the clock candidate's uncertainty includes
+        it (:attr:`calibration.photodiode_diagnosis.instrument.Instrument.time_uncertainty_s`).
 
     Returns
     -------
@@ -139,7 +145,11 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
         raise InstrumentDataError(f"{where}: light must be one of {', '.join(LIGHTS)}; "
                                   f"got {light!r}")
     inst = data if isinstance(data, Instrument) else instrument_from_photodiodes(data, where)
-    inst = replace(inst, light=light)
+    tu = float(time_uncertainty_s)
+    if not (np.isfinite(tu) and tu >= 0.0):
+        raise InstrumentDataError(f"{where}: time_uncertainty_s must be a finite number of "
+                                  f"seconds >= 0; got {time_uncertainty_s!r}")
+    inst = replace(inst, light=light, time_uncertainty_s=tu)
     if pointing_from is not None:
         pointing = pointing_from_reports(pointing_from, n_units=inst.n_units)
     doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
@@ -176,6 +186,8 @@ class RingAdapter:
 
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
                  where: str = "photodiode data", pointing=None,
-                 pointing_from=None, light: str = "sun") -> DiagnosisReport:
+                 pointing_from=None, light: str = "sun",
+                 time_uncertainty_s: float = 0.0) -> DiagnosisReport:
         return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where,
-                              pointing=pointing, pointing_from=pointing_from, light=light)
+                              pointing=pointing, pointing_from=pointing_from, light=light,
+                              time_uncertainty_s=time_uncertainty_s)

@@ -85,6 +85,12 @@ class Instrument:
         The body whose light the sky scatters: ``"moon"`` for a session under the moonlit
         night sky (the Moon takes the Sun's place in every model, as in
         :class:`skysim.night.MoonlitSky`).
+    time_uncertainty_s : float
+        Standard uncertainty [s] of the recorded times themselves (0: a logged clock). A
+        logger without a clock whose times were reconstructed afterwards (a session's start
+        from a photograph, then a nominal cadence) has one; the clock candidate adds it in
+        quadrature to its own uncertainty, since a clock fitted to within its statistics
+        is no better than the times it corrects.
     """
 
     sensor: CompoundEyeSensor
@@ -105,6 +111,7 @@ class Instrument:
     held: np.ndarray | None = None
     pointing_deg: np.ndarray | None = None
     light: str = "sun"
+    time_uncertainty_s: float = 0.0
 
     @property
     def n(self) -> int:

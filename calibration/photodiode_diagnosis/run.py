@@ -838,7 +838,8 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     (``by_sky``: single scattering and every sky candidate at its fold-mean parameters, on the
     whole session; half their range is ``sky_model_spread_s``, a systematic the noise does
     not show), the resulting ``uncertainty_s`` (root sum of squares of the statistical
-    uncertainty and that spread) and the mirror time about the sun's culmination
+    uncertainty, that spread and the recorded times' own uncertainty,
+    :attr:`Instrument.time_uncertainty_s`) and the mirror time about the sun's culmination
     (:func:`clock_mirror`). The parameter's ``uncertainty`` is updated to ``uncertainty_s``."""
     offset = param["value"]
     fe = Forward(_thin(inst), effect, sun=sun, polarizer_sign=sign)
@@ -859,11 +860,13 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     values = np.array([v for v in by_sky.values() if v is not None] or [offset])
     spread = 0.5 * float(np.ptp(values))
     stat = float(param.get("uncertainty", param["fold_spread"]))
-    param["uncertainty"] = float(np.hypot(stat, spread))
+    times = float(inst.time_uncertainty_s)
+    param["uncertainty"] = float(np.sqrt(stat ** 2 + spread ** 2 + times ** 2))
     out = {"sensitivity": clock_sensitivity(sun, float(np.mean(inst.t_s)), inst.absolute_yaw,
                                             offset_s=offset),
            "by_sky": {k: None if v is None else float(v) for k, v in by_sky.items()},
            "by_sky_errors": errors, "sky_model_spread_s": spread, "statistical_uncertainty_s": stat,
+           "recorded_times_uncertainty_s": times,
            "uncertainty_s": param["uncertainty"],
            "significant": bool(abs(offset) > 2.0 * param["uncertainty"])}
     out["mirror"] = clock_mirror(inst, effect, theta_base, layout, sun, sign, sigma, offset)

@@ -88,18 +88,47 @@ def _params_text(params: dict) -> str:
     return "; ".join(rest)
 
 
+ESTIMATED_TIMES_UNCERTAINTY_S = 120.0
+"""Uncertainty [s] of per-sample times that were estimated, not logged: the Gkanias et al.
+(2023) recordings carry no clock, and where no log survives their times are reconstructed
+from the session's photograph and a nominal cadence, "good to about +-2 minutes at
+mid-session" (the data set's README)."""
+
+
+def times_uncertainty(files) -> dict:
+    """Uncertainty [s] of each session's recorded times, from a ``sessions.csv`` beside the
+    sessions (columns ``file`` and ``sample_times``: ``logged`` or ``estimated``):
+    :data:`ESTIMATED_TIMES_UNCERTAINTY_S` for estimated times, 0 for logged ones and for
+    sessions it does not list (as for a folder without one)."""
+    out = {}
+    for folder in {Path(f).parent for f in files}:
+        index = folder / "sessions.csv"
+        if not index.exists():
+            continue
+        table = pd.read_csv(index)
+        if not {"file", "sample_times"} <= set(table.columns):
+            continue
+        for name, kind in zip(table["file"], table["sample_times"]):
+            out[str(folder / str(name))] = (ESTIMATED_TIMES_UNCERTAINTY_S
+                                            if str(kind).strip() == "estimated" else 0.0)
+    return {Path(f): out.get(str(f), 0.0) for f in files}
+
+
 def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_SEED):
-    """Diagnose every session; write per-session reports, the table and the figures."""
+    """Diagnose every session; write per-session reports, the table and the figures. The
+    clock's uncertainty includes that of the recorded times (:func:`times_uncertainty`)."""
     from tqdm import tqdm
 
     from calibration import diagnose
     from calibration.diagnosis import DiagnosisError
     rows, reports = [], {}
+    uncertain = times_uncertainty(files)
     for f in tqdm(files, desc="sessions", unit="session"):
         sub = out / Path(f).stem
         t0 = time.perf_counter()
         try:
-            report = diagnose(f, effects, folds=folds, seed=seed)
+            report = diagnose(f, effects, folds=folds, seed=seed,
+                              time_uncertainty_s=uncertain[Path(f)])
         except DiagnosisError as exc:
             rows.append({"session": Path(f).name, "verdict": "error", "faulty": str(exc)})
             continue
@@ -152,7 +181,7 @@ def clock_check(files, reports: dict, out: Path, effects, folds: int = 3,
                 and fitted(reports[f])]
     if len(open_sky) < 3:
         return pd.DataFrame()
-    rows = []
+    rows, uncertain = [], times_uncertainty(files)
     for f in (open_sky[0], open_sky[-1]):
         pointing = pointing_from_reports([reports[g] for g in open_sky if g != f])
         data = read_photodiodes(f)
@@ -164,6 +193,7 @@ def clock_check(files, reports: dict, out: Path, effects, folds: int = 3,
             try:
                 report = diagnose(PhotodiodeData(t, dict(data.sidecar)), effects, folds=folds,
                                   seed=seed, pointing=pointing,
+                                  time_uncertainty_s=uncertain[Path(f)],
                                   where=f"{Path(f).name} with its clock {err:+.0f} s")
             except DiagnosisError as exc:
                 rows.append(dict(row, verdict="error", note=str(exc)))

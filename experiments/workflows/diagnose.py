@@ -52,6 +52,7 @@ from experiments.cli.argtypes import (
     DefaultsHelpFormatter,
     existing_file,
     int_at_least,
+    nonnegative_float,
     output_dir,
     positive_int,
     seed,
@@ -423,6 +424,8 @@ def _diagnose_cmd(args) -> int:
                                     if x.strip()]
     if getattr(args, "light", "sun") != "sun":
         options["light"] = args.light
+    if getattr(args, "time_uncertainty", None):
+        options["time_uncertainty_s"] = args.time_uncertainty
     report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
     written = write_diagnosis(report, out)
@@ -537,6 +540,11 @@ def register(sub) -> None:
                    help="photodiode instruments: the body whose light the session's sky "
                         "scatters; moon for a night session under the moonlit sky (the Moon "
                         "up, the Sun below -18 deg)")
+    d.add_argument("--time-uncertainty", type=nonnegative_float, metavar="SECONDS",
+                   help="photodiode instruments: standard uncertainty of the recorded times "
+                        "[s] (default 0: a logged clock), e.g. for times reconstructed from a "
+                        "start and a nominal cadence; the fitted clock's uncertainty includes "
+                        "it")
     d.set_defaults(func=_diagnose_cmd)
     b = sub.add_parser("gap-benchmark", help="blind benchmark of the gap diagnosis",
                        formatter_class=DefaultsHelpFormatter)

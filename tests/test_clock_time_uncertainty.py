@@ -1,0 +1,68 @@
+"""Recorded times that are themselves uncertain (reconstructed after the fact, not logged):
+the fitted clock's uncertainty includes theirs."""
+
+import numpy as np
+import pytest
+from ring_sessions import ring_session
+
+from calibration import diagnose
+from calibration.diagnosis import UnsupportedInstrumentError
+from calibration.photodiode_diagnosis.errors import InstrumentDataError
+
+
+@pytest.fixture(scope="module")
+def reports():
+    """One short session with a right clock, diagnosed with the clock candidate alone, with
+    the recorded times taken as exact and as uncertain by 2 min."""
+    s = ring_session(n_sweeps=3, per_sweep=60)
+    return (diagnose(s, ("clock_offset",), folds=3),
+            diagnose(s, ("clock_offset",), folds=3, time_uncertainty_s=120.0))
+
+
+def _clock(report):
+    return next(c for c in report.candidates if c.effect == "clock_offset")
+
+
+def test_time_uncertainty_adds_in_quadrature(reports):
+    """The three terms are independent (the noise of this session, the spread of the clock
+    over sky models, the error of the times), so their variances add: the reported
+    uncertainty is their root sum of squares, to round-off."""
+    exact, uncertain = (_clock(r).details for r in reports)
+    assert exact["recorded_times_uncertainty_s"] == 0.0
+    assert uncertain["recorded_times_uncertainty_s"] == 120.0
+    for e in (exact, uncertain):
+        expected = np.sqrt(e["statistical_uncertainty_s"] ** 2 + e["sky_model_spread_s"] ** 2
+                           + e["recorded_times_uncertainty_s"] ** 2)
+        assert e["uncertainty_s"] == pytest.approx(expected, rel=1e-12)
+    # the fit itself does not depend on what is known of the times
+    assert _clock(reports[1]).params["clock_offset_s"]["value"] == pytest.approx(
+        _clock(reports[0]).params["clock_offset_s"]["value"], abs=1e-6)
+    assert uncertain["uncertainty_s"] > 120.0 > exact["uncertainty_s"]
+
+
+@pytest.mark.parametrize("bad", [-1.0, float("nan"), float("inf")])
+def test_bad_time_uncertainty_is_refused(bad):
+    s = ring_session(n_sweeps=2, per_sweep=20)
+    with pytest.raises(InstrumentDataError, match="time_uncertainty_s must be a finite"):
+        diagnose(s, ("clock_offset",), folds=2, time_uncertainty_s=bad)
+
+
+def test_time_uncertainty_is_for_rings_only():
+    """A three-pair sensor's diagnosis fits no clock with an uncertainty: asked for one, it
+    says so rather than ignoring it."""
+    from experiments.workflows.diagnose import simulate_session
+    ds = simulate_session(None, np.random.default_rng(1))
+    with pytest.raises(UnsupportedInstrumentError, match="time_uncertainty_s"):
+        diagnose(ds["data"], ("tilt",), time_uncertainty_s=60.0)
+
+
+def test_session_index_marks_estimated_times(tmp_path):
+    """The reproduction reads which sessions' times were estimated from the folder's
+    ``sessions.csv``; logged, unlisted and index-less sessions count as exact."""
+    from experiments.studies.real_compass import ESTIMATED_TIMES_UNCERTAINTY_S, times_uncertainty
+    files = [tmp_path / n for n in ("a.csv", "b.csv", "c.csv")]
+    (tmp_path / "sessions.csv").write_text("file,sample_times\na.csv,estimated\nb.csv,logged\n")
+    u = times_uncertainty(files)
+    assert u == {files[0]: ESTIMATED_TIMES_UNCERTAINTY_S, files[1]: 0.0, files[2]: 0.0}
+    (tmp_path / "sessions.csv").unlink()
+    assert set(times_uncertainty(files).values()) == {0.0}
