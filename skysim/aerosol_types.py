@@ -13,6 +13,14 @@ components by number:
 - Greek coefficients weighted by the scattering of each component,
   ``alpha_l = sum_i N_i C_sca,i alpha_l,i / sum_i N_i C_sca,i`` ([3]_, eq. (2.56)).
 
+The optics of each component (one Mie integration, up to a few seconds for coarse modes)
+are cached in the process and on disk (:mod:`skysim.disk_cache`, subfolder ``mie/`` of
+``$SKYSIM_CACHE_DIR``, else ``$XDG_CACHE_HOME/skysim``, else ``~/.cache/skysim``), one
+``.npz`` per entry keyed by the SHA-256 of every field of the component, the wavelength, the
+number of moments and the sasktran2 and scipy versions: a later process reads the result
+back bit for bit. A corrupt entry is recomputed and overwritten; a cache folder that cannot
+be written only means nothing is stored; deleting the folder is always safe.
+
 Presets (:data:`PRESETS`) are OPAC's mixtures [1]_ (Table 4: number densities per component;
 Table 1: the components' ``r_mod`` and ``sigma`` for dry particles; refractive indices of
 the dry components at 550 nm from the OPAC data files). Stated simplifications: particles
@@ -37,10 +45,11 @@ References
 from __future__ import annotations
 
 import functools
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 
 import numpy as np
 
+from .disk_cache import load_entry, store_entry
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
@@ -205,12 +214,46 @@ class AerosolOptics:
         return float(self.greek[1, 0] / 3.0)
 
 
-@functools.lru_cache(maxsize=64)
-def _component_optics(comp: AerosolComponent, wavelength_nm: float, n_moments: int):
-    from scipy.stats import lognorm
+MIE_CACHE_KIND = "mie"
+"""Subfolder of the on-disk cache (:mod:`skysim.disk_cache`) holding the component optics."""
 
-    from .rt_sasktran import require_sasktran2
-    require_sasktran2()
+_MIE_CACHE_FORMAT = 1
+"""Version of what an entry holds and how it is computed here (the distribution set-up below):
+raise it when either changes, so older entries are no longer found."""
+
+_MIE_ARRAYS = ("extinction", "scattering", "greek")
+
+
+def _field_json(value):
+    """A component field as exact JSON: complex -> [re, im], real numbers -> float."""
+    if isinstance(value, (complex, np.complexfloating)):
+        return [float(value.real), float(value.imag)]
+    if isinstance(value, (int, float, np.integer, np.floating)) and not isinstance(value, bool):
+        return float(value)
+    return value if isinstance(value, str) else repr(value)
+
+
+def _mie_cache_params(comp: AerosolComponent, wavelength_nm: float, n_moments: int,
+                      sasktran2) -> dict:
+    """Everything the optics of one component depend on: every field of the component, the
+    wavelength, the moment count and the versions of the code that integrates."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    import scipy
+    try:
+        engine = version("sasktran2")
+    except PackageNotFoundError:  # pragma: no cover - an unpackaged sasktran2 build
+        engine = str(getattr(sasktran2, "__version__", "unknown"))
+    return {"format": _MIE_CACHE_FORMAT,
+            "component": {f.name: _field_json(getattr(comp, f.name)) for f in fields(comp)},
+            "wavelength_nm": float(wavelength_nm), "n_moments": int(n_moments),
+            "sasktran2": engine, "scipy": scipy.__version__}
+
+
+def _integrate_component(comp: AerosolComponent, wavelength_nm: float, n_moments: int):
+    """Mie cross-sections [m^2 per particle] and Greek coefficients of one component from
+    sasktran2's size-distribution integration ([2]_)."""
+    from scipy.stats import lognorm
     from sasktran2.mie.distribution import integrate_mie_cpp
     dist = lognorm(np.log(comp.sigma), scale=comp.mode_radius_um * 1e3)  # radii in [nm]
     m = complex(comp.refractive_index)
@@ -219,6 +262,34 @@ def _component_optics(comp: AerosolComponent, wavelength_nm: float, n_moments: i
     ext = float(ds.xs_total.values[0, 0])           # [m^2] per particle
     sca = float(ds.xs_scattering.values[0, 0])
     greek = np.stack([ds[f"lm_{k}"].values[0, 0] for k in ("a1", "a2", "a3", "b1")], axis=1)
+    return ext, sca, np.asarray(greek, dtype=float)
+
+
+def _usable(entry: dict, n_moments: int) -> bool:
+    """Whether a cache entry holds finite float64 optics of the expected shapes."""
+    shapes = {"extinction": (), "scattering": (), "greek": (int(n_moments), 4)}
+    return all(entry[k].dtype == np.float64 and entry[k].shape == shapes[k]
+               and bool(np.isfinite(entry[k]).all()) for k in _MIE_ARRAYS)
+
+
+@functools.lru_cache(maxsize=64)
+def _component_optics(comp: AerosolComponent, wavelength_nm: float, n_moments: int):
+    """``(extinction [m^2], scattering [m^2], greek (n_moments, 4))`` of one component.
+
+    Cached per process (this LRU cache) and across processes on disk
+    (:mod:`skysim.disk_cache`, subfolder ``mie/``): an entry computed before on this machine
+    is read back bit for bit; a missing, corrupt or unreadable one is computed and
+    (re)written; an unwritable cache folder only means nothing is stored.
+    """
+    from .rt_sasktran import require_sasktran2
+    sasktran2 = require_sasktran2()
+    params = _mie_cache_params(comp, wavelength_nm, n_moments, sasktran2)
+    hit = load_entry(MIE_CACHE_KIND, params, _MIE_ARRAYS)
+    if hit is not None and _usable(hit, n_moments):
+        return float(hit["extinction"]), float(hit["scattering"]), hit["greek"]
+    ext, sca, greek = _integrate_component(comp, wavelength_nm, n_moments)
+    store_entry(MIE_CACHE_KIND, params, {"extinction": np.float64(ext),
+                                         "scattering": np.float64(sca), "greek": greek})
     return ext, sca, greek
 
 
@@ -237,7 +308,8 @@ def aerosol_optics(preset, wavelength_nm: float, n_moments: int = N_MOMENTS) -> 
     Returns
     -------
     AerosolOptics
-        Cached per component, wavelength and ``n_moments`` (a coarse mode takes seconds).
+        Cached per component, wavelength and ``n_moments`` (a coarse mode takes seconds),
+        in this process and on disk for later processes (module notes).
     """
     t = aerosol_type(preset)
     lam = float(check_in_range("wavelength_nm", wavelength_nm, 250.0, 2500.0))

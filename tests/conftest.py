@@ -1,4 +1,5 @@
-"""Shared fixtures: the reference-data folder and a standard site."""
+"""Shared fixtures: the reference-data folder, a standard site, and an on-disk cache folder
+per test session (so tests never write into the user's ~/.cache)."""
 
 from pathlib import Path
 
@@ -6,6 +7,8 @@ import numpy as np
 import pytest
 
 from skysim.sun import Site
+
+from skysim.disk_cache import CACHE_DIR_ENV
 
 REFERENCE_DIR = Path(__file__).resolve().parents[1].parent / "shared" / "reference"
 
@@ -28,3 +31,16 @@ def xian():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+@pytest.fixture(scope="session")
+def session_cache_dir(tmp_path_factory):
+    """One empty on-disk cache folder (:mod:`skysim.disk_cache`) for the whole session."""
+    return tmp_path_factory.mktemp("skysim-cache")
+
+
+@pytest.fixture(autouse=True)
+def _isolated_cache_dir(session_cache_dir, monkeypatch):
+    """Point ``SKYSIM_CACHE_DIR`` at the session's folder in every test (and the processes it
+    starts), never at the user's real cache."""
+    monkeypatch.setenv(CACHE_DIR_ENV, str(session_cache_dir))
