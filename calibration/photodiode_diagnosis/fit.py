@@ -15,6 +15,9 @@ References
    matrices", IMA J. Appl. Math. 13(1):117-119 (1974), doi:10.1093/imamat/13.1.117.
 .. [2] D. W. Marquardt, "An algorithm for least-squares estimation of nonlinear parameters",
    J. SIAM 11(2):431-441 (1963), doi:10.1137/0111030.
+.. [3] Y. Pawitan, *In All Likelihood: Statistical Modelling and Inference Using
+   Likelihood*, Oxford University Press (2001), sect. 3.4 (profile likelihood; its curvature
+   is the inverse of the joint information's block of the parameter of interest).
 """
 
 from __future__ import annotations
@@ -165,8 +168,19 @@ def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
                          shape=(usable_idx.size, fidx.size))
 
 
+def _not_calibrated(fwd: Forward) -> np.ndarray:
+    """False for the pointing parameters calibrated on other sessions
+    (:attr:`Instrument.pointing_deg`, finite entries), True elsewhere."""
+    L = fwd.layout
+    m = np.ones(L.size, bool)
+    if fwd.inst.pointing_deg is not None:
+        m[np.arange(L.size)[L.pointing][np.isfinite(fwd.inst.pointing_deg)]] = False
+    return m
+
+
 def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma: float = 0.01,
-        max_iter: int = 40, tol: float = 1e-6, covariance: bool = False) -> FitResult:
+        max_iter: int = 40, tol: float = 1e-6, covariance: bool = False,
+        profiled=None) -> FitResult:
     """Levenberg-Marquardt MAP fit of the parameters marked ``free`` (default: all).
 
     Parameters
@@ -177,6 +191,16 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
         says when the instrument's pointing is calibrated (:attr:`Instrument.pointing_deg`).
     sigma : float
         Noise level of the relative residuals, weighting the data against the prior.
+    covariance : bool
+        Compute the posterior covariance of the free parameters at the solution.
+    profiled : ndarray (p,) bool, optional
+        Parameters held in the fit whose uncertainty the covariance takes in: it is the
+        marginal covariance of the free parameters from the joint information of the free and
+        the profiled ones (data and prior) at the solution, the Laplace approximation of
+        profiling them out (Pawitan 2001, sect. 3.4 [3]_).
+        A held parameter that trades with a free one (the units' elevations and a clock)
+        then widens its uncertainty by what the data leave of the trade. Calibrated pointing
+        (:attr:`Instrument.pointing_deg`) is not profiled.
 
     Returns
     -------
@@ -186,8 +210,7 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     theta = np.asarray(theta0, float).copy()
     L = fwd.layout
     free = np.ones(L.size, bool) if free is None else np.asarray(free, bool).copy()
-    if fwd.inst.pointing_deg is not None:   # calibrated on other sessions: held
-        free[np.arange(L.size)[L.pointing][np.isfinite(fwd.inst.pointing_deg)]] = False
+    free &= _not_calibrated(fwd)             # calibrated pointing: held
     pri = priors or Priors.for_model(fwd, theta)
     theta = np.clip(theta, pri.lower, pri.upper)
     usable_idx = np.flatnonzero(fwd.usable.ravel())
@@ -238,11 +261,17 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
             break
     cov = None
     if covariance:
-        J = _jacobian(fwd, theta, r, obs, free, pri.step, usable_idx)
-        A = (J.T @ J).toarray() / sigma ** 2 + np.diag(w_prior)
+        joint = free.copy()
+        if profiled is not None:
+            joint |= np.asarray(profiled, bool) & _not_calibrated(fwd)
+        jidx = np.flatnonzero(joint)
+        J = _jacobian(fwd, theta, r, obs, joint, pri.step, usable_idx)
+        w_joint = np.where(np.isfinite(pri.sd[jidx]), 1.0 / pri.sd[jidx] ** 2, 0.0)
+        A = (J.T @ J).toarray() / sigma ** 2 + np.diag(w_joint)
         dof = max(usable_idx.size - fidx.size, 1)
         chi2 = float(np.sum(r.ravel()[usable_idx] ** 2) / sigma ** 2) / dof
-        cov = np.linalg.pinv(A) * max(chi2, 1.0)
+        keep = np.flatnonzero(free[jidx])     # the free parameters' rows of the joint one
+        cov = (np.linalg.pinv(A) * max(chi2, 1.0))[np.ix_(keep, keep)]
     rms = float(np.sqrt(np.mean(r.ravel()[usable_idx] ** 2))) if usable_idx.size else np.nan
     return FitResult(theta, cost, rms, it, converged, cov, free)
 
@@ -284,7 +313,9 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     -------
     (FitResult or None, FitResult or None)
         Stage 2 (None with ``full=False``), and stage 1 (with its covariance when asked) or
-        None.
+        None. A geometric effect's covariance has the held pointing profiled out
+        (:func:`fit`, ``profiled``): its uncertainty is that of the effect with the units'
+        pointing unknown within its prior and what the AoP says of it.
     """
     L = fwd.layout
     theta = np.asarray(theta0, float)
@@ -307,14 +338,19 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
         free[L.scale] = False
         if fwd.effect is not None and not fwd.effect.geometric:
             free[L.effect] = False
+        profiled = None
         if fwd.effect is not None and fwd.effect.geometric:
             # the pointing stays where the base model's AoP fit put it: a common shift of
             # the units' elevations and a shift of the sun's (a clock) are nearly the same
-            # to the AoP, and freed together they trade one for the other
+            # to the AoP, and freed together they trade one for the other; the effect's
+            # uncertainty takes in what the data leave of that trade
             free[L.pointing] = False
+            profiled = np.zeros(L.size, bool)
+            profiled[L.pointing] = True
         fwd.dop_free = True
         try:
-            first = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter, covariance=covariance)
+            first = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter, covariance=covariance,
+                        profiled=profiled)
         finally:
             fwd.dop_free = False
         theta = first.theta
