@@ -66,3 +66,26 @@ def test_session_index_marks_estimated_times(tmp_path):
     assert u == {files[0]: ESTIMATED_TIMES_UNCERTAINTY_S, files[1]: 0.0, files[2]: 0.0}
     (tmp_path / "sessions.csv").unlink()
     assert set(times_uncertainty(files).values()) == {0.0}
+
+
+def test_refined_clock_keeps_the_sky_model_spread():
+    """A clock hours off is refined by passes that fit it alone, under single scattering;
+    when the passes stay within 15 min of the first fit, that fit read the clock under every
+    sky candidate at about the right times, so the spread over those skies stays in the
+    refined uncertainty: the root sum of squares of the last pass's uncertainty and the
+    first fit's ``sky_model_spread_s``, to round-off."""
+    import pandas as pd
+
+    from sensor.photodiodes_io import PhotodiodeData
+    s = ring_session(n_sweeps=3, per_sweep=60)
+    t = s.table.copy()
+    t["time"] = t["time"] - pd.Timedelta(hours=2)
+    doc = diagnose(PhotodiodeData(t, s.sidecar), ("neutral_points", "clock_offset"), folds=3)
+    c = _clock(doc).details
+    ref = c["refinement"]
+    assert abs(_clock(doc).params["clock_offset_s"]["value"] - ref["first_fit_s"]) <= 900.0
+    assert ref["sky_model_spread_kept_s"] == c["sky_model_spread_s"] > 0.0
+    assert set(c["by_sky"]) == {"single_scattering", "neutral_points"}
+    expected = np.hypot(ref["passes"][-1]["uncertainty_s"], c["sky_model_spread_s"])
+    assert c["uncertainty_s"] == pytest.approx(expected, rel=1e-12)
+    assert _clock(doc).params["clock_offset_s"]["uncertainty"] == c["uncertainty_s"]

@@ -510,7 +510,10 @@ def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
     """Refine a large clock offset by diagnosing the session again at the corrected times
     (clock candidate alone) and adding the offset that pass finds, until a pass moves it by
     less than ``CLOCK_REFINE_S / 3``; updates ``row`` (value, uncertainty, ``significant``,
-    ``refinement``).
+    ``refinement``). The passes fit the clock alone, under single scattering; when they end
+    within ``CLOCK_REFINE_S`` of the first fit, whose sky candidates were then fitted near the
+    right times, its ``sky_model_spread_s`` is added in quadrature to the last pass's
+    uncertainty.
 
     Under a clock hours off, everything read from the base fit's residuals is read wrong: the
     glare screen finds no brightness at which the residuals grow (they are large everywhere)
@@ -545,6 +548,14 @@ def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
         row["refinement"] = {"first_fit_s": float(param["value"]), "passes": passes,
                              "method": "session diagnosed again at the corrected times "
                                        "(screen, base fit, clock candidate)"}
+        if abs(total - float(param["value"])) <= CLOCK_REFINE_S:
+            # the passes read the clock under single scattering alone; a first fit this
+            # close to the corrected times had its sky candidates fitted to about the right
+            # sky, so the spread of the clock over them still holds (on a real session an
+            # hour past culmination, 224 s that the passes would drop)
+            spread = float(row.get("sky_model_spread_s", 0.0))
+            param["uncertainty"] = float(np.hypot(param["uncertainty"], spread))
+            row["refinement"]["sky_model_spread_kept_s"] = spread
         param["value"] = total
         row["uncertainty_s"] = param["uncertainty"]
         row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
