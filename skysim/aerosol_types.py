@@ -49,7 +49,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .disk_cache import load_entry, store_entry
+from .disk_cache import library_versions, load_entry, store_entry
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
@@ -237,17 +237,12 @@ def _mie_cache_params(comp: AerosolComponent, wavelength_nm: float, n_moments: i
                       sasktran2) -> dict:
     """Everything the optics of one component depend on: every field of the component, the
     wavelength, the moment count and the versions of the code that integrates."""
-    from importlib.metadata import PackageNotFoundError, version
-
-    import scipy
-    try:
-        engine = version("sasktran2")
-    except PackageNotFoundError:  # pragma: no cover - an unpackaged sasktran2 build
-        engine = str(getattr(sasktran2, "__version__", "unknown"))
+    versions = library_versions("sasktran2", "scipy")
+    if versions["sasktran2"] == "unknown":  # pragma: no cover - an unpackaged sasktran2 build
+        versions["sasktran2"] = str(getattr(sasktran2, "__version__", "unknown"))
     return {"format": _MIE_CACHE_FORMAT,
             "component": {f.name: _field_json(getattr(comp, f.name)) for f in fields(comp)},
-            "wavelength_nm": float(wavelength_nm), "n_moments": int(n_moments),
-            "sasktran2": engine, "scipy": scipy.__version__}
+            "wavelength_nm": float(wavelength_nm), "n_moments": int(n_moments), **versions}
 
 
 def _integrate_component(comp: AerosolComponent, wavelength_nm: float, n_moments: int):

@@ -49,6 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .disk_cache import library_versions, load_entry, store_entry
 from .exceptions import InvalidParameterError
 from .multiple import MultipleScatteringSky, _mu0, zenith_nodes_deg
 from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, ParticleLayer
@@ -157,7 +158,8 @@ class CloudOptics:
 @functools.lru_cache(maxsize=8)
 def cloud_optics(wavelength_nm: float = 550.0, effective_radius_um: float = 10.0,
                  effective_variance: float = 0.1, n_moments: int = 1000) -> CloudOptics:
-    """Mie optics of a water cloud from sasktran2's Lorenz-Mie code (cached; ~4 s).
+    """Mie optics of a water cloud from sasktran2's Lorenz-Mie code (~4 s; cached in the
+    process and on disk, :data:`CLOUD_CACHE_KIND`).
 
     Parameters
     ----------
@@ -171,18 +173,62 @@ def cloud_optics(wavelength_nm: float = 550.0, effective_radius_um: float = 10.0
     """
     from .rt_sasktran import require_sasktran2
     require_sasktran2()
+    params = {"format": _CLOUD_CACHE_FORMAT, "wavelength_nm": float(wavelength_nm),
+              "effective_radius_um": float(effective_radius_um),
+              "effective_variance": float(effective_variance), "n_moments": int(n_moments),
+              **library_versions("sasktran2", "scipy")}
+    hit = load_entry(CLOUD_CACHE_KIND, params, _CLOUD_ARRAYS)
+    if hit is None or not _cloud_entry_usable(hit, int(n_moments)):
+        hit = _integrate_cloud(wavelength_nm, effective_radius_um, effective_variance,
+                               int(n_moments))
+        store_entry(CLOUD_CACHE_KIND, params, hit)
+    greek, ssa = hit["greek"], float(hit["single_scattering_albedo"])
+    return CloudOptics(greek, min(ssa, 1.0), float(greek[0, 1] / 3.0), hit["angle_deg"],
+                       hit["p11"], hit["p12"])
+
+
+CLOUD_CACHE_KIND = "mie_cloud"
+"""Subfolder of the on-disk cache (:mod:`skysim.disk_cache`) holding cloud optics: a later
+process reads an entry back bit for bit instead of integrating again (~4 s); a missing,
+corrupt or unreadable entry is computed and (re)written, an unwritable folder stores
+nothing."""
+
+_CLOUD_CACHE_FORMAT = 1
+"""Version of an entry's content and of the integration set-up below: raise it when either
+changes, so older entries are no longer found."""
+
+_CLOUD_ARRAYS = ("greek", "single_scattering_albedo", "angle_deg", "p11", "p12")
+
+_CLOUD_ANGLES = 1801
+"""Scattering angles of the tabulated phase-matrix elements (0.1-deg steps)."""
+
+
+def _cloud_entry_usable(entry: dict, n_moments: int) -> bool:
+    """Whether a cache entry holds finite float64 optics of the expected shapes."""
+    shapes = {"greek": (4, n_moments), "single_scattering_albedo": (),
+              "angle_deg": (_CLOUD_ANGLES,), "p11": (_CLOUD_ANGLES,), "p12": (_CLOUD_ANGLES,)}
+    return all(entry[k].dtype == np.float64 and entry[k].shape == shapes[k]
+               and bool(np.isfinite(entry[k]).all()) for k in _CLOUD_ARRAYS)
+
+
+def _integrate_cloud(wavelength_nm, effective_radius_um, effective_variance,
+                     n_moments: int) -> dict:
+    """The arrays of :data:`_CLOUD_ARRAYS` from sasktran2's Lorenz-Mie integration over the
+    gamma size distribution."""
     from sasktran2.mie import LinearizedMie, integrate_mie
     dist = gamma_size_distribution(effective_radius_um, effective_variance)
     n = complex(water_refractive_index(wavelength_nm))
     lam_um = float(wavelength_nm) * 1e-3
     out = integrate_mie(LinearizedMie(), dist, lambda _: n, np.array([lam_um]),
-                        num_angles=1801, num_quad=1024, compute_coeffs=True,
-                        num_coeffs=int(n_moments))
+                        num_angles=_CLOUD_ANGLES, num_quad=1024, compute_coeffs=True,
+                        num_coeffs=n_moments)
     greek = np.stack([out[k].values[0] for k in ("lm_a1", "lm_a2", "lm_a3", "lm_b1")])
-    ssa = float(out.xs_scattering.values[0] / out.xs_total.values[0])
-    return CloudOptics(greek, min(ssa, 1.0), float(greek[0, 1] / 3.0),
-                       out.angle.values.copy(), out.p11.values[0].copy(),
-                       out.p12.values[0].copy())
+    return {"greek": np.asarray(greek, np.float64),
+            "single_scattering_albedo": np.float64(out.xs_scattering.values[0]
+                                                   / out.xs_total.values[0]),
+            "angle_deg": np.asarray(out.angle.values, np.float64).copy(),
+            "p11": np.asarray(out.p11.values[0], np.float64).copy(),
+            "p12": np.asarray(out.p12.values[0], np.float64).copy()}
 
 
 def molecular_fraction_below(height_m) -> np.ndarray:

@@ -31,7 +31,8 @@ import numpy as np
 
 from .io import atomic_write
 
-__all__ = ["CACHE_DIR_ENV", "cache_root", "entry_key", "load_entry", "store_entry"]
+__all__ = ["CACHE_DIR_ENV", "cache_root", "entry_key", "load_entry", "store_entry",
+           "library_versions"]
 
 CACHE_DIR_ENV = "SKYSIM_CACHE_DIR"
 """Environment variable that moves the cache (read at every access)."""
@@ -102,3 +103,18 @@ def store_entry(kind: str, params: dict, arrays: dict) -> None:
         atomic_write(path, _write)
     except OSError:  # OutputPathError, WriteError (both OSError) or a stray OS error
         pass
+
+
+def library_versions(*names: str) -> dict:
+    """Installed versions of the libraries ``names`` (their distribution names), for an
+    entry's key: an upgraded library then misses instead of returning old results; a
+    library not installed as a distribution is ``"unknown"``."""
+    from importlib.metadata import PackageNotFoundError, version
+
+    out = {}
+    for n in names:
+        try:
+            out[n] = version(n)
+        except PackageNotFoundError:  # pragma: no cover - an unpackaged build
+            out[n] = "unknown"
+    return out
