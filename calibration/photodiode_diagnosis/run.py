@@ -497,6 +497,11 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
     return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
 
 
+CLOCK_NEAR_S = 1800.0
+"""Offsets [s] nearer the recorded times than this (the nearest coarse start, half an hour)
+are read under each sky model from the recorded times (:func:`clock_report`); farther ones
+from the fitted offset, with the pointing re-read there."""
+
 CLOCK_REFINE_S = 900.0
 """A clock offset larger than this [s] is refined (:func:`_refine_clock`)."""
 
@@ -847,8 +852,9 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     """What the clock candidate reports beside its fit: what pins it (``sensitivity``), how
     far it moves when the angle of polarization is read under each sky model fitted here
     (``by_sky``: single scattering and every sky candidate at its fold-mean parameters, on the
-    whole session; half their range is ``sky_model_spread_s``, a systematic the noise does
-    not show), the resulting ``uncertainty_s`` (root sum of squares of the statistical
+    whole session, each read from the recorded times with the base's pointing held, or from
+    the fitted offset when that is :data:`CLOCK_NEAR_S` or more away; half their range is
+    ``sky_model_spread_s``, a systematic the noise does not show), the resulting ``uncertainty_s`` (root sum of squares of the statistical
     uncertainty, that spread and the recorded times' own uncertainty,
     :attr:`Instrument.time_uncertainty_s`) and the mirror time about the sun's culmination
     (:func:`clock_mirror`). The parameter's ``uncertainty`` is updated to ``uncertainty_s``."""
@@ -861,10 +867,17 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
             p = np.array([row["params"][n]["value"] for n in e.names])
             skies[e.name] = e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s))
     by_sky, errors = {}, {}
+    # read as the candidate reads an offset within its nearest coarse start: from the
+    # recorded times, with the pointing where the base's AoP fit put it. A start at the
+    # fitted offset re-reads the pointing there first (as a clock hours off needs), and that
+    # pointing, having taken up the offset, hides how far the sky alone moves the clock (on
+    # a real session an hour past culmination the three skies' clocks spanned 7.5 min read
+    # from the fitted -20 min, 25 min read from the recorded times)
+    start = offset if abs(offset) >= CLOCK_NEAR_S else 0.0
     for name, sky in skies.items():
         fe.aop_sky = sky
         try:
-            by_sky[name] = _aop_clock_fit(fe, theta_base, layout, offset, sigma)
+            by_sky[name] = _aop_clock_fit(fe, theta_base, layout, start, sigma)
         except InvalidParameterError as exc:   # this sky does not hold at the fitted time
             by_sky[name], errors[name] = None, str(exc)
     fe.aop_sky = None
