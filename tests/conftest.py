@@ -44,3 +44,12 @@ def _isolated_cache_dir(session_cache_dir, monkeypatch):
     """Point ``SKYSIM_CACHE_DIR`` at the session's folder in every test (and the processes it
     starts), never at the user's real cache."""
     monkeypatch.setenv(CACHE_DIR_ENV, str(session_cache_dir))
+
+
+@pytest.fixture
+def empty_cache_dir(tmp_path, monkeypatch):
+    """An empty on-disk cache folder of this test alone (``SKYSIM_CACHE_DIR``), for tests of
+    what a cache holds; the folder is created on first write."""
+    path = tmp_path / "cache"
+    monkeypatch.setenv(CACHE_DIR_ENV, str(path))
+    return path

@@ -26,11 +26,10 @@ N_MOM, LAM = 16, 550.0
 
 
 @pytest.fixture
-def cache_dir(tmp_path, monkeypatch):
+def cache_dir(empty_cache_dir):
     """An empty cache folder of this test; the in-process cache emptied before and after."""
-    monkeypatch.setenv(CACHE_DIR_ENV, str(tmp_path / "cache"))
     _component_optics.cache_clear()
-    yield tmp_path / "cache"
+    yield empty_cache_dir
     _component_optics.cache_clear()
 
 

@@ -11,7 +11,6 @@ import sasktran2.mie as sk_mie  # noqa: E402
 
 from skysim import clouds  # noqa: E402
 from skysim.clouds import CLOUD_CACHE_KIND, cloud_optics  # noqa: E402
-from skysim.disk_cache import CACHE_DIR_ENV  # noqa: E402
 
 ARGS = (550.0, 10.0, 0.1, 64)
 """A 10-um water cloud at 550 nm with 64 moments (the integration's cost is in its 1,024
@@ -19,10 +18,10 @@ quadrature radii and 1,801 angles, not the moment count: ~4 s either way)."""
 
 
 @pytest.fixture
-def cache_dir(tmp_path, monkeypatch):
-    monkeypatch.setenv(CACHE_DIR_ENV, str(tmp_path / "cache"))
+def cache_dir(empty_cache_dir):
+    """An empty cache folder of this test; the in-process cache emptied before and after."""
     cloud_optics.cache_clear()
-    yield tmp_path / "cache"
+    yield empty_cache_dir
     cloud_optics.cache_clear()
 
 
