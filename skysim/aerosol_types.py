@@ -49,7 +49,7 @@ from dataclasses import dataclass, fields
 
 import numpy as np
 
-from .disk_cache import library_versions, load_entry, store_entry
+from .disk_cache import finite_float_arrays, library_versions, load_entry, store_entry
 from .exceptions import InvalidParameterError
 from .validation import check_in_range
 
@@ -262,9 +262,8 @@ def _integrate_component(comp: AerosolComponent, wavelength_nm: float, n_moments
 
 def _usable(entry: dict, n_moments: int) -> bool:
     """Whether a cache entry holds finite float64 optics of the expected shapes."""
-    shapes = {"extinction": (), "scattering": (), "greek": (int(n_moments), 4)}
-    return all(entry[k].dtype == np.float64 and entry[k].shape == shapes[k]
-               and bool(np.isfinite(entry[k]).all()) for k in _MIE_ARRAYS)
+    return finite_float_arrays(entry, {"extinction": (), "scattering": (),
+                                       "greek": (int(n_moments), 4)})
 
 
 @functools.lru_cache(maxsize=64)

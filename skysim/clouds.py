@@ -49,7 +49,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .disk_cache import library_versions, load_entry, store_entry
+from .disk_cache import finite_float_arrays, library_versions, load_entry, store_entry
 from .exceptions import InvalidParameterError
 from .multiple import MultipleScatteringSky, _mu0, zenith_nodes_deg
 from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, ParticleLayer
@@ -205,10 +205,9 @@ _CLOUD_ANGLES = 1801
 
 def _cloud_entry_usable(entry: dict, n_moments: int) -> bool:
     """Whether a cache entry holds finite float64 optics of the expected shapes."""
-    shapes = {"greek": (4, n_moments), "single_scattering_albedo": (),
-              "angle_deg": (_CLOUD_ANGLES,), "p11": (_CLOUD_ANGLES,), "p12": (_CLOUD_ANGLES,)}
-    return all(entry[k].dtype == np.float64 and entry[k].shape == shapes[k]
-               and bool(np.isfinite(entry[k]).all()) for k in _CLOUD_ARRAYS)
+    return finite_float_arrays(entry, {"greek": (4, n_moments), "single_scattering_albedo": (),
+                                       "angle_deg": (_CLOUD_ANGLES,), "p11": (_CLOUD_ANGLES,),
+                                       "p12": (_CLOUD_ANGLES,)})
 
 
 def _integrate_cloud(wavelength_nm, effective_radius_um, effective_variance,

@@ -32,7 +32,7 @@ import numpy as np
 from .io import atomic_write
 
 __all__ = ["CACHE_DIR_ENV", "cache_root", "entry_key", "load_entry", "store_entry",
-           "library_versions"]
+           "library_versions", "finite_float_arrays"]
 
 CACHE_DIR_ENV = "SKYSIM_CACHE_DIR"
 """Environment variable that moves the cache (read at every access)."""
@@ -118,3 +118,10 @@ def library_versions(*names: str) -> dict:
         except PackageNotFoundError:  # pragma: no cover - an unpackaged build
             out[n] = "unknown"
     return out
+
+
+def finite_float_arrays(entry: dict, shapes: dict) -> bool:
+    """Whether every array ``name`` of ``shapes`` in ``entry`` is finite float64 of shape
+    ``shapes[name]``: what a loaded entry must hold to be used rather than recomputed."""
+    return all(entry[k].dtype == np.float64 and entry[k].shape == tuple(shape)
+               and bool(np.isfinite(entry[k]).all()) for k, shape in shapes.items())

@@ -557,7 +557,7 @@ def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
             # the passes read the clock under single scattering alone; a first fit this
             # close to the corrected times had its sky candidates fitted to about the right
             # sky, so the spread of the clock over them still holds (on a real session an
-            # hour past culmination, 224 s that the passes would drop)
+            # hour past culmination, 745 s that the passes would drop)
             spread = float(row.get("sky_model_spread_s", 0.0))
             param["uncertainty"] = float(np.hypot(param["uncertainty"], spread))
             row["refinement"]["sky_model_spread_kept_s"] = spread
@@ -854,8 +854,9 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     (``by_sky``: single scattering and every sky candidate at its fold-mean parameters, on the
     whole session, each read from the recorded times with the base's pointing held, or from
     the fitted offset when that is :data:`CLOCK_NEAR_S` or more away; half their range is
-    ``sky_model_spread_s``, a systematic the noise does not show), the resulting ``uncertainty_s`` (root sum of squares of the statistical
-    uncertainty, that spread and the recorded times' own uncertainty,
+    ``sky_model_spread_s``, a systematic the noise does not show), the resulting
+    ``uncertainty_s`` (root sum of squares of the statistical uncertainty, that spread and
+    the recorded times' own uncertainty,
     :attr:`Instrument.time_uncertainty_s`) and the mirror time about the sun's culmination
     (:func:`clock_mirror`). The parameter's ``uncertainty`` is updated to ``uncertainty_s``."""
     offset = param["value"]
