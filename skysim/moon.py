@@ -5,9 +5,13 @@ Position: astropy's built-in ephemeris (``get_body("moon")`` with ``solar_system
 Algorithms*, ch. 47 [3]_, good to about 10 arcsec in longitude and 4 arcsec in latitude), then
 astropy's rigorous ICRS -> topocentric alt/az chain (precession, nutation, aberration,
 diurnal parallax), without refraction (geometric, as :mod:`skysim.sun`). Nothing is
-downloaded: the ephemeris is a series in the code, and Earth-orientation data come from the
-tables bundled with astropy (past their end UT1 - UTC is taken as 0, which is within 0.9 s,
-i.e. 0.004 deg of Earth rotation). It is vectorised over times and sites.
+downloaded and no result depends on the day it is computed: the ephemeris is a series in the
+code, and Earth-orientation data come from the tables bundled with astropy, used however old
+they are. Past their end the last predicted UT1 - UTC is held; the IERS keeps |UT1 - UTC| below
+0.9 s, so the error is below 1.8 s of Earth rotation (0.008 deg), and polar motion falls back
+to its 50-year mean (arcseconds). Leap seconds not yet announced (ERFA's "dubious year") shift
+UTC by whole seconds, within the same bound per leap second. It is vectorised over times and
+sites, for any date.
 
 Phase: the phase angle ``i`` (Sun-Moon-observer) from the elongation and the distances
 (Meeus eq. 48.3 [3]_) and the illuminated fraction ``k = (1 + cos i) / 2`` (eq. 48.1).
@@ -78,12 +82,25 @@ _AU_KM = 149_597_870.7
 @contextlib.contextmanager
 def _offline_astropy():
     """astropy with its built-in lunar ephemeris and bundled Earth-orientation tables only
-    (no download; past the tables' end UT1 - UTC = 0, see the module docstring)."""
+    (no download, whatever today's date; past the tables' end see the module docstring).
+
+    The warnings astropy and ERFA give past the tables (polar motion from its mean, a
+    "dubious year" for leap seconds not yet announced) are silenced: their effect is within
+    the accuracy the module docstring states.
+    """
+    import warnings
+
     from astropy.coordinates import solar_system_ephemeris
     from astropy.utils import iers
+    # auto_max_age None: the bundled predictions are used whatever today's date (astropy
+    # otherwise refuses predictions more than 30 days older than the computer's clock, which
+    # would make a result depend on the day it is computed)
     with iers.conf.set_temp("auto_download", False), \
+            iers.conf.set_temp("auto_max_age", None), \
             iers.conf.set_temp("iers_degraded_accuracy", "ignore"), \
-            solar_system_ephemeris.set("builtin"):
+            solar_system_ephemeris.set("builtin"), warnings.catch_warnings():
+        warnings.filterwarnings("ignore", message=r".*polar motions for times after IERS")
+        warnings.filterwarnings("ignore", message=r".*dubious year")
         yield
 
 

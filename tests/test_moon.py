@@ -128,3 +128,39 @@ def test_irradiance_inverse_square_and_bad_input():
         lunar_disk_reflectance(545.0, -5.0, 0.0)
     with pytest.raises(InvalidParameterError, match="distance"):
         lunar_irradiance(a, 1.87, 0.0)
+
+
+def test_offline_for_any_date_and_any_clock(monkeypatch):
+    """The Moon's position needs no network and no fresh Earth-orientation data: five years
+    after today (past astropy's bundled predictions) with every socket refused and with the
+    computer's clock set ten years ahead, it matches PyEphem. Tolerance 60 arcsec: the 30 of
+    the random-date test plus UT1 - UTC held at its last predicted value (the IERS keeps
+    |UT1 - UTC| < 0.9 s, so the held value is off by < 1.8 s, i.e. < 27 arcsec of Earth
+    rotation)."""
+    import socket
+
+    import astropy.time
+    import astropy.units as u
+
+    def refuse(*args, **kwargs):
+        raise OSError("network unavailable in this test")
+
+    monkeypatch.setattr(socket, "socket", refuse)
+    monkeypatch.setattr(socket, "create_connection", refuse)
+    real_now = astropy.time.Time.now
+    monkeypatch.setattr(astropy.time.Time, "now",
+                        classmethod(lambda cls: real_now() + 3652 * u.day))
+    when = pd.Timestamp.now(tz="UTC").floor("h") + pd.Timedelta(days=5 * 365)
+    times = pd.date_range(when, periods=6, freq="4h")
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # nothing said past the tables either
+        ours = moon_position(times, 34.14, 108.55, 400.0)
+    for k, t in enumerate(times):
+        o = ephem.Observer()
+        o.lat, o.lon, o.elevation, o.pressure = "34.14", "108.55", 400.0, 0.0
+        o.date = t.tz_localize(None).to_pydatetime()
+        m = ephem.Moon(o)
+        sep = angle_between_deg(
+            direction_vector(ours.elevation_deg.iloc[k], ours.azimuth_deg.iloc[k]),
+            direction_vector(math.degrees(m.alt), math.degrees(m.az)))
+        assert float(sep) * 3600 < 60.0, (t, float(sep) * 3600)
