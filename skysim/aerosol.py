@@ -149,7 +149,7 @@ def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
     ndarray (m, n, 3)
         ``I, Q, U`` (skysim basis, incident flux ``pi``, direct beam excluded).
     """
-    from .multiple import bodhaine_optical_thickness
+    from .molecular import bodhaine_optical_thickness
     aods = np.atleast_1d(check_in_range("aods_550", aods_550, *AOD_RANGE,
                                         hint="aerosol optical depth at 550 nm"))
     albedos = np.broadcast_to(check_in_range("albedos", albedos, 0.0, 1.0), aods.shape)
@@ -372,7 +372,7 @@ class AerosolSky(Sky):
                  sun_node_origin_deg: float = 0.0,
                  n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH,
                  settings: EngineSettings = DEFAULT_SETTINGS, n_moments: int = N_MOMENTS):
-        from .multiple import _check_wavelength, bodhaine_depolarization_ratio
+        from .molecular import _check_wavelength, bodhaine_depolarization_ratio
         from .rt_sasktran import require_sasktran2
         self.aerosol = aerosol_type(preset)
         self.aod_550 = float(check_in_range("aod_550", aod_550, *AOD_RANGE,
@@ -452,7 +452,7 @@ class AerosolSky(Sky):
     def describe(self) -> dict:
         optics = aerosol_optics(self.aerosol, self.wavelength_nm, self.n_moments)
         ref = aerosol_optics(self.aerosol, REFERENCE_WAVELENGTH_NM, self.n_moments)
-        from .multiple import bodhaine_optical_thickness
+        from .molecular import bodhaine_optical_thickness
         return {"model": self.name, "aerosol": self.aerosol.describe(),
                 "aod_550": self.aod_550,
                 "aod": self.aod_550 * optics.extinction / ref.extinction,

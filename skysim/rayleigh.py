@@ -304,11 +304,11 @@ def flux_pi_scale(view_elevation_deg, sun_elevation_deg, tau: float | None = Non
     ``P h / 4`` (:func:`slab_transmission`, ``P`` the relative radiance, ``mu = sin(view
     elevation)``, ``mu0 = sin(sun elevation)``), so the factor is ``4 / h`` (about
     ``4 mu / tau`` overhead). ``tau`` defaults to the molecular optical thickness at 550 nm
-    at sea level, 0.0973 (Bodhaine et al. 1999, :func:`skysim.multiple.bodhaine_optical_thickness`).
+    at sea level, 0.0973 (Bodhaine et al. 1999, :func:`skysim.molecular.bodhaine_optical_thickness`).
     Broadcast; the sun above the horizon.
     """
     if tau is None:
-        from .multiple import bodhaine_optical_thickness
+        from .molecular import bodhaine_optical_thickness
         tau = float(bodhaine_optical_thickness(550.0))
     mu = np.sin(np.radians(np.asarray(view_elevation_deg, float)))
     mu0 = np.sin(np.radians(np.asarray(sun_elevation_deg, float)))
