@@ -216,9 +216,9 @@ def sun_geometry(inst: Instrument, heading_offset_deg: float, sun_enu) -> tuple:
     Parameters
     ----------
     inst : Instrument
-    heading_offset_deg : float
+    heading_offset_deg : float or array (n,)
         Heading minus recorded yaw [deg] (0 for an absolute yaw; a relative yaw's offset
-        from the base fit).
+        from the base fit, one per sample when the fit has one per sweep).
     sun_enu : array (n, 3)
         Sun (or Moon) unit vectors in east-north-up at the samples.
 
@@ -230,7 +230,8 @@ def sun_geometry(inst: Instrument, heading_offset_deg: float, sun_enu) -> tuple:
         (``(view x sun) . up > 0``), -1 to the right, 0 on the axis or straight behind.
     """
     from sensor.compound_eye import body_attitude
-    att = body_attitude(inst.yaw_deg + float(heading_offset_deg), inst.pitch_deg, inst.roll_deg)
+    att = body_attitude(inst.yaw_deg + np.asarray(heading_offset_deg, float), inst.pitch_deg,
+                        inst.roll_deg)
     views = inst.sensor.nominal().view_directions_sensor()                    # (U, 3)
     enu = np.stack([att.apply(v) for v in views], axis=1)                     # (n, U, 3)
     sun = np.asarray(sun_enu, float)[:, None, :]
@@ -311,7 +312,7 @@ def check_instrument(inst: Instrument, heading_offset_deg: float, sun_enu,
     Parameters
     ----------
     inst : Instrument
-    heading_offset_deg : float
+    heading_offset_deg : float or array (n,)
         Heading minus recorded yaw [deg] (:func:`sun_geometry`).
     sun_enu : array (n, 3)
         The light source's ENU unit vectors at the samples.
