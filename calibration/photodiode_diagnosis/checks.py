@@ -21,10 +21,10 @@ the casing near the sun, channels read at different instants while the platform 
 clock, only the readings. For units of more than four photodiodes the residual is the norm
 of the readings' null-space part (unsigned).
 
-Gains from the sum rule: ``sum_j nu_j r_tj w_j = 0`` at every sample ``t`` for ``w_j =
-1 / g_j``, a homogeneous linear system in ``w`` whose null vector is unique up to scale once
-the unit has seen at least two polarization states (the readings' Malus part spans three
-dimensions, the null combination one: for ``k = 4``, ``4 - 1 = 3``). So the relative gains of
+Gains from the sum rule: ``sum_j nu_j r_tj w_j = c`` at every sample ``t`` for ``w_j =
+1 / g_j``, with ``c`` what the dark offsets add to the combination, a homogeneous linear
+system in ``(w, c)`` whose null vector is unique up to scale once the unit has seen enough
+brightness and polarization states (the readings' Malus part spans three dimensions). So the relative gains of
 a unit's photodiodes are measured from the readings alone (the smallest right singular vector
 of the stacked rows, each row scaled by its sample's mean reading), which a common sky shape
 fitted to all units cannot absorb. They are taken from the readings farther than
@@ -45,6 +45,10 @@ A unit *fails in motion* when its residual RMS on turning samples is more than
 bins reweighted to the turning samples' distance distribution) and more than
 :data:`MOTION_FACTOR` times the median turning RMS of the instrument's units. Without enough
 standing samples (:data:`MIN_SAMPLES`), only the comparison with the other units is made.
+When turning breaks the rule on most units (the median ratio above :data:`MOTION_FACTOR`),
+the cause is the instrument's, not a unit's: channels of a unit converted at different
+instants (a multiplexed converter whose readings are held between conversions) see
+different skies while the platform turns.
 
 References
 ----------
@@ -131,7 +135,8 @@ def _units(pd_unit, pd_angle_deg, n_units):
     return out
 
 
-def sum_rule_residual(readings, pd_unit, pd_angle_deg, gains=None, usable=None) -> np.ndarray:
+def sum_rule_residual(readings, pd_unit, pd_angle_deg, gains=None, usable=None,
+                      rule_offsets=None) -> np.ndarray:
     """Relative sum-rule residual ``s`` of every unit at every sample, eq. [1] of the module.
 
     Parameters
@@ -144,6 +149,9 @@ def sum_rule_residual(readings, pd_unit, pd_angle_deg, gains=None, usable=None) 
         Relative photodiode gains (default 1), e.g. from :func:`sum_rule_gains`.
     usable : array (n, P) bool, optional
         False for readings to leave out (flagged); a unit-sample with any left out is NaN.
+    rule_offsets : array (U, k - 3), optional
+        What dark offsets add to each null combination of the gain-corrected readings
+        [reading units], subtracted (:func:`sum_rule_gains`); default 0.
 
     Returns
     -------
@@ -163,13 +171,21 @@ def sum_rule_residual(readings, pd_unit, pd_angle_deg, gains=None, usable=None) 
             continue
         ru = r[:, cols]
         mean = ru.mean(axis=1)
-        comb = ru @ null.T / mean[:, None]
+        c = 0.0 if rule_offsets is None else np.nan_to_num(np.asarray(rule_offsets)[u,
+                                                                              :len(null)])
+        comb = (ru @ null.T - c) / mean[:, None]
         out[:, u] = comb[:, 0] if len(null) == 1 else np.linalg.norm(comb, axis=1)
     return out
 
 
 def sum_rule_gains(readings, pd_unit, pd_angle_deg, usable=None):
-    """Relative photodiode gains from the sum rule (module docstring), mean 1 per unit.
+    """Relative photodiode gains and the dark offsets' share of the sum rule (module
+    docstring), from the readings alone.
+
+    With dark offsets ``o_j`` the rule reads ``sum_j nu_j w_j r_tj = c`` at every sample,
+    ``c = sum_j nu_j w_j o_j`` one constant per null combination: the unknowns ``(w, c)``
+    are the null vector of the rows ``[nu_m * r_t, -e_m]`` (each scaled by the sample's mean
+    reading), unique up to scale once the unit's brightness and polarization vary.
 
     Parameters
     ----------
@@ -179,35 +195,49 @@ def sum_rule_gains(readings, pd_unit, pd_angle_deg, usable=None):
     Returns
     -------
     gains : ndarray (P,)
-        NaN for the photodiodes of units without redundancy or without a well-defined null
-        direction.
+        Mean 1 per unit; NaN for the photodiodes of units without redundancy or without a
+        well-defined null direction (:data:`GAIN_IDENTIFIABLE_RATIO`).
+    rule_offsets : ndarray (U, max(k) - 3)
+        ``c`` per unit and null combination [reading units, on the gain-corrected readings];
+        NaN where not identified.
     identifiable : ndarray (U,) bool
     """
     r = np.asarray(readings, float)
     n_units = int(np.max(pd_unit)) + 1
+    units = _units(pd_unit, pd_angle_deg, n_units)
     gains = np.full(r.shape[1], np.nan)
+    offsets = np.full((n_units, max(1, max(len(nl) for _, nl in units))), np.nan)
     ok = np.zeros(n_units, bool)
-    for u, (cols, null) in enumerate(_units(pd_unit, pd_angle_deg, n_units)):
-        if len(null) == 0:
+    for u, (cols, null) in enumerate(units):
+        k, m = len(cols), len(null)
+        if m == 0:
             continue
         ru = r[:, cols]
         keep = np.all(np.isfinite(ru), axis=1)
         if usable is not None:
             keep &= np.all(np.asarray(usable)[:, cols], axis=1)
-        ru = ru[keep] / ru[keep].mean(axis=1, keepdims=True)
-        if len(ru) < 3 * len(cols):
+        ru = ru[keep]
+        if len(ru) < 3 * (k + m):
             continue
-        rows = (ru[:, None, :] * null[None, :, :]).reshape(-1, len(cols))
+        scale = ru.mean(axis=1)
+        ref = np.median(scale)   # c in units of a typical reading: columns of one size
+        rows = np.concatenate([
+            (ru[:, None, :] * null[None, :, :]).reshape(-1, k),
+            -np.kron(ref / scale[:, None], np.eye(m))], axis=1)
+        rows[:, :k] /= np.repeat(scale, m)[:, None]
         sv, vt = np.linalg.svd(rows, full_matrices=False)[1:]
         if sv[-1] > GAIN_IDENTIFIABLE_RATIO * sv[-2]:
             continue
-        w = vt[-1] * np.sign(vt[-1].sum())
+        sol = vt[-1] * np.sign(vt[-1][:k].sum())
+        w, c = sol[:k], sol[k:] * ref
         if np.any(w <= 0):   # a gain cannot be negative: the readings do not obey the rule
             continue
         g = 1.0 / w
-        gains[cols] = g / g.mean()
+        norm = g.mean()
+        gains[cols] = g / norm
+        offsets[u, :m] = c * norm   # the rule on r / (g / mean g)
         ok[u] = True
-    return gains, ok
+    return gains, offsets, ok
 
 
 def sun_geometry(inst: Instrument, heading_offset_deg: float, sun_enu) -> tuple:
@@ -274,6 +304,19 @@ class InstrumentChecks:
         return [int(u) for u in self.motion.unit[self.motion.fails_in_motion]]
 
     @property
+    def turning_ratio(self) -> float:
+        """Median over units of the turning over standing residual RMS (NaN without
+        standing samples): well above 1 on every unit, turning breaks the rule for the whole
+        instrument (channels converted at different instants, a lag of the attitude
+        record), not for one faulty unit."""
+        r = self.motion.ratio.to_numpy(float)
+        return float(np.median(r[np.isfinite(r)])) if np.isfinite(r).any() else float("nan")
+
+    @property
+    def motion_breaks_rule(self) -> bool:
+        return bool(self.turning_ratio > MOTION_FACTOR)
+
+    @property
     def units_with_side_glare(self) -> list:
         return [int(u) for u in self.glare.unit[self.glare.side_dependent]]
 
@@ -283,6 +326,8 @@ class InstrumentChecks:
                 "motion": self.motion.to_dict(orient="records"),
                 "glare": self.glare.to_dict(orient="records"),
                 "units_failing_in_motion": self.units_failing_in_motion,
+                "turning_ratio": self.turning_ratio,
+                "motion_breaks_rule": self.motion_breaks_rule,
                 "units_with_side_glare": self.units_with_side_glare}
 
 
@@ -305,8 +350,7 @@ def _jackknife_means(df: pd.DataFrame, keys: list) -> pd.DataFrame:
     return out.merge(se, on=keys, how="left")
 
 
-def check_instrument(inst: Instrument, heading_offset_deg: float, sun_enu,
-                     dark_offset=0.0) -> InstrumentChecks:
+def check_instrument(inst: Instrument, heading_offset_deg, sun_enu) -> InstrumentChecks:
     """Sum rule by sun distance, side and motion, and the motion test, of one session.
 
     Parameters
@@ -316,16 +360,13 @@ def check_instrument(inst: Instrument, heading_offset_deg: float, sun_enu,
         Heading minus recorded yaw [deg] (:func:`sun_geometry`).
     sun_enu : array (n, 3)
         The light source's ENU unit vectors at the samples.
-    dark_offset : float or array (P,)
-        Dark reading subtracted before the rule (the instrument's, where known) [reading
-        units].
 
     Returns
     -------
     InstrumentChecks
     """
     usable = ~inst.flagged
-    r = inst.readings - np.asarray(dark_offset, float)
+    r = inst.readings
     dist, side = sun_geometry(inst, heading_offset_deg, sun_enu)
     # gains from the readings far from the sun (no glare) and standing (a unit misreading
     # only while turning must not bend them), each where enough such samples remain
@@ -334,9 +375,9 @@ def check_instrument(inst: Instrument, heading_offset_deg: float, sun_enu,
                  np.broadcast_to(~inst.rotating[:, None], usable.shape)):
         enough = np.count_nonzero(fit & keep, axis=0) >= 3 * MIN_SAMPLES
         fit &= np.where(enough, keep, True)
-    gains, _ = sum_rule_gains(r, inst.pd_unit, inst.pd_angle_deg, fit)
+    gains, rule_offsets, _ = sum_rule_gains(r, inst.pd_unit, inst.pd_angle_deg, fit)
     s = sum_rule_residual(r, inst.pd_unit, inst.pd_angle_deg,
-                          np.where(np.isfinite(gains), gains, 1.0), usable)
+                          np.where(np.isfinite(gains), gains, 1.0), usable, rule_offsets)
     n, U = s.shape
     df = pd.DataFrame({
         "unit": np.tile(np.arange(U), n), "s": s.ravel(),
