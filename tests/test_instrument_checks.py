@@ -161,3 +161,20 @@ def test_units_without_redundancy_are_skipped():
     r = np.random.default_rng(0).uniform(1, 2, (20, 6))
     s = sum_rule_residual(r, np.repeat([0, 1], 3), [0, 60, 120] * 2)
     assert np.isnan(s).all()
+
+
+def test_given_gains_serve_units_whose_readings_do_not_define_them(ring):
+    """Twelve samples (fewer than the rule's gains need): with the true gains and dark
+    offsets handed in the residual is at the noise; without them it carries the gain and
+    offset differences."""
+    inst, sun = ring
+    rng = np.random.default_rng(7)
+    g = 1.0 + 0.03 * rng.standard_normal(32)
+    dark = rng.uniform(0.0, 300.0, 32)
+    few = inst.subset(np.arange(12)).with_readings(inst.readings[:12] * g + dark)
+    given = check_instrument(few, 0.0, sun[:12], gains=g, dark_offsets=dark)
+    assert given.gain_source == ["given"] * 8
+    assert given.sum_rule.rms.max() < 2e-3
+    bare = check_instrument(few, 0.0, sun[:12])
+    assert bare.gain_source == ["none"] * 8
+    assert bare.sum_rule.rms.max() > 10 * given.sum_rule.rms.max()

@@ -292,12 +292,17 @@ class InstrumentChecks:
         times +1 with the sun on the left, -1 on the right) with its jackknife SE, and ``side_dependent`` (beyond
         :data:`SIDE_FAMILY_ALPHA`: stray light reaching the photodiodes unequally, by
         the side the sun is on).
+    gain_source : list of str
+        Per unit: ``"sum rule"`` (its own readings), ``"given"`` (the gains and offsets
+        handed in) or ``"none"`` (uncorrected: its residual includes gain and offset
+        differences).
     """
 
     gains: np.ndarray
     sum_rule: pd.DataFrame
     motion: pd.DataFrame
     glare: pd.DataFrame
+    gain_source: list
 
     @property
     def units_failing_in_motion(self) -> list:
@@ -322,6 +327,7 @@ class InstrumentChecks:
 
     def to_dict(self) -> dict:
         return {"gains": [None if not np.isfinite(g) else float(g) for g in self.gains],
+                "gain_source": list(self.gain_source),
                 "sum_rule": self.sum_rule.to_dict(orient="records"),
                 "motion": self.motion.to_dict(orient="records"),
                 "glare": self.glare.to_dict(orient="records"),
@@ -350,7 +356,8 @@ def _jackknife_means(df: pd.DataFrame, keys: list) -> pd.DataFrame:
     return out.merge(se, on=keys, how="left")
 
 
-def check_instrument(inst: Instrument, heading_offset_deg, sun_enu) -> InstrumentChecks:
+def check_instrument(inst: Instrument, heading_offset_deg, sun_enu, *, gains=None,
+                     dark_offsets=None) -> InstrumentChecks:
     """Sum rule by sun distance, side and motion, and the motion test, of one session.
 
     Parameters
@@ -360,13 +367,17 @@ def check_instrument(inst: Instrument, heading_offset_deg, sun_enu) -> Instrumen
         Heading minus recorded yaw [deg] (:func:`sun_geometry`).
     sun_enu : array (n, 3)
         The light source's ENU unit vectors at the samples.
+    gains, dark_offsets : array (P,), optional
+        Photodiode gains and dark offsets [reading units] known otherwise (a base fit's),
+        used for the units whose readings do not define their own (NaN: none known);
+        ``InstrumentChecks.gain_source`` says which each unit got.
 
     Returns
     -------
     InstrumentChecks
     """
     usable = ~inst.flagged
-    r = inst.readings
+    r = np.array(inst.readings, float)
     dist, side = sun_geometry(inst, heading_offset_deg, sun_enu)
     # gains from the readings far from the sun (no glare) and standing (a unit misreading
     # only while turning must not bend them), each where enough such samples remain
@@ -375,9 +386,20 @@ def check_instrument(inst: Instrument, heading_offset_deg, sun_enu) -> Instrumen
                  np.broadcast_to(~inst.rotating[:, None], usable.shape)):
         enough = np.count_nonzero(fit & keep, axis=0) >= 3 * MIN_SAMPLES
         fit &= np.where(enough, keep, True)
-    gains, rule_offsets, _ = sum_rule_gains(r, inst.pd_unit, inst.pd_angle_deg, fit)
+    rule_gains, rule_offsets, own = sum_rule_gains(r, inst.pd_unit, inst.pd_angle_deg, fit)
+    source = np.where(own, "sum rule", "none").astype(object)
+    if gains is not None:   # the units without their own: the given gains and offsets
+        g = np.asarray(gains, float)
+        o = np.zeros_like(g) if dark_offsets is None else np.asarray(dark_offsets, float)
+        for u in np.flatnonzero(~own):
+            cols = np.flatnonzero(inst.pd_unit == u)
+            if np.all(np.isfinite(g[cols])) and np.all(np.isfinite(o[cols])):
+                r[:, cols] = (r[:, cols] - o[cols]) / (g[cols] / g[cols].mean())
+                rule_offsets[u] = 0.0
+                source[u] = "given"
     s = sum_rule_residual(r, inst.pd_unit, inst.pd_angle_deg,
-                          np.where(np.isfinite(gains), gains, 1.0), usable, rule_offsets)
+                          np.where(np.isfinite(rule_gains), rule_gains, 1.0), usable,
+                          rule_offsets)
     n, U = s.shape
     df = pd.DataFrame({
         "unit": np.tile(np.arange(U), n), "s": s.ravel(),
@@ -395,9 +417,10 @@ def check_instrument(inst: Instrument, heading_offset_deg, sun_enu) -> Instrumen
     crit = student_t.ppf(1.0 - SIDE_FAMILY_ALPHA / (2.0 * U), glare.sweeps - 1)
     glare["side_dependent"] = (np.abs(glare.side_asymmetry)
                                > crit * glare.side_asymmetry_se).fillna(False).astype(bool)
-    return InstrumentChecks(gains, table, _motion(df, U),
+    return InstrumentChecks(rule_gains, table, _motion(df, U),
                             glare[["unit", "n", "sweeps", "side_asymmetry",
-                                   "side_asymmetry_se", "side_dependent"]])
+                                   "side_asymmetry_se", "side_dependent"]],
+                            [str(x) for x in source])
 
 
 def _motion(df: pd.DataFrame, n_units: int) -> pd.DataFrame:
