@@ -295,7 +295,8 @@ class InstrumentChecks:
     gain_source : list of str
         Per unit: ``"sum rule"`` (its own readings), ``"given"`` (the gains and offsets
         handed in) or ``"none"`` (uncorrected: its residual includes gain and offset
-        differences).
+        differences, so it is tabulated but neither named for glare or motion nor part of
+        :attr:`turning_ratio`).
     """
 
     gains: np.ndarray
@@ -415,9 +416,11 @@ def check_instrument(inst: Instrument, heading_offset_deg, sun_enu, *, gains=Non
         columns={"mean": "side_asymmetry", "mean_se": "side_asymmetry_se"})
     from scipy.stats import t as student_t
     crit = student_t.ppf(1.0 - SIDE_FAMILY_ALPHA / (2.0 * U), glare.sweeps - 1)
-    glare["side_dependent"] = (np.abs(glare.side_asymmetry)
-                               > crit * glare.side_asymmetry_se).fillna(False).astype(bool)
-    return InstrumentChecks(rule_gains, table, _motion(df, U),
+    corrected = np.array([src != "none" for src in source])
+    glare["side_dependent"] = ((np.abs(glare.side_asymmetry) > crit * glare.side_asymmetry_se)
+                               .fillna(False).astype(bool) & corrected[glare.unit])
+    motion = _motion(df[corrected[df.unit.to_numpy()]], U)
+    return InstrumentChecks(rule_gains, table, motion,
                             glare[["unit", "n", "sweeps", "side_asymmetry",
                                    "side_asymmetry_se", "side_dependent"]],
                             [str(x) for x in source])
