@@ -35,7 +35,8 @@ def test_readme_python_blocks_run_in_order(tmp_path, monkeypatch, capsys):
     # what the blocks promise: the files written, the calibration and the verdict printed
     for name in ("sky.tiff", "sky.tiff.json", "truth/sweep.csv", "truth/sweep.csv.json",
                  "truth/manifest.json"):
-        assert (tmp_path / name).is_file(), name
+        assert (tmp_path / "results" / name).is_file(), name
+    assert [p.name for p in tmp_path.iterdir()] == ["results"]  # nothing beside results/
     assert re.search(r"^1-2 \d+\.\d\d -> \d+\.\d\d$", out, flags=re.M), out
     # an image with noise only: no effect is named (README: "this image has noise only")
     assert out.rstrip().splitlines()[-1].startswith("none - "), out
