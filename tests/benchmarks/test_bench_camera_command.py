@@ -12,6 +12,7 @@ Goals reported by ``tests/benchmarks/ratios.py`` (never asserted as timings): th
 within 4x the floor (``max_floor_ratio``) and at most 800 MB resident (``max_peak_mb``).
 """
 
+import json
 import subprocess
 import sys
 from pathlib import Path
@@ -47,7 +48,7 @@ def frame(tmp_path_factory):
     raw, doc = read_raw(d / "frame.tiff")
     doc.pop("schema")
     np.save(d / "frame.npy", raw)
-    (d / "sidecar.json").write_text(__import__("json").dumps(doc))
+    (d / "sidecar.json").write_text(json.dumps(doc))
     return d
 
 
