@@ -43,5 +43,6 @@ bench: $(VENV)/.installed-test
 		--benchmark-json=.benchmarks/latest.json -p no:randomly
 	$(BIN)/python tests/benchmarks/ratios.py .benchmarks/latest.json
 
+# results/: what the README's commands and the reproductions write
 clean:
 	rm -rf $(VENV) results .benchmarks .pytest_cache

@@ -98,7 +98,9 @@ def test_readme_commands_run_top_to_bottom(fresh_copy, monkeypatch, capsys):
     assert len(ran) >= len(readme_commands()) - (0 if slow_ok else len(SLOW)) - len(needs_data)
     for name in ("sky.parquet", "sky.parquet.json", "sky.csv", "sky.csv.json", "sweep.csv",
                  "sweeps.csv", "report.json", "truth/manifest.json", "mine/manifest.json"):
-        assert (fresh_copy / name).is_file(), name
+        assert (fresh_copy / "results" / name).is_file(), name
+    # every output under results/ (which `make clean` removes), none beside the checkout's files
+    assert sorted(p.name for p in fresh_copy.iterdir()) == ["examples", "results"]
 
 
 @pytest.mark.parametrize("argv", [c for c in readme_commands() if _data_of(c) is not None],

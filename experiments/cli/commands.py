@@ -452,7 +452,7 @@ def register(sub) -> None:
                    help="time from one sweep's start to the next [s] (default: --duration "
                         "+ 60)")
     s.add_argument("--dmax", type=float_in(0, 1, low_open=True, high_open=True), default=0.7,
-                   help="maximum degree of polarization of the sky")
+                   help="maximum degree of polarization of the sky (skysim sky: 1)")
     s.add_argument("--errors", default="random",
                    help="sensor errors: 'random' (Yang 2014 error model), 'none', or a JSON "
                         "file with misalignment_deg (6 values) [deg], transmittance (3) "

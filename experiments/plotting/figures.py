@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from pathlib import Path
 
-__all__ = ["pyplot", "save_png"]
+__all__ = ["pyplot", "quantity_label", "save_png"]
 
 
 def pyplot():
@@ -26,3 +26,20 @@ def save_png(fig, path, dpi: int = 110) -> Path:
     finally:
         plt.close(fig)
     return path
+
+
+_UNITS = {"deg": "deg", "lx": "lx", "s": "s", "min": "min", "h": "h", "m": "m", "km": "km",
+          "nm": "nm", "C": "°C", "K": "K", "hPa": "hPa", "pct": "%", "dn": "DN", "v": "V",
+          "mv": "mV", "e": "e-", "px": "px", "hz": "Hz"}
+"""Unit suffixes of column names and how a figure writes them."""
+
+
+def quantity_label(name: str) -> str:
+    """A column name as a figure's words: ``illuminance_lx`` -> ``illuminance [lx]``,
+    ``sun_elevation_deg`` -> ``sun elevation [deg]``, ``time of day`` unchanged (a last
+    word that is not a known unit stays a word)."""
+    head, _, last = str(name).rpartition("_")
+    unit = _UNITS.get(last) or _UNITS.get(last.lower())
+    if head and unit:
+        return f"{head.replace('_', ' ')} [{unit}]"
+    return str(name).replace("_", " ")

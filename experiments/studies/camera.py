@@ -249,7 +249,7 @@ def register(sub) -> None:
                    help="sky model: single-scattering Rayleigh, multiple scattering (sasktran2) "
                         "or the Berry neutral-point sky")
     p.add_argument("--dmax", type=float_in(0, 1, low_open=True), default=SKY_DMAX,
-                   help="rayleigh/berry: maximum degree of polarization")
+                   help="rayleigh/berry: maximum degree of polarization (skysim sky: 1)")
     p.add_argument("--tau", type=positive_float, default=0.1,
                    help="multiple: Rayleigh optical thickness")
     p.add_argument("--albedo", type=float_in(0, 1), default=0.1, help="multiple: ground albedo")

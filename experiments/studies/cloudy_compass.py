@@ -316,26 +316,48 @@ def _write(out: Path, result: dict, cfg: Config, clear, fields) -> None:
     _example(out, cfg, clear, fields)
 
 
+SENSOR_TITLES = {"three-pair": "three-pair sensor at the zenith",
+                 "ring": "ring of 8 photodiode units", "camera": "fisheye polarization camera"}
+METHOD_LABELS = {"U1-U2": "units 1 and 2, every reading", "U1-U2, DoP >= 0.05":
+                 "units 1 and 2, DoP ≥ 0.05", "DoP-weighted": "units weighted by DoP",
+                 "equal weights": "units weighted equally",
+                 "DoP >= 0.05": "units of DoP ≥ 0.05 only", "robust": "robust fit (Cauchy)",
+                 "least squares": "least squares"}
+"""What the figure calls the sensors and the methods of :data:`METHODS`."""
+
+
 def _plot(table: pd.DataFrame, out: Path) -> None:
+    """Median heading error against cover, one panel per sensor: the line style is the
+    method (legend in the panel), the colour the clouds' optical thickness (one legend for
+    the figure)."""
+    from matplotlib.lines import Line2D
     plt = pyplot()
     sensors = list(METHODS)
-    fig, axes = plt.subplots(1, len(sensors), figsize=(4.0 * len(sensors), 3.8), sharey=True,
+    fig, axes = plt.subplots(1, len(sensors), figsize=(4.2 * len(sensors), 4.4), sharey=True,
                              constrained_layout=True)
     styles = ["-", "--", ":"]
     taus = sorted(table.tau.unique())
     cmap = plt.get_cmap("viridis")
+    colours = {tau: cmap(j / max(1, len(taus) - 1) * 0.8) for j, tau in enumerate(taus)}
     for ax, sensor in zip(axes, sensors):
         for i, method in enumerate(METHODS[sensor]):
-            for j, tau in enumerate(taus):
+            for tau in taus:
                 g = table[(table.sensor == sensor) & (table.method == method)
                           & (table.tau == tau)].sort_values("cover")
-                ax.semilogy(g.cover, g.median_abs_error_deg, styles[i % 3], marker="o", ms=3,
-                            color=cmap(j / max(1, len(taus) - 1) * 0.8),
-                            label=f"{method}, τ {tau:g}")
-        ax.set(title=sensor, xlabel="cloud cover")
+                ax.semilogy(g.cover, g.median_abs_error_deg, linestyle=styles[i % 3],
+                            marker="o", ms=3, color=colours[tau])
+        ax.set(title=SENSOR_TITLES[sensor], xlabel="cloud cover [fraction of the sky]")
         ax.grid(True, which="both", alpha=0.3)
-        ax.legend(fontsize=6.5, loc="upper left")
+        ax.legend([Line2D([], [], color="0.2", linestyle=styles[i % 3])
+                   for i in range(len(METHODS[sensor]))],
+                  [METHOD_LABELS[m] for m in METHODS[sensor]], fontsize=7.5,
+                  loc="upper left", handlelength=3.5, title="method", title_fontsize=7.5)
     axes[0].set_ylabel("median absolute heading error [deg]")
+    lo, hi = axes[0].get_ylim()
+    axes[0].set_ylim(lo, hi * (hi / lo) ** 0.3)  # room for the method legends above the lines
+    fig.legend([Line2D([], [], color=colours[tau], marker="o", ms=3) for tau in taus],
+               [f"{tau:g}" for tau in taus], title="cloud optical thickness", loc="outside "
+               "lower center", ncol=len(taus), fontsize=8, title_fontsize=8)
     save_png(fig, out / "heading_vs_cover.png")
 
 

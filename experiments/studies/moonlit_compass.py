@@ -437,15 +437,28 @@ def _write(out: Path, result: dict):
     _plot(result, out)
 
 
+SENSOR_TITLES = {"three-pair raw": "three-pair sensor, uncalibrated",
+                 "three-pair dark-calibrated": "three-pair, dark current calibrated",
+                 "three-pair true-parameters": "three-pair, true sensor parameters",
+                 "ring": "ring of 8 photodiode units", "camera": "polarization camera"}
+"""What the figures call the rows of :data:`SENSORS`."""
+
+
 def _plot(result: dict, out: Path):
+    """RMS heading error against the Moon's phase, one panel per sensor on a 2 x 3 grid
+    whose sixth cell holds the legend (the Moon's elevation); and against the night's
+    illuminance, all sensors on one axis."""
     plt = pyplot()
     table = result["table"]
     sensors = [s for s in SENSORS if s in set(table.sensor)]
-    fig, axes = plt.subplots(1, len(sensors), figsize=(3.4 * len(sensors), 3.6), sharey=True,
-                             constrained_layout=True)
+    ncols = min(3, len(sensors) + 1)
+    nrows = -(-(len(sensors) + 1) // ncols)
+    fig, axes = plt.subplots(nrows, ncols, figsize=(3.9 * ncols, 3.3 * nrows), sharey=True,
+                             squeeze=False, constrained_layout=True)
     cmap = plt.get_cmap("viridis")
     targets = sorted(result["conditions"].target_elevation_deg.unique())
-    for ax, sensor in zip(np.atleast_1d(axes), sensors):
+    flat = axes.ravel()
+    for ax, sensor in zip(flat, sensors):
         g = table[table.sensor == sensor].merge(
             result["conditions"][["night", "moon_elevation_deg", "target_elevation_deg"]],
             on=["night", "moon_elevation_deg"])
@@ -453,22 +466,29 @@ def _plot(result: dict, out: Path):
             h = g[g.target_elevation_deg == target].sort_values("phase_angle_deg")
             ax.semilogy(h.phase_angle_deg, h.rms_error_deg, "o-", ms=3,
                         color=cmap(i / max(1, len(targets) - 1)),
-                        label=f"Moon at ~{target:g}°")
+                        label=f"about {target:g}°")
         ax.invert_xaxis()
-        ax.set(title=sensor, xlabel="phase angle [deg] (new → full)")
+        ax.set(title=SENSOR_TITLES.get(sensor, sensor),
+               xlabel="Moon's phase angle [deg] (new → full)")
         ax.grid(True, which="both", alpha=0.3)
-    np.atleast_1d(axes)[0].set_ylabel("RMS heading error [deg]")
-    np.atleast_1d(axes)[0].legend(fontsize=7)
+    for row in axes:
+        row[0].set_ylabel("RMS heading error [deg]")
+    handles, labels = flat[0].get_legend_handles_labels()
+    for ax in flat[len(sensors):]:
+        ax.set_axis_off()
+    flat[len(sensors)].legend(handles, labels, title="Moon's elevation", loc="center",
+                              fontsize=9, title_fontsize=9)
     save_png(fig, out / "heading_vs_phase.png")
 
-    fig, ax = plt.subplots(figsize=(6, 4.2), constrained_layout=True)
+    fig, ax = plt.subplots(figsize=(6, 5.0), constrained_layout=True)
     for sensor in sensors:
         g = table[table.sensor == sensor].sort_values("zenith_lux_eq")
-        ax.loglog(g.zenith_lux_eq, g.rms_error_deg, "o", ms=4, label=sensor)
+        ax.loglog(g.zenith_lux_eq, g.rms_error_deg, "o", ms=4,
+                  label=SENSOR_TITLES.get(sensor, sensor))
     ax.set(xlabel="zenith lux equivalent π L [lx]", ylabel="RMS heading error [deg]",
            title="heading error vs night illuminance")
     ax.grid(True, which="both", alpha=0.3)
-    ax.legend(fontsize=7)
+    fig.legend(loc="outside lower center", ncol=2, fontsize=8)  # beside the points, not on them
     save_png(fig, out / "heading_vs_illuminance.png")
 
 

@@ -193,7 +193,19 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
     """Run everything; return the tables and a summary dict.
 
     ``reference``: another copy of the Natraj tables (:func:`natraj_path`); default the
-    shipped rows."""
+    shipped rows. Progress on stderr, step by step (:data:`experiments.workflows.progress.
+    STEP_SECONDS`)."""
+    from experiments.workflows.progress import STEP_SECONDS, Steps
+
+    t0 = time.perf_counter()
+    out = Path(out)
+    table = natraj_path(reference)
+    with Steps("skysim reproduce physical-sky",
+               STEP_SECONDS["physical-sky" + (" --quick" if quick else "")]) as steps:
+        return _run(out, quick, table, steps, t0)
+
+
+def _run(out: Path, quick: bool, table, steps, t0: float) -> dict:
     from skysim.berry import BerrySky
     from skysim.multiple import MultipleScatteringSky
     from skysim.neutral_points import neutral_points
@@ -201,16 +213,16 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
 
     from skysim.geometry import sky_grid
 
-    t0 = time.perf_counter()
-    out = Path(out)
-    table = natraj_path(reference)
     per_case, points = validate_against_natraj(table, cases=QUICK_CASES if quick else None)
+    steps.done("validation against the Natraj tables")
     suns = [5.0, MU0_04_ELEVATION_DEG, 45.0] if quick else \
         [3.0, 6.0, 10.0, 15.0, MU0_04_ELEVATION_DEG, 30.0, 40.0, 50.0, 60.0, 70.0]
     configs = [(0.25, 0.0), (0.25, 0.25)]
     npts = neutral_point_curves(suns, configs)
     npts["berry_delta_deg"] = [berry_delta_from(r) for _, r in npts.iterrows()]
+    steps.done("neutral points")
     zen = zenith_dop_curves(suns, configs)
+    steps.done("zenith DoP")
 
     sun = (20.0, 180.0)
     el, az = sky_grid(3.0)
@@ -227,9 +239,11 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
                "berry_delta_deg": delta, "sun_elevation_deg": sun[0]}
     _figures(out, per_case, points, npts, zen,
              (el, az, sun, (ms, berry, single), n.marks(sun[1])))
+    steps.done("sky maps and figures")
 
     from .aerosol_sky import aerosol_section
     aerosol_summary = aerosol_section(out, quick=quick)
+    steps.done("aerosol skies")
 
     row04 = zen[np.isclose(zen.sun_elevation_deg, MU0_04_ELEVATION_DEG)].iloc[0]
     summary = {
@@ -251,6 +265,8 @@ def run(out: Path, quick: bool = False, reference=None) -> dict:
         "aop_rms_over_sky": aop_rms,
         "aerosol": aerosol_summary,
         "elapsed_s": time.perf_counter() - t0,
+        "step_s": {k: round(v, 2) for k, v in steps.elapsed_s.items()},
+        "step_cpu_s": {k: round(v, 2) for k, v in steps.cpu_s.items()},
         "config": {"reference": str(table), "min_mu": 0.1,
                    "cases": "quick subset " + repr(QUICK_CASES) if quick else "all shared",
                    "sun_elevations_deg": suns, "neutral_point_configs": configs,

@@ -277,6 +277,8 @@ def plot_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
+
+    from experiments.plotting.figures import quantity_label
     u = report.unit
     dims = list(dict.fromkeys(s.dimension for s in report.where))
     fig, axes = plt.subplots(1, max(len(dims), 1), figsize=(3.4 * max(len(dims), 1), 3.6),
@@ -291,7 +293,7 @@ def plot_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
         if report.noise_floor is not None:
             ax.axhline(report.noise_floor, color="k", ls="--", lw=1, label="noise floor")
         ax.set_xticks(x, [s.label for s in tab], rotation=45, ha="right", fontsize=7)
-        ax.set_title(f"by {dim}", fontsize=9)
+        ax.set_title(f"by {quantity_label(dim)}", fontsize=9)
         ax.set_ylabel(f"held-out RMS [{u}]")
     axes[0][0].legend(fontsize=7)
     p1 = out / "residuals_by_slice.png"

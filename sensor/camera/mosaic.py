@@ -426,8 +426,8 @@ class PolarizationCamera:
         out = np.empty(self.sensor.shape, bool)
         for rows, x, y in self._row_blocks():
             with np.errstate(invalid="ignore"):
-                np.less_equal(self.lens.theta_rad(np.hypot(x, y)), self.lens.max_theta_rad,
-                              out=out[rows])
+                np.less_equal(self.lens.theta_rad(np.sqrt(np.add(x * x, y * y))),
+                              self.lens.max_theta_rad, out=out[rows])
         return out
 
     def _row_blocks(self):
@@ -491,17 +491,33 @@ class PolarizationCamera:
         image circle. The ray is ``d = (sin theta cos psi, sin theta sin psi, cos theta)``
         and the sun's projections on its polarization axes follow in closed form
         (:func:`_sun_projections`)."""
+        # The radius, the angle theta and the image azimuth's cosines come from float64 (the
+        # radius squared of half-integer offsets is exact); the trigonometric functions of
+        # theta run in the planes' dtype: in float32 they take a tenth of the float64 time
+        # and miss the rounded float64 value by at most about one float32 ulp, the size of
+        # the rounding to float32 that storing them already makes (the render's float32
+        # error bounds are tested against float64).
         def make():
-            out = np.zeros((5,) + self.sensor.shape, dtype)
+            t = np.dtype(dtype).type
+            out = np.zeros((5,) + self.sensor.shape, t)
+            circle = None if "_in_circle" in self.__dict__ else np.empty(self.sensor.shape,
+                                                                          bool)
             for rows, x, y in self._row_blocks():
-                rho = np.hypot(x, y)
+                rho = np.sqrt(np.add(x * x, y * y))
                 with np.errstate(invalid="ignore", divide="ignore"):
                     theta = self.lens.theta_rad(rho)
                     inside = theta <= self.lens.max_theta_rad
+                    theta = theta.astype(t, copy=False)
+                    half = np.sin(np.multiply(theta, t(0.5)))
                     planes = (np.where(rho > 0, x / rho, 1.0), np.where(rho > 0, y / rho, 0.0),
-                              np.sin(theta), np.cos(theta), 2.0 * np.sin(0.5 * theta) ** 2)
+                              np.sin(theta), np.cos(theta),
+                              np.multiply(np.multiply(half, half), t(2.0)))
+                if circle is not None:  # the image-circle mask on the way (as _in_circle)
+                    circle[rows] = inside
                 for k, plane in enumerate(planes):
                     np.copyto(out[k, rows], plane, casting="same_kind", where=inside)
+            if circle is not None:
+                self.__dict__["_in_circle"] = circle
             return out
         return self._cached(("polar", np.dtype(dtype)), make)
 
@@ -656,23 +672,41 @@ class PolarizationCamera:
         there). Works in the input's dtype.
         """
         lam = np.asarray(mean_electrons)
+        shape = lam.shape
+        lam = lam.reshape((1,) * (2 - lam.ndim) + shape)  # rows of pixels, whatever the shape
         dtype = np.result_type(lam, np.float32)
         read = float(self.sensor.read_noise_e)
+        # every normal draw first, then every Poisson draw (the random stream of one frame
+        # does not depend on the blocks below)
         z = rng.standard_normal(lam.shape, dtype=dtype)
         low = lam < POISSON_EXACT_BELOW_E
-        z_low = z[low] if low.any() else None
-        var = np.add(lam, read * read, dtype=dtype)
-        skew = np.divide(lam, var, dtype=dtype)
-        skew *= 1.0 / 6.0
-        e = np.multiply(z, z)
-        e -= 1.0
-        e *= skew
-        z *= np.sqrt(var, out=var)
-        e += z
-        e += lam
-        if z_low is not None:
-            e[low] = rng.poisson(lam[low]) + read * z_low
-        return self.digitise(e)
+        poisson = None
+        if low.any():
+            poisson = rng.poisson(lam[low]) + read * z[low]
+        # the normal law in blocks of rows: temporaries of a few hundred kB instead of four
+        # frames (on a fresh process most of the time of a full-frame temporary is spent
+        # faulting its memory in)
+        raw = np.empty(lam.shape, np.uint16)
+        h, w = lam.shape[-2:]
+        step = max(1, _FRAME_BLOCK_PX // w)
+        for lead in np.ndindex(lam.shape[:-2]):
+            for r0 in range(0, h, step):
+                at = lead + (slice(r0, min(r0 + step, h)),)
+                lam_b, z_b = lam[at], z[at]
+                var = np.add(lam_b, read * read, dtype=dtype)
+                skew = np.divide(lam_b, var, dtype=dtype)
+                skew *= 1.0 / 6.0
+                e = np.multiply(z_b, z_b)
+                e -= 1.0
+                e *= skew
+                np.sqrt(var, out=var)
+                var *= z_b
+                e += var
+                e += lam_b
+                raw[at] = self.digitise(e)
+        if poisson is not None:
+            raw[low] = self.digitise(poisson.astype(dtype, copy=False))
+        return raw.reshape(shape)
 
     def capture(self, scene: Scene, exposure_s: float, rng: np.random.Generator) -> np.ndarray:
         """A raw mosaic image (H, W) uint16 [DN] of ``scene`` (:meth:`noisy_frames`); the sun

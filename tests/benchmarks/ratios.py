@@ -10,8 +10,9 @@ A group may also hold a *floor* (``extra_info["floor"]`` true): a bare numpy pas
 what any implementation can reach (one ``np.cos`` over the grid); the others print how many
 times the floor's per-item time they take. A member's ``extra_info["goal"]`` states its goal,
 printed as met or not: ``min_speedup`` (against the baseline), ``max_floor_ratio``,
-``min_items_per_s``, ``max_import_s`` (against ``extra_info["import_s"]``) or ``max_s`` (the
-median wall time of one round, in seconds). Nothing here
+``min_items_per_s``, ``max_import_s`` (against ``extra_info["import_s"]``), ``max_s`` (the
+median wall time of one round, in seconds) or ``max_peak_mb`` (against
+``extra_info["peak_mb"]``, a child process's peak resident memory). Nothing here
 asserts anything about time.
 
 Usage: python tests/benchmarks/ratios.py BENCHMARK_JSON
@@ -42,7 +43,8 @@ def main(path: str) -> int:
             if n != 1:
                 line += f"  ({1.0 / t:,.0f} items/s)"
             measured = {"items_per_s": 1.0 / t, "s": b["stats"]["median"],
-                        "import_s": b.get("extra_info", {}).get("import_s")}
+                        "import_s": b.get("extra_info", {}).get("import_s"),
+                        "peak_mb": b.get("extra_info", {}).get("peak_mb")}
             if base is not None and b is not base:
                 measured["speedup"] = _per_item(base) / t
                 line += f"  speed-up vs {base['name']}: {measured['speedup']:,.1f}x"
@@ -69,7 +71,7 @@ def _per_item(bench) -> float:
 
 _GOALS = {"min_speedup": ("speedup", ">=", "x"), "max_floor_ratio": ("floor_ratio", "<=", "x"),
           "min_items_per_s": ("items_per_s", ">=", "/s"), "max_import_s": ("import_s", "<=", "s"),
-          "max_s": ("s", "<=", "s")}
+          "max_s": ("s", "<=", "s"), "max_peak_mb": ("peak_mb", "<=", " MB")}
 
 
 def _goals(bench, measured):
