@@ -22,6 +22,7 @@ import functools
 import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
 
 from .exceptions import ConvergenceError
@@ -38,7 +39,8 @@ def pair_index(pair) -> tuple[int, int]:
     """0-based column indices of a pair such as ``(1, 2)``; raises ``ValueError`` otherwise."""
     i, j = (int(pair[0]), int(pair[1]))
     if i == j or not {i, j} <= {1, 2, 3}:
-        raise ValueError(f"pair must be two different channels of 1, 2, 3; got {pair!r}")
+        raise InvalidParameterError(
+            f"pair must be two different channels of 1, 2, 3; got {pair!r}")
     return i - 1, j - 1
 
 
@@ -96,7 +98,8 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     """
     U = np.asarray(U, dtype=float)
     if U.shape[-1:] != (3,):
-        raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
+        raise InvalidParameterError(
+            f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
     used, systems = _pair_systems(tuple(pair_index(pair) for pair in pairs))
     flat = U.reshape(-1, 3)
     flat = flat if len(used) == 3 else flat[:, used]

@@ -196,7 +196,7 @@ class CompoundEyeSensor:
 
     def __post_init__(self):
         if len(self.units) == 0:
-            raise ValueError("a compound-eye sensor needs at least one unit")
+            raise InvalidParameterError("a compound-eye sensor needs at least one unit")
         for i, u in enumerate(self.units):
             if not 0.0 <= float(u.elevation_deg) <= 90.0:
                 raise UnitBelowHorizonError(
@@ -323,14 +323,15 @@ class CompoundEyeSensor:
             moonlit sky (:class:`skysim.night.MoonlitSky`).
         """
         if yaw_reference not in ("north", "relative"):
-            raise ValueError(f"yaw_reference must be 'north' or 'relative'; got {yaw_reference!r}")
+            raise InvalidParameterError(
+                f"yaw_reference must be 'north' or 'relative'; got {yaw_reference!r}")
         if source == "sun":
             sun, idx = sun_vector(times, site)
         elif source == "moon":
             from skysim.moon import moon_vector
             sun, idx = moon_vector(times, site)
         else:
-            raise ValueError(f"source must be 'sun' or 'moon'; got {source!r}")
+            raise InvalidParameterError(f"source must be 'sun' or 'moon'; got {source!r}")
         n = len(idx)
         yaw, pitch, roll = (np.broadcast_to(check_finite(k, v), (n,)).astype(float) for k, v in (
             ("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)))

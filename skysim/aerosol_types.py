@@ -182,7 +182,8 @@ def aerosol_type(preset) -> AerosolType:
     if isinstance(preset, AerosolType):
         return preset
     if preset not in PRESETS:
-        raise ValueError(f"unknown aerosol preset {preset!r}; valid: {', '.join(PRESETS)}")
+        raise InvalidParameterError(
+            f"unknown aerosol preset {preset!r}; valid: {', '.join(PRESETS)}")
     return PRESETS[preset]
 
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .exceptions import InvalidParameterError
+
 __all__ = ["ARCSEC2_SR", "BANDS", "Band", "get_band", "magnitude_to_radiance",
            "radiance_to_magnitude", "solar_irradiance"]
 
@@ -80,7 +82,7 @@ def get_band(name: str) -> Band:
     try:
         return BANDS[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown band {name!r}; valid: {', '.join(BANDS)}") from None
+        raise InvalidParameterError(f"unknown band {name!r}; valid: {', '.join(BANDS)}") from None
 
 
 def magnitude_to_radiance(mag_arcsec2, band: str) -> np.ndarray:

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rayleigh
-from .exceptions import InvalidParameterError
+from .exceptions import InvalidParameterError, UnsupportedOperationError
 from .geometry import e_vector_from_aop, wrap_axial_deg
 from .validation import (
     TWILIGHT_LIMIT_DEG,
@@ -141,8 +141,8 @@ class Sky(abc.ABC):
         NotImplementedError
             For a model whose ``I`` has no stated absolute unit.
         """
-        raise NotImplementedError(f"sky model {self.name!r} does not state the unit of its "
-                                  "radiance, so no cloud light can be added to it")
+        raise UnsupportedOperationError(f"sky model {self.name!r} does not state the unit of its "
+                                        "radiance, so no cloud light can be added to it")
 
     def describe(self) -> dict:
         """Model name and parameters, for sidecars."""
@@ -177,7 +177,8 @@ class RayleighSky(Sky):
         except TypeError:
             self.dtype = None
         if self.dtype is None or self.dtype.name not in self.DTYPES:
-            raise ValueError(f"dtype must be one of {', '.join(self.DTYPES)}; got {dtype!r}")
+            raise InvalidParameterError(
+                f"dtype must be one of {', '.join(self.DTYPES)}; got {dtype!r}")
         self.dmax = float(dmax)
 
     def _stokes(self, vel, vaz, sel, saz):
@@ -223,7 +224,8 @@ def make_sky(model: str = "rayleigh", **params) -> Sky:
     """
     import inspect
     if model not in SKY_MODELS:
-        raise ValueError(f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
+        raise InvalidParameterError(
+            f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
     module_name, cls_name = SKY_MODELS[model].split(":")
     cls = getattr(importlib.import_module(module_name), cls_name)
     takes = [n for n, p in inspect.signature(cls).parameters.items()

@@ -58,7 +58,12 @@ from pysolar import constants as _pysolar_constants
 from pysolar import solar as _solar
 from pysolar import solartime as _solartime
 
-from .exceptions import BroadcastError, InvalidTimeError, NaiveDatetimeError
+from .exceptions import (
+    BroadcastError,
+    InvalidParameterError,
+    InvalidTimeError,
+    NaiveDatetimeError,
+)
 from .geometry import direction_vector, elevation_azimuth
 from .validation import check_finite, check_in_range, check_latitude, check_longitude
 
@@ -199,8 +204,34 @@ class Site:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Site":
-        return cls(float(d["latitude_deg"]), float(d["longitude_deg"]),
-                   float(d.get("altitude_m", 0.0)), str(d.get("name", "")))
+        """The site of a dict such as a sidecar's ``site``: ``latitude_deg``,
+        ``longitude_deg`` [deg] and optionally ``altitude_m`` [m] (0 when absent) and
+        ``name``; numbers may be given as text (``"34.1"``).
+
+        Raises
+        ------
+        InvalidParameterError
+            Naming the key that is missing, not a number, or out of range.
+        """
+        if not isinstance(d, dict):
+            raise InvalidParameterError(f"a site must be an object with latitude_deg, "
+                                        f"longitude_deg (and altitude_m); got {d!r}")
+
+        def number(key: str, default=None) -> float:
+            if key not in d:
+                if default is not None:
+                    return default
+                raise InvalidParameterError(f"site lacks {key!r} (latitude_deg, longitude_deg "
+                                            f"[deg] and altitude_m [m]); got {d!r}")
+            value = d[key]
+            try:
+                if isinstance(value, bool):
+                    raise TypeError
+                return float(value)
+            except (TypeError, ValueError):
+                raise InvalidParameterError(f"{key} must be a number; got {value!r}") from None
+        return cls(number("latitude_deg"), number("longitude_deg"), number("altitude_m", 0.0),
+                   str(d.get("name", "")))
 
 
 # --------------------------------------------------------------------------- times
@@ -550,7 +581,8 @@ def _sun_angles(times, latitude_deg, longitude_deg, altitude_m, refraction, meth
     """Shared core: UTC index (broadcast against the sites), elevation and azimuth [deg], and
     the ENU unit vectors when ``want_vector`` (else None)."""
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; valid: {', '.join(map(repr, METHODS))}")
+        raise InvalidParameterError(
+            f"unknown method {method!r}; valid: {', '.join(map(repr, METHODS))}")
     idx = as_utc_index(times)
     lat, lon, alt, n = _as_site_arrays(len(idx), latitude_deg, longitude_deg, altitude_m)
     if len(idx) == 1 and n > 1:

@@ -13,6 +13,17 @@ from sensor.camera.files import (DofpFormatError, camera_from_sidecar, check_sid
                                  write_raw)
 
 
+def _sidecar(width: int, height: int) -> dict:
+    """A complete skysim.dofp/1 sidecar (without ``schema``) for a width x height mosaic."""
+    return {"site": {"latitude_deg": 34.0, "longitude_deg": 108.0}, "attitude": {},
+            "lens": {"focal_px": 2.0, "cx": 3.0, "cy": 2.0, "fov_deg": 180.0,
+                     "model": "equidistant"},
+            "exposure": {"exposure_s": 0.01}, "time": "2020-01-01T00:00Z",
+            "sensor": {"width": width, "height": height, "layout_deg": [[90, 45], [135, 0]],
+                       "full_well_e": 1e4, "read_noise_e": 2.0, "dark_current_e_s": 1.0,
+                       "adc_bits": 12, "black_level_dn": 0}}
+
+
 def test_camera_then_heading_round_trip(tmp_path, capsys):
     out = tmp_path / "sky.tiff"
     assert main(["camera", "--lat", "34.2", "--lon", "108.9", "--time",
@@ -52,13 +63,7 @@ def test_writer_is_atomic_and_reader_checks(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing half-written
     with pytest.raises(DofpFormatError, match="uint16"):
         write_raw(tmp_path / "a.tiff", raw.astype(float), {})
-    doc = {"site": {"latitude_deg": 34.0, "longitude_deg": 108.0}, "attitude": {},
-           "lens": {"focal_px": 2.0, "cx": 3.0, "cy": 2.0, "fov_deg": 180.0,
-                    "model": "equidistant"},
-           "exposure": {"exposure_s": 0.01}, "time": "2020-01-01T00:00Z",
-           "sensor": {"width": 8, "height": 4, "layout_deg": [[90, 45], [135, 0]],
-                      "full_well_e": 1e4, "read_noise_e": 2.0, "dark_current_e_s": 1.0,
-                      "adc_bits": 12, "black_level_dn": 0}}
+    doc = _sidecar(8, 4)
     write_raw(tmp_path / "a.tiff", raw, doc)
     with pytest.raises(DofpFormatError, match="sidecar says"):
         read_raw(tmp_path / "a.tiff")
@@ -88,9 +93,7 @@ def test_png_round_trip_is_bit_exact(tmp_path):
     # every 16-bit value, odd sizes and the extremes: the file holds the DN exactly
     raw = np.random.default_rng(2).integers(0, 2 ** 16, (6, 10), dtype=np.uint16)
     raw[0, :2] = (0, 65535)
-    doc = {k: {} for k in ("site", "attitude", "lens", "exposure")}
-    doc.update(time="2020-01-01T00:00Z", sensor={"width": 10, "height": 6})
-    write_raw(tmp_path / "a.png", raw, doc)
+    write_raw(tmp_path / "a.png", raw, _sidecar(10, 6))
     back, side = read_raw(tmp_path / "a.png")
     assert back.dtype == np.uint16 and np.array_equal(back, raw)
     assert side["schema"] == "skysim.dofp/1" and (tmp_path / "a.png.json").exists()
