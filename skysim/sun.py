@@ -225,11 +225,12 @@ class Site:
                                             f"[deg] and altitude_m [m]); got {d!r}")
             value = d[key]
             try:
-                if isinstance(value, bool):
-                    raise TypeError
-                return float(value)
+                x = None if isinstance(value, bool) else float(value)
             except (TypeError, ValueError):
-                raise InvalidParameterError(f"{key} must be a number; got {value!r}") from None
+                x = None
+            if x is None:
+                raise InvalidParameterError(f"{key} must be a number; got {value!r}")
+            return x
         return cls(number("latitude_deg"), number("longitude_deg"), number("altitude_m", 0.0),
                    str(d.get("name", "")))
 
