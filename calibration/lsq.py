@@ -27,7 +27,7 @@ import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from skysim.exceptions import BroadcastError, InvalidParameterError
-from skysim.validation import check_finite
+from skysim.validation import as_float_array, check_finite
 
 from .exceptions import ConvergenceError, RankDeficientError, TooFewSamplesError
 from .model import channel_jacobian
@@ -320,8 +320,8 @@ def fit_pair(phi_deg, U, pair=(1, 2), dop=None, *, fit_dop_scale: bool = False,
     TooFewSamplesError, RankDeficientError, ConvergenceError
         As :func:`fit_pairs` with ``on_failure="raise"``.
     """
-    phi = np.asarray(phi_deg, dtype=float).ravel()
-    U = np.asarray(U, dtype=float)
+    phi = as_float_array("phi_deg", phi_deg).ravel()
+    U = as_float_array("U", U)
     if U.ndim != 2 or U.shape[1] != 3 or U.shape[0] != phi.size:
         raise InvalidParameterError(
             f"U must have shape (n, 3) with n = len(phi_deg) = {phi.size}; "

@@ -24,6 +24,7 @@ import numpy as np
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
+from skysim.validation import as_float_array
 
 from .exceptions import ConvergenceError
 from .model import channel_jacobian
@@ -36,7 +37,8 @@ PAIRS = ((1, 2), (1, 3), (2, 3))
 
 
 def pair_index(pair) -> tuple[int, int]:
-    """0-based column indices of a pair such as ``(1, 2)``; raises ``ValueError`` otherwise."""
+    """0-based column indices of a pair such as ``(1, 2)``; raises
+    :class:`~skysim.exceptions.InvalidParameterError` otherwise."""
     i, j = (int(pair[0]), int(pair[1]))
     if i == j or not {i, j} <= {1, 2, 3}:
         raise InvalidParameterError(
@@ -96,7 +98,7 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     (phi_deg, dop) : arrays of shape ``U.shape[:-1] + (len(pairs),)``, pair ``k`` in
     ``[..., k]``.
     """
-    U = np.asarray(U, dtype=float)
+    U = as_float_array("U", U)
     if U.shape[-1:] != (3,):
         raise InvalidParameterError(
             f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
@@ -158,7 +160,7 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
         If Newton's method has not converged for every sample after ``max_iter`` steps.
     """
     i, j = pair_index(pair)
-    U = np.asarray(U, dtype=float)
+    U = as_float_array("U", U)
     e = np.asarray(misalignment_deg, dtype=float)
     f = np.asarray(transmittance, dtype=float)
     e1, e2 = e[..., 0::2], e[..., 1::2]

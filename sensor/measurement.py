@@ -186,7 +186,7 @@ def read_measurement(path) -> Measurement:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the data file or the sidecar is missing.
     MeasurementFormatError
         For a malformed sidecar, a missing/NaN column or times without offsets.

@@ -125,10 +125,8 @@ def luminance_cd_m2(radiance, band: str = "V") -> np.ndarray:
 
     Raises
     ------
-    ValueError
-        For a band other than V.
     InvalidParameterError
-        For a negative or non-finite radiance.
+        For a band other than V, or a negative or non-finite radiance.
     """
     _photometric_band(band)
     return LUX_PER_V_IRRADIANCE * check_in_range("radiance", radiance, 0.0, np.inf)

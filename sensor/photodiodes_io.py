@@ -327,7 +327,7 @@ def read_photodiodes(path) -> PhotodiodeData:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the data file or its sidecar is missing.
     PhotodiodeFormatError
         For invalid JSON, a malformed sidecar, a missing/non-numeric required column or times

@@ -176,7 +176,7 @@ def aerosol_type(preset) -> AerosolType:
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unknown name (the message lists the presets).
     """
     if isinstance(preset, AerosolType):

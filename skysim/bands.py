@@ -78,7 +78,8 @@ magnitudes (B 5.44, V 4.81, R 4.43, I 4.10) minus 31.57."""
 
 
 def get_band(name: str) -> Band:
-    """The :class:`Band` called ``name``; raises ``ValueError`` listing the valid names."""
+    """The :class:`Band` called ``name``; raises
+    :class:`~skysim.exceptions.InvalidParameterError` listing the valid names."""
     try:
         return BANDS[name]
     except (KeyError, TypeError):

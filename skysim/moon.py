@@ -140,7 +140,7 @@ def moon_position(times, latitude_deg, longitude_deg, altitude_m=0.0) -> pd.Data
     ------
     NaiveDatetimeError, InvalidTimeError, InvalidParameterError, BroadcastError
         As :func:`skysim.sun.sun_position`.
-    ImportError
+    MissingDependencyError
         Without astropy (extra ``moon``); the message gives the install command.
     """
     idx = as_utc_index(times)

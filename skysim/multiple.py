@@ -322,7 +322,7 @@ def prefetch_modes(skies, sun_elevation_deg) -> None:
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         If the skies differ in anything but ``tau`` and ``albedo``.
     """
     skies = list(skies)

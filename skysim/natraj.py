@@ -45,7 +45,7 @@ def natraj_path(reference=None) -> Path:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If ``reference`` is neither such a file nor a folder holding one.
     """
     if reference is None:
@@ -68,9 +68,9 @@ def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the table is missing.
-    ValueError
+    FileFormatError
         If it is not a readable CSV with the columns :data:`NATRAJ_COLUMNS`, or holds no
         transmitted rows at ``mu >= min_mu``.
     """

@@ -65,7 +65,13 @@ from .exceptions import (
     NaiveDatetimeError,
 )
 from .geometry import direction_vector, elevation_azimuth
-from .validation import check_finite, check_in_range, check_latitude, check_longitude
+from .validation import (
+    as_float_array,
+    check_finite,
+    check_in_range,
+    check_latitude,
+    check_longitude,
+)
 
 __all__ = [
     "Site",
@@ -246,10 +252,15 @@ def as_utc_index(times) -> pd.DatetimeIndex:
     NaiveDatetimeError
         If any time has no timezone (skysim never guesses UTC).
     InvalidTimeError
-        If any time is missing (NaT).
+        If any time is missing (NaT), cannot be read as a time, or lies outside the years
+        1678-2261.
     """
     if isinstance(times, (pd.DatetimeIndex, pd.Series)):
-        idx = pd.DatetimeIndex(times)
+        try:
+            idx = pd.DatetimeIndex(times)
+        except (ValueError, TypeError, OverflowError) as exc:   # pandas' parse errors
+            raise InvalidTimeError(f"times are not times ({exc}); give timezone-aware times, "
+                                   "e.g. '2013-05-22T17:10:00+08:00'") from None
         if idx.tz is None:
             raise NaiveDatetimeError(
                 f"times are timezone-naive (first: {idx[0] if len(idx) else '<empty>'}); "
@@ -264,7 +275,12 @@ def as_utc_index(times) -> pd.DatetimeIndex:
         seq = list(np.atleast_1d(times))
     out = []
     for k, t in enumerate(seq):  # list input: per-element tz check (arrays should be an index)
-        ts = pd.Timestamp(t)
+        try:
+            ts = pd.Timestamp(t)
+        except (ValueError, TypeError, OverflowError) as exc:   # pandas' parse errors
+            raise InvalidTimeError(f"times[{k}] = {t!r:.60} is not a time ({exc}); give "
+                                   "timezone-aware times, e.g. '2013-05-22T17:10:00+08:00'") \
+                from None
         if ts is pd.NaT:
             raise InvalidTimeError(f"times[{k}] is missing (NaT); drop or fill missing times "
                                    "first")
@@ -273,7 +289,11 @@ def as_utc_index(times) -> pd.DatetimeIndex:
                 f"time {t!r} is timezone-naive; give a UTC offset or zone, e.g. "
                 "'2013-05-22T17:10:00+08:00' or datetime(..., tzinfo=timezone.utc)")
         out.append(ts.tz_convert("UTC"))
-    return pd.DatetimeIndex(out)
+    try:
+        return pd.DatetimeIndex(out)
+    except (ValueError, OverflowError) as exc:   # e.g. a year nanoseconds cannot hold
+        raise InvalidTimeError(f"times outside the supported years 1678-2261 ({exc})") \
+            from None
 
 
 def _check_no_nat(idx: pd.DatetimeIndex) -> None:
@@ -451,7 +471,7 @@ def _as_site_arrays(n_times: int, latitude_deg, longitude_deg, altitude_m):
              "altitude_m": altitude_m}
     arrays = {}
     for name, value in named.items():
-        arr = np.asarray(value, dtype=float)
+        arr = as_float_array(name, value)
         if arr.ndim > 1:
             raise BroadcastError(f"{name} has shape {arr.shape}; give a scalar or a 1-D array "
                                  f"(one value per time, {n_times} times)")
@@ -637,6 +657,9 @@ def sun_vector(times, site: Site, refraction: bool = False, method: str = "auto"
     delta_t_s : float or array, optional
         TT - UT1 [s]; default :func:`delta_t_seconds`.
     """
+    if not all(hasattr(site, k) for k in ("latitude_deg", "longitude_deg", "altitude_m")):
+        raise InvalidParameterError(f"site must be a skysim.Site (latitude_deg, longitude_deg, "
+                                    f"altitude_m); got {site!r:.80}")
     idx, _, _, vec = _sun_angles(times, site.latitude_deg, site.longitude_deg, site.altitude_m,
                                  refraction, method, pressure_hPa, temperature_C, delta_t_s,
                                  want_vector=True)

@@ -295,6 +295,20 @@ def _bad_preset():
     return aerosol_type("smog")
 
 
+def _text_latitude():
+    from skysim import sun_position
+    return sun_position(pd.DatetimeIndex(["2013-05-22 10:00+08:00"]), "north", 108.5)
+
+
+def _unreadable_time():
+    from skysim import sun_position
+    return sun_position(["yesterday"], 34.1, 108.5)
+
+
+def _shapes_apart():
+    return skysim.make_sky("rayleigh").field(np.full(3, 45.0), np.zeros(2), 30.0, 100.0)
+
+
 CASES = {
     "unknown sky model": (lambda tmp: skysim.make_sky("foo"), "'foo'"),
     "naive time": (lambda tmp: _naive_times(), "2013-05-22 10:00:00"),
@@ -312,6 +326,10 @@ CASES = {
     "missing data file": (_missing_table, "nowhere.csv"),
     "metadata without JSON form": (_unjsonable, "set"),
     "unknown sweep backend": (lambda tmp: _bad_backend(), "'mpi'"),
+    "latitude as text": (lambda tmp: _text_latitude(), "'north'"),
+    "d_max as text": (lambda tmp: skysim.make_sky("rayleigh", dmax="high"), "'high'"),
+    "time that is not a time": (lambda tmp: _unreadable_time(), "'yesterday'"),
+    "shapes that do not broadcast": (lambda tmp: _shapes_apart(), "(3,), (2,)"),
 }
 
 

@@ -60,7 +60,7 @@ def replacing_folder(out, run: dict, force: bool = False):
 
     Raises
     ------
-    ValueError
+    OutputPathError
         Before any work, if ``out`` holds files of something else, or a full run that a
         ``quick`` run would replace, and ``force`` is not set.
     """

@@ -147,7 +147,7 @@ def write_sky_series(path, sky, view_elevation_deg, view_azimuth_deg, sun_elevat
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unsupported suffix, mismatched inputs, naive times or a sun below the horizon
         (nothing is written then).
     skysim.io.WriteError

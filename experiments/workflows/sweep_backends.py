@@ -140,7 +140,7 @@ def run_tasks(fn: Callable, tasks: Sequence, *, backend: str = "local",
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unknown backend, or ``scheduler`` with the local backend.
     SchedulerUnreachableError
         If ``scheduler`` does not answer.

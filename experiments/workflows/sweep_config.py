@@ -343,7 +343,7 @@ def load_config(path) -> SweepConfig:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the file does not exist.
     SweepConfigError
         For invalid TOML or an invalid configuration (see :func:`parse_config`).

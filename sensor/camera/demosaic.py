@@ -325,10 +325,9 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
 
     Raises
     ------
-    ValueError
-        For an unknown method (the message lists the valid ones).
     InvalidParameterError
-        For shapes that do not match or an odd image size.
+        For an unknown method (the message lists the valid ones), shapes that do not match
+        or an odd image size.
     """
     if method not in DEMOSAIC_METHODS:
         raise InvalidParameterError(

@@ -305,7 +305,7 @@ def undo_readout(recorded: np.ndarray, flip: str = "none", rotate_deg: int = 0) 
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For a flip not in :data:`FLIPS` or a rotation not in :data:`ROTATIONS_DEG`.
     """
     if flip not in FLIPS:
