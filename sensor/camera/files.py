@@ -51,7 +51,8 @@ from .lens import FisheyeLens
 from .mosaic import MosaicSensor, PolarizationCamera
 
 __all__ = ["FLIPS", "IMAGE_SUFFIXES", "ROTATIONS_DEG", "SCHEMA", "DofpFormatError",
-           "camera_from_sidecar", "read_raw", "require_image_codec", "require_tifffile",
+           "camera_from_sidecar", "check_sidecar", "read_raw", "require_image_codec",
+           "require_tifffile",
            "undo_readout", "write_raw"]
 
 SCHEMA = "skysim.dofp/1"
