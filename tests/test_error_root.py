@@ -423,3 +423,31 @@ def test_measurement_sidecar_fields_are_named(tmp_path, edit, named):
     with pytest.raises(SkysimError) as err:
         read_measurement(path)
     assert named in str(err.value) and "m.csv" in str(err.value)
+
+
+# ------------------------------------------------------------------ the command line on top
+
+
+@pytest.mark.parametrize("raised,code,line", [
+    (lambda: skysim.exceptions.InvalidParameterError("flip 'x' is wrong"), 2,
+     "skysim camera-heading: error: flip 'x' is wrong"),
+    (lambda: skysim.exceptions.MissingFileError("no raw image a.png"), 2,
+     "skysim camera-heading: error: no raw image a.png"),
+    (lambda: RuntimeError("an invariant broke"), 70,
+     "skysim camera-heading: internal error: RuntimeError: an invariant broke"),
+])
+def test_the_command_line_catches_the_root(tmp_path, monkeypatch, capsys, raised, code, line):
+    """A SkysimError (whatever its built-in base) is one line with exit 2; a bare built-in
+    RuntimeError is a bug: the internal-error line and exit 70."""
+    from experiments.cli.main import main
+    from sensor.camera import files
+
+    def fail(*args, **kwargs):
+        raise raised()
+    monkeypatch.setattr(files, "read_raw", fail)
+    monkeypatch.delenv("SKYSIM_TRACEBACK", raising=False)
+    image = tmp_path / "a.png"
+    image.write_bytes(b"\x89PNG")
+    assert main(["camera-heading", str(image)]) == code
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith(line)
