@@ -35,6 +35,7 @@ References
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -410,6 +411,8 @@ def ring_configuration(n_units: int = 8, elevation_deg: float = 45.0,
                        photodiode: PhotodiodeModel | None = None) -> CompoundEyeSensor:
     """A ring of ``n_units`` units at ``elevation_deg``, evenly in azimuth, with four
     photodiodes each (0/45/90/135 deg): a common real instrument, usually with relative yaw."""
+    if isinstance(n_units, bool) or not isinstance(n_units, numbers.Integral) or n_units < 1:
+        raise InvalidParameterError(f"n_units must be a whole number >= 1; got {n_units!r}")
     units = [Unit(360.0 * k / n_units, elevation_deg, tuple(photodiodes)) for k in range(n_units)]
     return CompoundEyeSensor(tuple(units), photodiode=photodiode or PhotodiodeModel())
 

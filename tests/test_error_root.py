@@ -309,6 +309,11 @@ def _shapes_apart():
     return skysim.make_sky("rayleigh").field(np.full(3, 45.0), np.zeros(2), 30.0, 100.0)
 
 
+def _text_ring():
+    from sensor import ring_configuration
+    return ring_configuration("six")
+
+
 CASES = {
     "unknown sky model": (lambda tmp: skysim.make_sky("foo"), "'foo'"),
     "naive time": (lambda tmp: _naive_times(), "2013-05-22 10:00:00"),
@@ -330,6 +335,7 @@ CASES = {
     "d_max as text": (lambda tmp: skysim.make_sky("rayleigh", dmax="high"), "'high'"),
     "time that is not a time": (lambda tmp: _unreadable_time(), "'yesterday'"),
     "shapes that do not broadcast": (lambda tmp: _shapes_apart(), "(3,), (2,)"),
+    "ring of text units": (lambda tmp: _text_ring(), "'six'"),
 }
 
 
