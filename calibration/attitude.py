@@ -272,7 +272,7 @@ def gradient_step(q, e, J, method: str, fixed_step: float = 0.0) -> tuple[np.nda
         dq = fixed_step * np.divide(g, gn[..., None], out=np.zeros_like(g),
                                     where=gn[..., None] > 0)
     else:
-        raise ValueError(f"unknown step method {method!r}; valid: 'dynamic', 'fixed'")
+        raise InvalidParameterError(f"unknown step method {method!r}; valid: 'dynamic', 'fixed'")
     q_new = q - dq
     q_new /= np.linalg.norm(q_new, axis=-1, keepdims=True)
     return q_new, 2.0 * np.linalg.norm(dq, axis=-1)
@@ -393,7 +393,7 @@ def estimate_attitude(gyro_deg_s, accel_mps2, e_meas_b, sun_enu, q0, sample_rate
         If ``sky`` is given without ``view_axes_b`` (or with the wrong number of axes).
     """
     if method not in STEP_METHODS:
-        raise ValueError(f"unknown method {method!r}; valid: {', '.join(STEP_METHODS)}")
+        raise InvalidParameterError(f"unknown method {method!r}; valid: {', '.join(STEP_METHODS)}")
     fs = check_rate("sample_rate_hz", sample_rate_hz)
     every = int(polarization_every)
     if every < 1:

@@ -170,7 +170,7 @@ class ChannelModel:
     def __post_init__(self):
         a = check_finite("alpha_deg", self.alpha_deg)
         if a.ndim != 2 or a.shape[1] != 2:
-            raise ValueError(f"alpha_deg must have shape (n, 2); got {a.shape}")
+            raise InvalidParameterError(f"alpha_deg must have shape (n, 2); got {a.shape}")
         n = a.shape[0]
         object.__setattr__(self, "alpha_deg", a)
         for name, shape in (("eta", (n, 2)), ("dark_lx", (n, 2)), ("gain_V", (n,)),
@@ -187,7 +187,7 @@ class ChannelModel:
         """Design values of the three-pair sensor: angles (60, 0, 120) and +90 deg, ideal
         polarizers, gain 0.5, zero offset, a datasheet dark-equivalent illuminance [lx]."""
         if n_channels != 3:
-            raise ValueError("nominal() describes the three-pair sensor (n_channels=3)")
+            raise InvalidParameterError("nominal() describes the three-pair sensor (n_channels=3)")
         alpha = CHANNEL_ANGLES_DEG[:, None] + np.array([0.0, 90.0])
         return cls(alpha, np.ones((3, 2)), np.full((3, 2), dark_lx), np.full(3, GAIN),
                    np.zeros(3))
@@ -299,7 +299,8 @@ def solve_opponent(U, model: ChannelModel, *, daq: Daq | None = None) -> Polariz
     """
     U = _check_outputs(U, 3, daq)
     if U.shape[-1] != model.n_channels:
-        raise ValueError(f"U has {U.shape[-1]} channels but the model {model.n_channels}")
+        raise InvalidParameterError(
+            f"U has {U.shape[-1]} channels but the model {model.n_channels}")
     if not np.any(model.dark_lx):
         raise IntensityNotIdentifiableError(
             "all dark-equivalent illuminances are zero: the outputs do not depend on the "
@@ -424,7 +425,7 @@ def solve_combined(U, model: ChannelModel, noise_V, *, pool_axis: int | None = N
     U = _check_outputs(U, 3, daq)
     n = U.shape[-1]
     if n != model.n_channels:
-        raise ValueError(f"U has {n} channels but the model {model.n_channels}")
+        raise InvalidParameterError(f"U has {n} channels but the model {model.n_channels}")
     if np.allclose(model.dark_lx[:, 0], model.dark_lx[:, 1], rtol=1e-12, atol=0.0):
         raise IntensityNotIdentifiableError(
             f"dark-equivalent illuminances {model.dark_lx.tolist()} lx are equal within every "
@@ -700,7 +701,7 @@ def calibrate_dark_current(U, intensity_lx, phi_deg, dop, *,
     """
     U = _check_outputs(U, 3, daq)
     if U.ndim != 2 or U.shape[1] != 3:
-        raise ValueError(f"U must have shape (N, 3); got {U.shape}")
+        raise InvalidParameterError(f"U must have shape (N, 3); got {U.shape}")
     N = U.shape[0]
     I_ref = check_finite("intensity_lx", intensity_lx).ravel()
     if (I_ref <= 0).any():
@@ -711,7 +712,8 @@ def calibrate_dark_current(U, intensity_lx, phi_deg, dop, *,
     d_ref = np.broadcast_to(check_in_range("dop", dop, 0.0, 1.0, low_open=True,
                                            high_open=True).ravel(), (N,))
     if I_ref.shape != (N,):
-        raise ValueError(f"intensity_lx must have one value per sample ({N}); got {I_ref.shape}")
+        raise InvalidParameterError(
+            f"intensity_lx must have one value per sample ({N}); got {I_ref.shape}")
     levels = np.unique(np.round(np.log10(I_ref), 6))
     if levels.size < 2:
         raise DarkCurrentNotIdentifiableError(
@@ -729,7 +731,8 @@ def calibrate_dark_current(U, intensity_lx, phi_deg, dop, *,
     n = 3
     labels = model0.parameter_labels()
     if residuals not in ("solution", "outputs"):
-        raise ValueError(f"residuals must be 'solution' or 'outputs'; got {residuals!r}")
+        raise InvalidParameterError(
+            f"residuals must be 'solution' or 'outputs'; got {residuals!r}")
     x_scale = np.tile([0.1, 0.1, 0.01, 0.01, 0.1, 0.1, 0.005, 0.005], n)
     # stage 1: output space from the nominal values (the solve is singular at the nominal
     # model: equal dark levels in a channel make I + delta, not I, the only scale)

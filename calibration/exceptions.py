@@ -1,8 +1,11 @@
-"""Errors raised by estimators. A fit either succeeds or raises one of these: never a NaN."""
+"""Errors raised by estimators and the diagnosis. A fit either succeeds or raises one of these:
+never a NaN. All are :class:`skysim.exceptions.SkysimError` (``from skysim import
+SkysimError`` catches them)."""
 
 from skysim.exceptions import SkysimError
 
-__all__ = ["CalibrationError", "TooFewSamplesError", "RankDeficientError", "ConvergenceError"]
+__all__ = ["CalibrationError", "TooFewSamplesError", "RankDeficientError", "ConvergenceError",
+           "DiagnosisError"]
 
 
 class CalibrationError(SkysimError, RuntimeError):
@@ -25,3 +28,10 @@ class ConvergenceError(CalibrationError):
         super().__init__(message)
         self.last_step = last_step
         self.iterations = iterations
+
+
+class DiagnosisError(CalibrationError):
+    """Base class of diagnosis failures caused by the data (the message says how to fix it);
+    :mod:`calibration.diagnosis.errors` lists its subclasses. Defined here, with the other
+    estimation errors, so that :mod:`calibration.effects` can derive from it without importing
+    the diagnosis package."""

@@ -41,6 +41,7 @@ from scipy.spatial.transform import Rotation
 from sensor.compound_eye import CompoundEyeSensor, attitude_angles, body_attitude
 from sensor.opponent import GAIN
 from sensor.photodiodes_io import ACCEL_COLUMNS, PhotodiodeData
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
 from skysim.sun import sun_vector
 
@@ -154,8 +155,9 @@ def polarization_from_photodiodes(readings, angles_deg, method: str = "stokes"):
     a = np.radians(np.asarray(angles_deg, float))
     if method == "opponent":
         if not _is_three_pair(angles_deg):
-            raise ValueError(f"method 'opponent' needs the three-pair angles 0/30/.../150 deg; "
-                             f"got {list(angles_deg)}")
+            raise InvalidParameterError(
+                f"method 'opponent' needs the three-pair angles 0/30/.../150 deg; "
+                f"got {list(angles_deg)}")
         col = {int(round(x)) % 180: j for j, x in enumerate(np.asarray(angles_deg, float))}
         with np.errstate(divide="ignore", invalid="ignore"):
             U = np.stack([GAIN * np.log10(P[..., col[c]] / P[..., col[(c + 90) % 180]])
@@ -164,7 +166,7 @@ def polarization_from_photodiodes(readings, angles_deg, method: str = "stokes"):
         phi, dop = solve_pair(U, (1, 2), GAIN)
         return wrap_axial_deg(-phi), dop
     if method != "stokes":
-        raise ValueError(f"unknown method {method!r}; valid: 'stokes', 'opponent'")
+        raise InvalidParameterError(f"unknown method {method!r}; valid: 'stokes', 'opponent'")
     A = np.stack([np.ones_like(a), np.cos(2 * a), np.sin(2 * a)], axis=1)
     s = P @ np.linalg.pinv(A).T
     with np.errstate(divide="ignore", invalid="ignore"):

@@ -26,7 +26,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
-from skysim.validation import check_finite
+from skysim.exceptions import BroadcastError, InvalidParameterError
+from skysim.validation import as_float_array, check_finite
 
 from .exceptions import ConvergenceError, RankDeficientError, TooFewSamplesError
 from .model import channel_jacobian
@@ -138,15 +139,17 @@ def _check_inputs(phi_deg, U, dop):
     phi = check_finite("phi_deg", phi_deg)
     U = check_finite("U", U)
     if phi.ndim == 0 or U.shape != phi.shape + (3,):
-        raise ValueError(f"U must have shape phi_deg.shape + (3,) = {phi.shape + (3,)}; "
-                         f"got {U.shape}")
+        raise InvalidParameterError(
+            f"U must have shape phi_deg.shape + (3,) = {phi.shape + (3,)}; "
+            f"got {U.shape}")
     if dop is None:
-        raise ValueError("dop is required: the DoP per sample, or its shape with fit_dop_scale")
+        raise InvalidParameterError(
+            "dop is required: the DoP per sample, or its shape with fit_dop_scale")
     try:
         dop = np.broadcast_to(check_finite("dop", dop), phi.shape).astype(float)
     except ValueError as exc:
-        raise ValueError(f"dop of shape {np.shape(dop)} does not broadcast to phi_deg's "
-                         f"shape {phi.shape}") from exc
+        raise BroadcastError(f"dop of shape {np.shape(dop)} does not broadcast to phi_deg's "
+                             f"shape {phi.shape}") from exc
     return phi, U, dop
 
 
@@ -195,7 +198,7 @@ def fit_pairs(phi_deg, U, pair=(1, 2), dop=None, *, fit_dop_scale: bool = False,
         If an element has not converged within ``max_iter`` (reports the last step size).
     """
     if on_failure not in ("raise", "flag"):
-        raise ValueError(f"on_failure must be 'raise' or 'flag'; got {on_failure!r}")
+        raise InvalidParameterError(f"on_failure must be 'raise' or 'flag'; got {on_failure!r}")
     phi, U, dop = _check_inputs(phi_deg, U, dop)
     batch, n = phi.shape[:-1], phi.shape[-1]
     i, j = pair_index(pair)
@@ -317,11 +320,12 @@ def fit_pair(phi_deg, U, pair=(1, 2), dop=None, *, fit_dop_scale: bool = False,
     TooFewSamplesError, RankDeficientError, ConvergenceError
         As :func:`fit_pairs` with ``on_failure="raise"``.
     """
-    phi = np.asarray(phi_deg, dtype=float).ravel()
-    U = np.asarray(U, dtype=float)
+    phi = as_float_array("phi_deg", phi_deg).ravel()
+    U = as_float_array("U", U)
     if U.ndim != 2 or U.shape[1] != 3 or U.shape[0] != phi.size:
-        raise ValueError(f"U must have shape (n, 3) with n = len(phi_deg) = {phi.size}; "
-                         f"got {U.shape}")
+        raise InvalidParameterError(
+            f"U must have shape (n, 3) with n = len(phi_deg) = {phi.size}; "
+            f"got {U.shape}")
     if dop is not None and np.ndim(dop):
         dop = np.ravel(dop)[None]
     return fit_pairs(phi[None], U[None], pair, dop, fit_dop_scale=fit_dop_scale, gain=gain,

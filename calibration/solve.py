@@ -22,7 +22,9 @@ import functools
 import numpy as np
 
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_axial_deg
+from skysim.validation import as_float_array
 
 from .exceptions import ConvergenceError
 from .model import channel_jacobian
@@ -35,10 +37,12 @@ PAIRS = ((1, 2), (1, 3), (2, 3))
 
 
 def pair_index(pair) -> tuple[int, int]:
-    """0-based column indices of a pair such as ``(1, 2)``; raises ``ValueError`` otherwise."""
+    """0-based column indices of a pair such as ``(1, 2)``; raises
+    :class:`~skysim.exceptions.InvalidParameterError` otherwise."""
     i, j = (int(pair[0]), int(pair[1]))
     if i == j or not {i, j} <= {1, 2, 3}:
-        raise ValueError(f"pair must be two different channels of 1, 2, 3; got {pair!r}")
+        raise InvalidParameterError(
+            f"pair must be two different channels of 1, 2, 3; got {pair!r}")
     return i - 1, j - 1
 
 
@@ -94,9 +98,10 @@ def solve_pairs(U, pairs=PAIRS, gain: float = GAIN) -> tuple[np.ndarray, np.ndar
     (phi_deg, dop) : arrays of shape ``U.shape[:-1] + (len(pairs),)``, pair ``k`` in
     ``[..., k]``.
     """
-    U = np.asarray(U, dtype=float)
+    U = as_float_array("U", U)
     if U.shape[-1:] != (3,):
-        raise ValueError(f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
+        raise InvalidParameterError(
+            f"U must have shape (..., 3) (channels U1, U2, U3); got {U.shape}")
     used, systems = _pair_systems(tuple(pair_index(pair) for pair in pairs))
     flat = U.reshape(-1, 3)
     flat = flat if len(used) == 3 else flat[:, used]
@@ -155,7 +160,7 @@ def solve_pair_compensated(U, pair, misalignment_deg, transmittance, gain: float
         If Newton's method has not converged for every sample after ``max_iter`` steps.
     """
     i, j = pair_index(pair)
-    U = np.asarray(U, dtype=float)
+    U = as_float_array("U", U)
     e = np.asarray(misalignment_deg, dtype=float)
     f = np.asarray(transmittance, dtype=float)
     e1, e2 = e[..., 0::2], e[..., 1::2]

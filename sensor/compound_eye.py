@@ -35,6 +35,7 @@ References
 
 from __future__ import annotations
 
+import numbers
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -196,7 +197,7 @@ class CompoundEyeSensor:
 
     def __post_init__(self):
         if len(self.units) == 0:
-            raise ValueError("a compound-eye sensor needs at least one unit")
+            raise InvalidParameterError("a compound-eye sensor needs at least one unit")
         for i, u in enumerate(self.units):
             if not 0.0 <= float(u.elevation_deg) <= 90.0:
                 raise UnitBelowHorizonError(
@@ -323,14 +324,15 @@ class CompoundEyeSensor:
             moonlit sky (:class:`skysim.night.MoonlitSky`).
         """
         if yaw_reference not in ("north", "relative"):
-            raise ValueError(f"yaw_reference must be 'north' or 'relative'; got {yaw_reference!r}")
+            raise InvalidParameterError(
+                f"yaw_reference must be 'north' or 'relative'; got {yaw_reference!r}")
         if source == "sun":
             sun, idx = sun_vector(times, site)
         elif source == "moon":
             from skysim.moon import moon_vector
             sun, idx = moon_vector(times, site)
         else:
-            raise ValueError(f"source must be 'sun' or 'moon'; got {source!r}")
+            raise InvalidParameterError(f"source must be 'sun' or 'moon'; got {source!r}")
         n = len(idx)
         yaw, pitch, roll = (np.broadcast_to(check_finite(k, v), (n,)).astype(float) for k, v in (
             ("yaw_deg", yaw_deg), ("pitch_deg", pitch_deg), ("roll_deg", roll_deg)))
@@ -409,6 +411,8 @@ def ring_configuration(n_units: int = 8, elevation_deg: float = 45.0,
                        photodiode: PhotodiodeModel | None = None) -> CompoundEyeSensor:
     """A ring of ``n_units`` units at ``elevation_deg``, evenly in azimuth, with four
     photodiodes each (0/45/90/135 deg): a common real instrument, usually with relative yaw."""
+    if isinstance(n_units, bool) or not isinstance(n_units, numbers.Integral) or n_units < 1:
+        raise InvalidParameterError(f"n_units must be a whole number >= 1; got {n_units!r}")
     units = [Unit(360.0 * k / n_units, elevation_deg, tuple(photodiodes)) for k in range(n_units)]
     return CompoundEyeSensor(tuple(units), photodiode=photodiode or PhotodiodeModel())
 

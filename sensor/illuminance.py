@@ -150,7 +150,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from skysim.exceptions import InvalidParameterError
+from skysim.exceptions import InvalidParameterError, SkysimWarning
 from skysim.geometry import wrap_axial_deg
 from skysim.sky import RayleighSky, Sky
 from skysim.validation import check_dop, check_in_range, check_sun_above_horizon
@@ -185,7 +185,7 @@ class OutsideSnellWindowError(InvalidParameterError):
     below. Keep the underwater view zenith angle below ``asin(1/n)`` (48.3 deg for n = 1.34)."""
 
 
-class DepthBeyondValidationWarning(UserWarning):
+class DepthBeyondValidationWarning(SkysimWarning):
     """Underwater polarization asked for deeper than its sources compared the model with
     measurements (:attr:`WaterType.polarization_validated_depth_m`; module docstring): the
     model keeps the in-water single-scattering DoP, while the zenith DoP of the asymptotic

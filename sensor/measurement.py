@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from skysim.exceptions import SkysimError
+from skysim.exceptions import FileFormatError
 from skysim.sun import Site
 
 from .tables import format_iso_times, read_table_and_sidecar, write_table_and_sidecar
@@ -29,7 +29,7 @@ _OFFSET_RE = r"(?:Z|[+-]\d\d:?\d\d|:\d\d(?:\.\d+)?[+-]\d\d)$"
 the time of day (so that the day of a bare date, ``2013-05-22``, is not read as an offset)."""
 
 
-class MeasurementFormatError(SkysimError, ValueError):
+class MeasurementFormatError(FileFormatError):
     """A measurement file or table does not follow its schema (message says what and where)."""
 
 
@@ -77,6 +77,16 @@ def parse_iso_times(values: pd.Series, where: str) -> pd.Series:
     raise MeasurementFormatError(
         f"{where}: time {text!r} in row {row} is {why}; write times as ISO 8601 with offset, "
         "e.g. 2013-05-22T17:10:00+08:00")
+
+
+def check_site_block(site, where: str) -> None:
+    """A sidecar's ``site`` must describe a valid :class:`skysim.sun.Site` (numbers
+    ``latitude_deg`` in [-90, 90], ``longitude_deg``, ``altitude_m`` [m] when given)."""
+    from skysim.exceptions import InvalidParameterError
+    try:
+        Site.from_dict(site)
+    except InvalidParameterError as exc:
+        raise MeasurementFormatError(f"{where}: sidecar site: {exc}") from None
 
 
 def check_daq_block(daq, where: str) -> None:
@@ -141,7 +151,14 @@ class Measurement:
                 f"{where}: sidecar has no 'site' with numbers latitude_deg, longitude_deg (and "
                 f"altitude_m) [deg, m]; got {site!r}; the sun position cannot be computed "
                 "without it")
+        check_site_block(site, where)
         sensor = self.sidecar.get("sensor")
+        if sensor is not None and not isinstance(sensor, dict):
+            raise MeasurementFormatError(f"{where}: sidecar 'sensor' must be an object; got "
+                                         f"{sensor!r}")
+        if not isinstance(self.sidecar.get("generator", {}), dict):
+            raise MeasurementFormatError(f"{where}: sidecar 'generator' must be an object; got "
+                                         f"{self.sidecar.get('generator')!r}")
         daq = sensor.get("daq") if isinstance(sensor, dict) else None
         if daq is not None:
             check_daq_block(daq, where)
@@ -169,7 +186,7 @@ def read_measurement(path) -> Measurement:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the data file or the sidecar is missing.
     MeasurementFormatError
         For a malformed sidecar, a missing/NaN column or times without offsets.

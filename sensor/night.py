@@ -112,9 +112,10 @@ MOON_RADIUS_DEG = 0.2590
 def _photometric_band(band: str):
     b = get_band(band)
     if b.name != "V":
-        raise ValueError(f"photometric quantities (lx, cd/m2) follow the eye's V(lambda) curve, "
-                         f"whose astronomical counterpart is the V band; got band {band!r}: "
-                         "evaluate the night sky in band 'V'")
+        raise InvalidParameterError(
+            f"photometric quantities (lx, cd/m2) follow the eye's V(lambda) curve, "
+            f"whose astronomical counterpart is the V band; got band {band!r}: "
+            "evaluate the night sky in band 'V'")
     return b
 
 
@@ -124,10 +125,8 @@ def luminance_cd_m2(radiance, band: str = "V") -> np.ndarray:
 
     Raises
     ------
-    ValueError
-        For a band other than V.
     InvalidParameterError
-        For a negative or non-finite radiance.
+        For a band other than V, or a negative or non-finite radiance.
     """
     _photometric_band(band)
     return LUX_PER_V_IRRADIANCE * check_in_range("radiance", radiance, 0.0, np.inf)

@@ -26,7 +26,12 @@ import pandas as pd
 
 from skysim.sun import Site
 
-from .measurement import MeasurementFormatError, check_numeric_columns, parse_iso_times
+from .measurement import (
+    MeasurementFormatError,
+    check_numeric_columns,
+    check_site_block,
+    parse_iso_times,
+)
 from .tables import read_table_and_sidecar, write_table_and_sidecar
 
 __all__ = ["PHOTODIODES_SCHEMA", "ACCEL_COLUMNS", "PhotodiodeFormatError",
@@ -236,6 +241,12 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
              and _is_number(site.get("altitude_m", 0.0)), where,
              f"sidecar 'site' must give the numbers latitude_deg, longitude_deg (and "
              f"altitude_m) [deg, m]; got {site!r}")
+    try:
+        check_site_block(site, where)
+    except PhotodiodeFormatError:
+        raise
+    except MeasurementFormatError as exc:   # this schema's error for the same check
+        raise PhotodiodeFormatError(str(exc)) from None
     for key, valid in (("yaw_reference", _YAW_REFERENCES), ("yaw_sense", _YAW_SENSES),
                        ("readings", _READINGS)):
         _require(sidecar.get(key) in valid, where,
@@ -244,6 +255,8 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
         v = sidecar.get(key)
         _require(isinstance(v, (int, float)) and not isinstance(v, bool) and np.isfinite(v)
                  and v > 0, where, f"sidecar {key!r} must be a positive number; got {v!r}")
+    _require(isinstance(sidecar.get("generator", {}), dict), where,
+             f"sidecar 'generator' must be an object; got {sidecar.get('generator')!r}")
     units = sidecar.get("units")
     _require(isinstance(units, list) and len(units) > 0, where,
              "sidecar 'units' must be a non-empty list of {azimuth_deg, elevation_deg, "
@@ -265,6 +278,10 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
         _require(len(pds) >= 3 and len({float(a) % 180 for a in pds}) >= 3, where,
                  f"unit {i} needs at least 3 photodiodes at distinct polarizer angles (mod 180) "
                  f"to determine a linear polarization; got {pds!r}")
+        for a in pds:
+            _require(float(a) == round(float(a)) and 0 <= float(a) < 180, where,
+                     f"unit {i} photodiodes: polarizer angle {a!r} must be a whole number of "
+                     f"degrees in [0, 180) (its column is u{i}_p{{angle:03d}})")
 
 
 def _validate_table(table: pd.DataFrame, columns: list[str], where: str) -> None:
@@ -310,7 +327,7 @@ def read_photodiodes(path) -> PhotodiodeData:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the data file or its sidecar is missing.
     PhotodiodeFormatError
         For invalid JSON, a malformed sidecar, a missing/non-numeric required column or times

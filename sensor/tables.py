@@ -16,7 +16,14 @@ from pathlib import Path
 
 import pandas as pd
 
-from skysim.io import _json_default, atomic_write_many, find_sidecar, sidecar_path
+from skysim.exceptions import InvalidParameterError, MissingFileError
+from skysim.io import (
+    _json_default,
+    atomic_write_many,
+    check_csv_header,
+    find_sidecar,
+    sidecar_path,
+)
 
 __all__ = ["TABLE_SUFFIXES", "write_table_and_sidecar", "read_table_and_sidecar",
            "format_iso_times"]
@@ -38,13 +45,18 @@ def write_table_and_sidecar(table: pd.DataFrame, sidecar: dict, path) -> Path:
 
     Raises
     ------
-    ValueError
-        For an extension other than ``.csv``/``.parquet``.
+    InvalidParameterError
+        For an extension other than ``.csv``/``.parquet``, or a table that names a column
+        twice (its reader would refuse the file).
     """
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in TABLE_SUFFIXES:
-        raise ValueError(f"unsupported extension {path.suffix!r}; use .csv or .parquet")
+        raise InvalidParameterError(f"unsupported extension {path.suffix!r}; use .csv or .parquet")
+    repeated = table.columns[table.columns.duplicated()]
+    if len(repeated):
+        raise InvalidParameterError(f"the table names column {repeated[0]!r} twice; name each "
+                                    f"column once (writing {path})")
 
     def write_table(tmp: Path):
         if suffix == ".csv":
@@ -81,22 +93,24 @@ def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
 
     Raises
     ------
-    FileNotFoundError
-        If the data file or the sidecar is missing.
+    MissingFileError
+        If the data file or the sidecar is missing (a ``FileNotFoundError``).
+    error_cls
+        For a CSV header that names a column twice (pandas would rename the second).
     """
     path = Path(path)
     if path.is_dir():
         raise error_cls(f"{path} is a folder; give a data file (.csv or .parquet)")
     if not path.exists():
-        raise FileNotFoundError(f"no data file {path} (schema {schema})")
+        raise MissingFileError(f"no data file {path} (schema {schema})")
     if path.suffix.lower() not in TABLE_SUFFIXES:
         raise error_cls(f"{path}: unsupported extension {path.suffix!r}; use .csv or .parquet")
     side = find_sidecar(path)
     if side is None:
         if sidecar_path(path).is_dir():
             raise error_cls(f"sidecar {sidecar_path(path)} is a folder, not a JSON file")
-        raise FileNotFoundError(f"no sidecar {sidecar_path(path)} beside {path} "
-                                f"(schema {schema})")
+        raise MissingFileError(f"no sidecar {sidecar_path(path)} beside {path} "
+                               f"(schema {schema})")
     try:
         sidecar = json.loads(side.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
@@ -104,6 +118,8 @@ def read_table_and_sidecar(path, schema: str, error_cls: type[Exception],
     if not isinstance(sidecar, dict):
         raise error_cls(f"{side}: the sidecar must be a JSON object {{...}}; got a "
                         f"{type(sidecar).__name__}")
+    if path.suffix.lower() == ".csv":
+        check_csv_header(path, error_cls)
     try:
         table = pd.read_parquet(path) if path.suffix.lower() == ".parquet" else \
             pd.read_csv(path, **read_csv_kwargs)

@@ -176,13 +176,14 @@ def aerosol_type(preset) -> AerosolType:
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unknown name (the message lists the presets).
     """
     if isinstance(preset, AerosolType):
         return preset
     if preset not in PRESETS:
-        raise ValueError(f"unknown aerosol preset {preset!r}; valid: {', '.join(PRESETS)}")
+        raise InvalidParameterError(
+            f"unknown aerosol preset {preset!r}; valid: {', '.join(PRESETS)}")
     return PRESETS[preset]
 
 

@@ -31,6 +31,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .exceptions import InvalidParameterError
+
 __all__ = ["ARCSEC2_SR", "BANDS", "Band", "get_band", "magnitude_to_radiance",
            "radiance_to_magnitude", "solar_irradiance"]
 
@@ -76,11 +78,12 @@ magnitudes (B 5.44, V 4.81, R 4.43, I 4.10) minus 31.57."""
 
 
 def get_band(name: str) -> Band:
-    """The :class:`Band` called ``name``; raises ``ValueError`` listing the valid names."""
+    """The :class:`Band` called ``name``; raises
+    :class:`~skysim.exceptions.InvalidParameterError` listing the valid names."""
     try:
         return BANDS[name]
     except (KeyError, TypeError):
-        raise ValueError(f"unknown band {name!r}; valid: {', '.join(BANDS)}") from None
+        raise InvalidParameterError(f"unknown band {name!r}; valid: {', '.join(BANDS)}") from None
 
 
 def magnitude_to_radiance(mag_arcsec2, band: str) -> np.ndarray:

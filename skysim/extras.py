@@ -14,7 +14,7 @@ from pathlib import Path
 __all__ = ["EXTRAS", "extra_for_module", "install_command", "missing_extra_message"]
 
 EXTRAS = {"sasktran2": "rt", "SALib": "sweep", "dask": "sweep", "distributed": "sweep",
-          "tifffile": "camera", "cv2": "camera", "astropy": "moon"}
+          "tifffile": "camera", "cv2": "camera", "astropy": "moon", "h5netcdf": "series"}
 """Top-level module -> the optional extra of ``pyproject.toml`` that installs it."""
 
 

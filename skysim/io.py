@@ -20,11 +20,11 @@ import tempfile
 from pathlib import Path
 from typing import Callable, Iterable
 
-from .exceptions import SkysimError
+from .exceptions import FileFormatError, SkysimError
 
-__all__ = ["OutputPathError", "WriteError", "atomic_write", "atomic_write_many",
-           "check_free_space", "check_output_dir", "check_output_file", "find_sidecar",
-           "legacy_sidecar_path", "sidecar_path", "write_json_atomic"]
+__all__ = ["JsonValueError", "OutputPathError", "WriteError", "atomic_write", "atomic_write_many",
+           "check_csv_header", "check_free_space", "check_output_dir", "check_output_file",
+           "find_sidecar", "legacy_sidecar_path", "sidecar_path", "write_json_atomic"]
 
 FREE_SPACE_MARGIN = 1.1
 """Free space a writer asks for, relative to its size estimate: room for the estimate's
@@ -39,6 +39,11 @@ class OutputPathError(SkysimError, OSError):
 class WriteError(SkysimError, OSError):
     """Writing a file failed part-way (a full disk, a quota, a lost network share): the message
     names the destination and the reason; the destination is left as it was."""
+
+
+class JsonValueError(SkysimError, TypeError):
+    """A value to be written as JSON (a sidecar, a report) that JSON cannot hold: the message
+    names its type; give numbers, text, lists or dicts of them."""
 
 
 def sidecar_path(path) -> Path:
@@ -60,6 +65,38 @@ def find_sidecar(path) -> Path | None:
         if side.is_file():
             return side
     return None
+
+
+def check_csv_header(path, error_cls: type[Exception] = FileFormatError, what: str = "") -> None:
+    """Refuse a CSV file (``.csv`` or ``.csv.gz``) whose header line names a column twice.
+
+    :func:`pandas.read_csv` would silently rename the second ``a`` to ``a.1`` and a reader
+    would use the first: the header line itself is read (with :mod:`csv`, so quoted names
+    count as written). A file without a header line passes (the table reader reports it).
+
+    Raises
+    ------
+    error_cls
+        Naming the file (after ``what``, e.g. ``"--directions "``) and the repeated column.
+    """
+    import csv
+    import gzip
+    import io
+    from collections import Counter
+    path = Path(path)
+    opener = gzip.open if path.suffix.lower() == ".gz" else open
+    try:
+        with opener(path, "rb") as raw:
+            line = raw.readline()
+    except (OSError, EOFError):   # unreadable: the table reader says why
+        return
+    text = line.decode("utf-8-sig", "replace")
+    header = next(csv.reader(io.StringIO(text)), [])
+    repeated = [name for name, n in Counter(header).items() if n > 1 and name.strip()]
+    if repeated:
+        name = repeated[0]
+        raise error_cls(f"{what}{path}: column {name!r} appears {header.count(name)} times in "
+                        "the header line; name each column once")
 
 
 def _umask_mode() -> int:
@@ -237,4 +274,7 @@ def _json_default(o):
         return o.tolist()
     if isinstance(o, Path):
         return str(o)
-    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+    # json.dumps calls this hook for what it cannot write and expects a TypeError: this one is
+    # also a SkysimError, for a caller's metadata that has no JSON form
+    raise JsonValueError(f"a {type(o).__name__} value ({o!r:.60}) cannot be written as JSON; "
+                         "give numbers, text, lists or dicts of them")

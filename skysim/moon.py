@@ -44,7 +44,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
-from .exceptions import InvalidParameterError
+from .exceptions import InvalidParameterError, MissingDependencyError
 from .sun import _UNITS_PER_S, SunTrack, _as_site_arrays, _original_index, as_utc_index
 from .validation import check_in_range
 
@@ -109,8 +109,8 @@ def _import_astropy():
         import astropy  # noqa: F401
     except ImportError as exc:  # the message names the extra that installs it
         from .extras import missing_extra_message
-        raise ImportError(missing_extra_message("astropy", "the Moon's position"),
-                          name="astropy") from exc
+        raise MissingDependencyError(missing_extra_message("astropy", "the Moon's position"),
+                                     name="astropy") from exc
 
 
 def moon_position(times, latitude_deg, longitude_deg, altitude_m=0.0) -> pd.DataFrame:
@@ -140,7 +140,7 @@ def moon_position(times, latitude_deg, longitude_deg, altitude_m=0.0) -> pd.Data
     ------
     NaiveDatetimeError, InvalidTimeError, InvalidParameterError, BroadcastError
         As :func:`skysim.sun.sun_position`.
-    ImportError
+    MissingDependencyError
         Without astropy (extra ``moon``); the message gives the install command.
     """
     idx = as_utc_index(times)

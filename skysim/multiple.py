@@ -229,7 +229,7 @@ def prefetch_modes(skies, sun_elevation_deg) -> None:
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         If the skies differ in anything but ``tau`` and ``albedo``.
     """
     skies = list(skies)
@@ -239,7 +239,8 @@ def prefetch_modes(skies, sun_elevation_deg) -> None:
                 s.sun_node_origin_deg)
 
     if any(shared(s) != shared(first) for s in skies):
-        raise ValueError("prefetch_modes needs skies that differ only in tau and albedo")
+        raise InvalidParameterError(
+            "prefetch_modes needs skies that differ only in tau and albedo")
     nodes = first.sun_node_set(sun_elevation_deg)
     for el in sorted(nodes):
         fourier_modes_cases([s.tau for s in skies], [s.albedo for s in skies], _mu0(el),
@@ -255,7 +256,7 @@ def mix_modes(modes, weights) -> FourierModes:
     modes = list(modes)
     theta = modes[0].theta_deg
     if any(m.theta_deg.shape != theta.shape or np.any(m.theta_deg != theta) for m in modes):
-        raise ValueError("mix_modes needs mode sets on the same zenith nodes")
+        raise InvalidParameterError("mix_modes needs mode sets on the same zenith nodes")
     c = sum(float(w) * m.coefficients for m, w in zip(modes, weights, strict=True))
     return FourierModes(theta, c, max(m.fit_residual for m in modes))
 

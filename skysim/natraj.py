@@ -25,6 +25,8 @@ from pathlib import Path
 
 import pandas as pd
 
+from .exceptions import FileFormatError, MissingFileError
+
 __all__ = ["NATRAJ_FILE", "NATRAJ_NAMES", "NATRAJ_COLUMNS", "natraj_path", "read_natraj"]
 
 NATRAJ_FILE = Path(__file__).with_name("data") / "natraj2009" / "natraj2009_transmitted.csv.gz"
@@ -43,7 +45,7 @@ def natraj_path(reference=None) -> Path:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If ``reference`` is neither such a file nor a folder holding one.
     """
     if reference is None:
@@ -55,9 +57,9 @@ def natraj_path(reference=None) -> Path:
         for name in NATRAJ_NAMES:
             if (folder / name).is_file():
                 return folder / name
-    raise FileNotFoundError(f"{ref}: no Natraj table there; give the table file or "
-                            f"a folder holding {' or '.join(NATRAJ_NAMES)} (directly or in "
-                            "natraj2009/)")
+    raise MissingFileError(f"{ref}: no Natraj table there; give the table file or "
+                           f"a folder holding {' or '.join(NATRAJ_NAMES)} (directly or in "
+                           "natraj2009/)")
 
 
 def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
@@ -66,26 +68,28 @@ def read_natraj(table_path=NATRAJ_FILE, min_mu: float = 0.1) -> pd.DataFrame:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the table is missing.
-    ValueError
+    FileFormatError
         If it is not a readable CSV with the columns :data:`NATRAJ_COLUMNS`, or holds no
         transmitted rows at ``mu >= min_mu``.
     """
     path = Path(table_path)
     if not path.is_file():
-        raise FileNotFoundError(f"no Natraj table {path}; give the table file or a folder "
-                                f"holding {' or '.join(NATRAJ_NAMES)}")
+        raise MissingFileError(f"no Natraj table {path}; give the table file or a folder "
+                               f"holding {' or '.join(NATRAJ_NAMES)}")
+    from .io import check_csv_header
+    check_csv_header(path)
     try:
         d = pd.read_csv(path)
     except (pd.errors.ParserError, pd.errors.EmptyDataError, UnicodeDecodeError, OSError,
             EOFError) as exc:
-        raise ValueError(f"{path}: not a readable Natraj table ({exc})") from None
+        raise FileFormatError(f"{path}: not a readable Natraj table ({exc})") from None
     missing = [c for c in NATRAJ_COLUMNS if c not in d.columns]
     if missing:
-        raise ValueError(f"{path}: missing column(s) {missing} of a Natraj table; found "
-                         f"{list(d.columns)}")
+        raise FileFormatError(f"{path}: missing column(s) {missing} of a Natraj table; found "
+                              f"{list(d.columns)}")
     d = d[(d.field == "transmitted") & (d.mu >= min_mu)]
     if d.empty:
-        raise ValueError(f"{path}: no transmitted-field rows with mu >= {min_mu}")
+        raise FileFormatError(f"{path}: no transmitted-field rows with mu >= {min_mu}")
     return d

@@ -48,8 +48,7 @@ from dataclasses import asdict, dataclass, replace
 
 import numpy as np
 
-from .exceptions import InvalidParameterError
-from .validation import check_in_range
+from .validation import check_finite, check_in_range
 
 __all__ = ["NeutralPoints", "neutral_points", "neutral_points_from_modes",
            "DENSE_SCAN_ELEVATION_DEG", "DENSE_SCAN_STEP_DEG", "NEUTRAL_DOP"]
@@ -258,8 +257,7 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     sun = float(check_in_range("sun_elevation_deg", sun_elevation_deg, 0.0, 89.5,
                                low_open=True,
                                hint="the solar meridian is undefined with the sun at the zenith"))
-    if not np.isfinite(tau):
-        raise InvalidParameterError(f"tau must be finite; got {tau!r}")
+    check_finite("tau", tau)
     sky = MultipleScatteringSky(tau=tau, albedo=albedo, **sky_kwargs)
     n = neutral_points_from_modes(sky.modes(sun), sun, sky.tau, sky.albedo)
     if sun > DENSE_SCAN_ELEVATION_DEG or not (n.babinet_visible and n.brewster_visible):

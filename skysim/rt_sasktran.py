@@ -55,7 +55,7 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
-from .exceptions import InvalidParameterError, SkysimError
+from .exceptions import InvalidParameterError, MissingDependencyError, SkysimWarning
 from .validation import check_in_range
 
 __all__ = [
@@ -108,7 +108,7 @@ class TauOutsideVerifiedRangeError(InvalidParameterError):
     is not verified (and is known to return wrong radiances for very thick slabs)."""
 
 
-class TauBeyondTablesWarning(UserWarning):
+class TauBeyondTablesWarning(SkysimWarning):
     """The optical thickness lies beyond the published tables (above 1): the engine set-up is
     checked there by convergence only (:data:`VERIFIED_TAU_RANGE`)."""
 
@@ -136,7 +136,7 @@ def tau_check(tau: float) -> str:
     return "tables" if TABLE_TAU_RANGE[0] <= tau <= TABLE_TAU_RANGE[1] else "convergence"
 
 
-class SasktranUnavailableError(SkysimError, ImportError):
+class SasktranUnavailableError(MissingDependencyError):
     """The optional radiative-transfer engine sasktran2 is not installed.
 
     Fix: install the ``rt`` extra from the skysim checkout,

@@ -27,7 +27,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from . import rayleigh
-from .exceptions import InvalidParameterError
+from .exceptions import BroadcastError, InvalidParameterError, UnsupportedOperationError
 from .geometry import e_vector_from_aop, wrap_axial_deg
 from .validation import (
     TWILIGHT_LIMIT_DEG,
@@ -105,14 +105,25 @@ class Sky(abc.ABC):
             the single-scattering models, which hold in twilight).
         InvalidParameterError
             If a view direction is below the horizon or an input is not finite.
+        BroadcastError
+            If the inputs' shapes do not broadcast against each other.
         """
         check_sun_above_horizon(sun_elevation_deg, self.min_sun_elevation_deg)
         check_in_range("view_elevation_deg", view_elevation_deg, 0.0, 90.0,
                        hint="ground-based sky models only look up")
         check_finite("view_azimuth_deg", view_azimuth_deg)
         check_finite("sun_azimuth_deg", sun_azimuth_deg)
-        return self._make_field(*(np.asarray(a, dtype=float) for a in (
-            view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg)))
+        args = tuple(np.asarray(a, dtype=float) for a in (
+            view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg))
+        try:
+            np.broadcast_shapes(*(a.shape for a in args))
+        except ValueError:
+            raise BroadcastError(
+                "view_elevation_deg, view_azimuth_deg, sun_elevation_deg and sun_azimuth_deg "
+                f"of shapes {', '.join(str(a.shape) for a in args)} do not broadcast against "
+                "each other; give arrays of one shape, or shapes such as (1, N) and (T, 1)") \
+                from None
+        return self._make_field(*args)
 
     def _make_field(self, vel, vaz, sel, saz) -> SkyField:
         """Field for validated, not yet broadcast inputs: broadcast and call :meth:`_stokes`.
@@ -138,11 +149,11 @@ class Sky(abc.ABC):
 
         Raises
         ------
-        NotImplementedError
+        UnsupportedOperationError
             For a model whose ``I`` has no stated absolute unit.
         """
-        raise NotImplementedError(f"sky model {self.name!r} does not state the unit of its "
-                                  "radiance, so no cloud light can be added to it")
+        raise UnsupportedOperationError(f"sky model {self.name!r} does not state the unit of its "
+                                        "radiance, so no cloud light can be added to it")
 
     def describe(self) -> dict:
         """Model name and parameters, for sidecars."""
@@ -177,7 +188,8 @@ class RayleighSky(Sky):
         except TypeError:
             self.dtype = None
         if self.dtype is None or self.dtype.name not in self.DTYPES:
-            raise ValueError(f"dtype must be one of {', '.join(self.DTYPES)}; got {dtype!r}")
+            raise InvalidParameterError(
+                f"dtype must be one of {', '.join(self.DTYPES)}; got {dtype!r}")
         self.dmax = float(dmax)
 
     def _stokes(self, vel, vaz, sel, saz):
@@ -216,14 +228,14 @@ def make_sky(model: str = "rayleigh", **params) -> Sky:
 
     Raises
     ------
-    ValueError
-        For an unknown model name (the message lists the valid ones).
     InvalidParameterError
-        For a parameter the model does not take (the message lists the ones it takes).
+        For an unknown model name (the message lists the valid ones), or a parameter the
+        model does not take (the message lists the ones it takes).
     """
     import inspect
     if model not in SKY_MODELS:
-        raise ValueError(f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
+        raise InvalidParameterError(
+            f"unknown sky model {model!r}; valid: {', '.join(sorted(SKY_MODELS))}")
     module_name, cls_name = SKY_MODELS[model].split(":")
     cls = getattr(importlib.import_module(module_name), cls_name)
     takes = [n for n, p in inspect.signature(cls).parameters.items()

@@ -58,9 +58,20 @@ from pysolar import constants as _pysolar_constants
 from pysolar import solar as _solar
 from pysolar import solartime as _solartime
 
-from .exceptions import BroadcastError, InvalidTimeError, NaiveDatetimeError
+from .exceptions import (
+    BroadcastError,
+    InvalidParameterError,
+    InvalidTimeError,
+    NaiveDatetimeError,
+)
 from .geometry import direction_vector, elevation_azimuth
-from .validation import check_finite, check_in_range, check_latitude, check_longitude
+from .validation import (
+    as_float_array,
+    check_finite,
+    check_in_range,
+    check_latitude,
+    check_longitude,
+)
 
 __all__ = [
     "Site",
@@ -199,8 +210,35 @@ class Site:
 
     @classmethod
     def from_dict(cls, d: dict) -> "Site":
-        return cls(float(d["latitude_deg"]), float(d["longitude_deg"]),
-                   float(d.get("altitude_m", 0.0)), str(d.get("name", "")))
+        """The site of a dict such as a sidecar's ``site``: ``latitude_deg``,
+        ``longitude_deg`` [deg] and optionally ``altitude_m`` [m] (0 when absent) and
+        ``name``; numbers may be given as text (``"34.1"``).
+
+        Raises
+        ------
+        InvalidParameterError
+            Naming the key that is missing, not a number, or out of range.
+        """
+        if not isinstance(d, dict):
+            raise InvalidParameterError(f"a site must be an object with latitude_deg, "
+                                        f"longitude_deg (and altitude_m); got {d!r}")
+
+        def number(key: str, default=None) -> float:
+            if key not in d:
+                if default is not None:
+                    return default
+                raise InvalidParameterError(f"site lacks {key!r} (latitude_deg, longitude_deg "
+                                            f"[deg] and altitude_m [m]); got {d!r}")
+            value = d[key]
+            try:
+                x = None if isinstance(value, bool) else float(value)
+            except (TypeError, ValueError):
+                x = None
+            if x is None:
+                raise InvalidParameterError(f"{key} must be a number; got {value!r}")
+            return x
+        return cls(number("latitude_deg"), number("longitude_deg"), number("altitude_m", 0.0),
+                   str(d.get("name", "")))
 
 
 # --------------------------------------------------------------------------- times
@@ -214,10 +252,15 @@ def as_utc_index(times) -> pd.DatetimeIndex:
     NaiveDatetimeError
         If any time has no timezone (skysim never guesses UTC).
     InvalidTimeError
-        If any time is missing (NaT).
+        If any time is missing (NaT), cannot be read as a time, or lies outside the years
+        1678-2261.
     """
     if isinstance(times, (pd.DatetimeIndex, pd.Series)):
-        idx = pd.DatetimeIndex(times)
+        try:
+            idx = pd.DatetimeIndex(times)
+        except (ValueError, TypeError, OverflowError) as exc:   # pandas' parse errors
+            raise InvalidTimeError(f"times are not times ({exc}); give timezone-aware times, "
+                                   "e.g. '2013-05-22T17:10:00+08:00'") from None
         if idx.tz is None:
             raise NaiveDatetimeError(
                 f"times are timezone-naive (first: {idx[0] if len(idx) else '<empty>'}); "
@@ -232,7 +275,12 @@ def as_utc_index(times) -> pd.DatetimeIndex:
         seq = list(np.atleast_1d(times))
     out = []
     for k, t in enumerate(seq):  # list input: per-element tz check (arrays should be an index)
-        ts = pd.Timestamp(t)
+        try:
+            ts = pd.Timestamp(t)
+        except (ValueError, TypeError, OverflowError) as exc:   # pandas' parse errors
+            raise InvalidTimeError(f"times[{k}] = {t!r:.60} is not a time ({exc}); give "
+                                   "timezone-aware times, e.g. '2013-05-22T17:10:00+08:00'") \
+                from None
         if ts is pd.NaT:
             raise InvalidTimeError(f"times[{k}] is missing (NaT); drop or fill missing times "
                                    "first")
@@ -241,7 +289,11 @@ def as_utc_index(times) -> pd.DatetimeIndex:
                 f"time {t!r} is timezone-naive; give a UTC offset or zone, e.g. "
                 "'2013-05-22T17:10:00+08:00' or datetime(..., tzinfo=timezone.utc)")
         out.append(ts.tz_convert("UTC"))
-    return pd.DatetimeIndex(out)
+    try:
+        return pd.DatetimeIndex(out)
+    except (ValueError, OverflowError) as exc:   # e.g. a year nanoseconds cannot hold
+        raise InvalidTimeError(f"times outside the supported years 1678-2261 ({exc})") \
+            from None
 
 
 def _check_no_nat(idx: pd.DatetimeIndex) -> None:
@@ -419,7 +471,7 @@ def _as_site_arrays(n_times: int, latitude_deg, longitude_deg, altitude_m):
              "altitude_m": altitude_m}
     arrays = {}
     for name, value in named.items():
-        arr = np.asarray(value, dtype=float)
+        arr = as_float_array(name, value)
         if arr.ndim > 1:
             raise BroadcastError(f"{name} has shape {arr.shape}; give a scalar or a 1-D array "
                                  f"(one value per time, {n_times} times)")
@@ -550,7 +602,8 @@ def _sun_angles(times, latitude_deg, longitude_deg, altitude_m, refraction, meth
     """Shared core: UTC index (broadcast against the sites), elevation and azimuth [deg], and
     the ENU unit vectors when ``want_vector`` (else None)."""
     if method not in METHODS:
-        raise ValueError(f"unknown method {method!r}; valid: {', '.join(map(repr, METHODS))}")
+        raise InvalidParameterError(
+            f"unknown method {method!r}; valid: {', '.join(map(repr, METHODS))}")
     idx = as_utc_index(times)
     lat, lon, alt, n = _as_site_arrays(len(idx), latitude_deg, longitude_deg, altitude_m)
     if len(idx) == 1 and n > 1:
@@ -604,6 +657,9 @@ def sun_vector(times, site: Site, refraction: bool = False, method: str = "auto"
     delta_t_s : float or array, optional
         TT - UT1 [s]; default :func:`delta_t_seconds`.
     """
+    if not all(hasattr(site, k) for k in ("latitude_deg", "longitude_deg", "altitude_m")):
+        raise InvalidParameterError(f"site must be a skysim.Site (latitude_deg, longitude_deg, "
+                                    f"altitude_m); got {site!r:.80}")
     idx, _, _, vec = _sun_angles(times, site.latitude_deg, site.longitude_deg, site.altitude_m,
                                  refraction, method, pressure_hPa, temperature_C, delta_t_s,
                                  want_vector=True)

@@ -7,6 +7,7 @@ import numpy as np
 from .exceptions import InvalidParameterError, SunBelowHorizonError
 
 __all__ = [
+    "as_float_array",
     "check_latitude",
     "check_longitude",
     "check_finite",
@@ -27,9 +28,19 @@ def _first_bad(values: np.ndarray, bad: np.ndarray) -> str:
     return f"{first!r} at flat index {idx[0]}{more}"
 
 
+def as_float_array(name: str, values) -> np.ndarray:
+    """``values`` as a float array; :class:`InvalidParameterError` naming ``name`` and the
+    value for what is not a number or a (rectangular) array of numbers, such as ``"high"``."""
+    try:
+        return np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise InvalidParameterError(f"{name} must be a number or an array of numbers; got "
+                                    f"{values!r:.80}") from None
+
+
 def check_finite(name: str, values) -> np.ndarray:
     """Return ``values`` as a float array; raise ``InvalidParameterError`` on NaN or inf."""
-    arr = np.asarray(values, dtype=float)
+    arr = as_float_array(name, values)
     bad = ~np.isfinite(arr)
     if bad.any():
         raise InvalidParameterError(f"{name} must be finite; got {_first_bad(arr, bad)}")
@@ -39,7 +50,7 @@ def check_finite(name: str, values) -> np.ndarray:
 def check_in_range(name: str, values, low: float, high: float, *, low_open=False,
                    high_open=False, hint: str = "") -> np.ndarray:
     """Check ``low <= values <= high`` (bounds optionally open); return a float array."""
-    arr = np.asarray(values, dtype=float)
+    arr = as_float_array(name, values)
     ok = arr > low if low_open else arr >= low   # NaN fails both comparisons
     ok &= arr < high if high_open else arr <= high
     if ok.all():

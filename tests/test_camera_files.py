@@ -1,6 +1,7 @@
 """Raw camera files (16-bit TIFF + skysim.dofp/1 sidecar) and the camera commands."""
 
 import json
+import re
 
 import numpy as np
 import pytest
@@ -11,6 +12,17 @@ pytest.importorskip("tifffile", reason="camera images need the 'camera' extra (t
 
 from sensor.camera.files import (DofpFormatError, camera_from_sidecar, check_sidecar, read_raw,  # noqa: E402
                                  write_raw)
+
+
+def _sidecar(width: int, height: int) -> dict:
+    """A complete skysim.dofp/1 sidecar (without ``schema``) for a width x height mosaic."""
+    return {"site": {"latitude_deg": 34.0, "longitude_deg": 108.0}, "attitude": {},
+            "lens": {"focal_px": 2.0, "cx": 3.0, "cy": 2.0, "fov_deg": 180.0,
+                     "model": "equidistant"},
+            "exposure": {"exposure_s": 0.01}, "time": "2020-01-01T00:00Z",
+            "sensor": {"width": width, "height": height, "layout_deg": [[90, 45], [135, 0]],
+                       "full_well_e": 1e4, "read_noise_e": 2.0, "dark_current_e_s": 1.0,
+                       "adc_bits": 12, "black_level_dn": 0}}
 
 
 def test_camera_then_heading_round_trip(tmp_path, capsys):
@@ -52,13 +64,7 @@ def test_writer_is_atomic_and_reader_checks(tmp_path):
     assert not list(tmp_path.iterdir())  # nothing half-written
     with pytest.raises(DofpFormatError, match="uint16"):
         write_raw(tmp_path / "a.tiff", raw.astype(float), {})
-    doc = {"site": {"latitude_deg": 34.0, "longitude_deg": 108.0}, "attitude": {},
-           "lens": {"focal_px": 2.0, "cx": 3.0, "cy": 2.0, "fov_deg": 180.0,
-                    "model": "equidistant"},
-           "exposure": {"exposure_s": 0.01}, "time": "2020-01-01T00:00Z",
-           "sensor": {"width": 8, "height": 4, "layout_deg": [[90, 45], [135, 0]],
-                      "full_well_e": 1e4, "read_noise_e": 2.0, "dark_current_e_s": 1.0,
-                      "adc_bits": 12, "black_level_dn": 0}}
+    doc = _sidecar(8, 4)
     write_raw(tmp_path / "a.tiff", raw, doc)
     with pytest.raises(DofpFormatError, match="sidecar says"):
         read_raw(tmp_path / "a.tiff")
@@ -88,9 +94,7 @@ def test_png_round_trip_is_bit_exact(tmp_path):
     # every 16-bit value, odd sizes and the extremes: the file holds the DN exactly
     raw = np.random.default_rng(2).integers(0, 2 ** 16, (6, 10), dtype=np.uint16)
     raw[0, :2] = (0, 65535)
-    doc = {k: {} for k in ("site", "attitude", "lens", "exposure")}
-    doc.update(time="2020-01-01T00:00Z", sensor={"width": 10, "height": 6})
-    write_raw(tmp_path / "a.png", raw, doc)
+    write_raw(tmp_path / "a.png", raw, _sidecar(10, 6))
     back, side = read_raw(tmp_path / "a.png")
     assert back.dtype == np.uint16 and np.array_equal(back, raw)
     assert side["schema"] == "skysim.dofp/1" and (tmp_path / "a.png.json").exists()
@@ -185,3 +189,111 @@ def test_incomplete_sidecar_names_the_key(tmp_path, edit):
         check_sidecar(read_raw(out)[1], side)
     assert side.name in str(err.value)
     assert main(["camera-heading", str(out)]) == 2
+
+
+@pytest.fixture(scope="module")
+def camera_png(tmp_path_factory):
+    """A small simulated PNG frame and its sidecar (bytes), made once for the module."""
+    pytest.importorskip("cv2", reason="PNG camera images need the 'camera' extra (OpenCV)")
+    out = tmp_path_factory.mktemp("camera") / "sky.png"
+    assert main(["camera", "--lat", "34.14", "--lon", "108.55", "--time",
+                 "2013-05-22T10:00+08:00", "--width", "64", "--height", "64",
+                 "--out", str(out)]) == 0
+    return out.read_bytes(), json.loads(out.with_name("sky.png.json").read_text())
+
+
+@pytest.mark.parametrize("edit,named", [
+    (lambda d: d.update(time="2013-05-22T10:00:00"), "time '2013-05-22T10:00:00' has no UTC"),
+    (lambda d: d.update(time="yesterday"), "time 'yesterday' is not a time"),
+    (lambda d: d.update(time=5), "time must be text; got 5"),
+    (lambda d: d.update(time="1500-01-01T00:00+00:00"), "outside the supported years"),
+    (lambda d: d["attitude"].update(pitch_deg="level"),
+     "attitude.pitch_deg must be a finite number; got 'level'"),
+    (lambda d: d["attitude"].update(yaw_deg=None), "attitude.yaw_deg must be a finite number"),
+    (lambda d: d["attitude"].update(yaw_known="yes"), "attitude.yaw_known must be true or false"),
+    (lambda d: d["attitude"].pop("yaw_deg"), "attitude.yaw_known is true but attitude.yaw_deg"),
+    (lambda d: d["site"].update(altitude_m="high"), "site.altitude_m must be a finite number"),
+    (lambda d: d["site"].update(latitude_deg=95), "site: latitude_deg must lie in"),
+    (lambda d: d["lens"].update(model="pinhole"), "lens: lens model must be one of"),
+    (lambda d: d["sensor"].update(layout_deg=[1, 2]), "sensor.layout_deg must be a 2x2 list"),
+    (lambda d: d["sensor"].update(exit_pupil_px="x"), "sensor.exit_pupil_px must be a finite"),
+    (lambda d: d["sensor"].update(adc_bits=40), "sensor: adc_bits must be an integer in [8, 16]"),
+    (lambda d: d["exposure"].update(exposure_s=-1), "exposure.exposure_s must be > 0"),
+    (lambda d: d.pop("time"), "lacks time"),
+])
+def test_every_sidecar_field_is_checked_by_name(tmp_path, capsys, camera_png, edit, named):
+    """A sidecar field of the wrong kind or out of range is one line naming the file and the
+    field (exit 2), never an internal error of a later step."""
+    data, doc = camera_png
+    doc = json.loads(json.dumps(doc))
+    edit(doc)
+    image = tmp_path / "frame.png"
+    image.write_bytes(data)
+    (tmp_path / "frame.png.json").write_text(json.dumps(doc))
+    with pytest.raises(DofpFormatError) as err:
+        read_raw(image)
+    assert named in str(err.value) and "frame.png.json" in str(err.value)
+    capsys.readouterr()
+    assert main(["camera-heading", str(image)]) == 2
+    lines = capsys.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and named in lines[0] and "internal error" not in lines[0]
+
+
+@pytest.mark.parametrize("suffix", [".png", ".tiff"])
+@pytest.mark.parametrize("damage,reason", [
+    (lambda b: b"", "is empty (0 bytes)"),
+    (lambda b: b[:len(b) // 2], "truncated or damaged"),
+    (lambda b: b"hello, not an image\n", "truncated or damaged"),
+])
+def test_damaged_images_are_named_and_codecs_kept_quiet(tmp_path, capfd, camera_png, suffix,
+                                                        damage, reason):
+    """An empty, truncated or foreign file is one line naming it; the codec's own output
+    (libpng's ``libpng error:``, OpenCV's log lines) does not reach the terminal."""
+    data, doc = camera_png
+    good = tmp_path / f"good{suffix}"
+    if suffix == ".png":
+        good.write_bytes(data)
+    else:
+        raw, _ = read_raw(_png_beside(tmp_path, data, doc))
+        write_raw(good, raw, {k: v for k, v in doc.items() if k != "schema"})
+    image = tmp_path / f"bad{suffix}"
+    image.write_bytes(damage(good.read_bytes()))
+    (tmp_path / f"bad{suffix}.json").write_text(json.dumps(doc))
+    capfd.readouterr()
+    with pytest.raises(DofpFormatError, match=re.escape(reason)) as err:
+        read_raw(image)
+    assert str(image) in str(err.value)
+    assert capfd.readouterr().err == ""
+    assert main(["camera-heading", str(image)]) == 2
+    lines = capfd.readouterr().err.strip().splitlines()
+    assert len(lines) == 1 and f"bad{suffix}" in lines[0] and reason in lines[0]
+
+
+def _png_beside(folder, data, doc):
+    path = folder / "source.png"
+    path.write_bytes(data)
+    (folder / "source.png.json").write_text(json.dumps(doc))
+    return path
+
+
+def test_a_png_codec_reason_is_given(tmp_path, capfd, camera_png):
+    """A PNG with a damaged byte in its compressed image data: the message carries libpng's
+    reason (a CRC, inflate or filter error), which does not reach the terminal itself."""
+    data, doc = camera_png
+    damaged = bytearray(data)
+    damaged[len(data) // 2] ^= 0xFF
+    image = tmp_path / "flip.png"
+    image.write_bytes(bytes(damaged))
+    (tmp_path / "flip.png.json").write_text(json.dumps(doc))
+    capfd.readouterr()
+    with pytest.raises(DofpFormatError, match=r"flip\.png is not a readable PNG image "
+                                              r"\([^)]+\); is it truncated or damaged"):
+        read_raw(image)
+    assert capfd.readouterr().err == ""
+
+
+def test_a_missing_image_beside_its_sidecar(tmp_path, camera_png):
+    from skysim.exceptions import MissingFileError
+    (tmp_path / "gone.png.json").write_text(json.dumps(camera_png[1]))
+    with pytest.raises(MissingFileError, match="gone.png"):
+        read_raw(tmp_path / "gone.png")

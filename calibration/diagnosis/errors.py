@@ -2,22 +2,19 @@
 
 Every diagnosis error is a :class:`DiagnosisError`, itself a
 :class:`calibration.exceptions.CalibrationError` (and so a :class:`skysim.exceptions.SkysimError`);
-those caused by bad input are also :class:`ValueError`.
+those caused by bad input are also :class:`ValueError`. An unknown candidate effect is
+:class:`calibration.effects.UnknownEffectError`, a :class:`DiagnosisError` too.
 """
 
 from __future__ import annotations
 
 from sensor.measurement import MeasurementFormatError
 
-from ..exceptions import CalibrationError, RankDeficientError, TooFewSamplesError
+from ..exceptions import DiagnosisError, RankDeficientError, TooFewSamplesError
 
 __all__ = ["AllNaNChannelError", "DiagnosisError", "EffectUnavailableError",
            "InsufficientDataError", "MissingSiteError", "ReportFormatError",
            "SingleHeadingError", "ThresholdsError", "UnsupportedInstrumentError"]
-
-
-class DiagnosisError(CalibrationError):
-    """Base class of diagnosis failures caused by the data (the message says how to fix it)."""
 
 
 class InsufficientDataError(DiagnosisError, TooFewSamplesError):

@@ -47,10 +47,10 @@ from typing import ClassVar
 import numpy as np
 import pandas as pd
 
+from calibration.exceptions import DiagnosisError
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
 from sensor.photodiode import opponent_log_ratio, photodiode_signal
 from skysim import rayleigh
-from skysim.exceptions import SkysimError
 from skysim.geometry import direction_vector, wrap_axial_deg
 from skysim.sun import Site, SunTrack, as_utc_index
 
@@ -79,7 +79,7 @@ BASE_NAMES = ("dtheta_1_deg", "dtheta_2_deg", "dtheta_3_deg", "dtheta_4_deg", "d
 """Base-model parameters in the order of the parameter vector."""
 
 
-class UnknownEffectError(SkysimError, ValueError):
+class UnknownEffectError(DiagnosisError, ValueError):
     """An effect name that is not in :data:`EFFECT_NAMES` (the message lists the valid ones)."""
 
 

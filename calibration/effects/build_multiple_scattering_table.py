@@ -61,6 +61,7 @@ from pathlib import Path
 
 import numpy as np
 
+from skysim.exceptions import InvalidParameterError
 from skysim.io import atomic_write
 from skysim.rt_sasktran import (
     DEFAULT_SETTINGS,
@@ -110,7 +111,8 @@ def zenith_stokes(taus, albedos, sun_elevation_deg: float,
         ``I, Q, U`` of each case.
     """
     if not 0.0 < sun_elevation_deg <= 90.0:
-        raise ValueError(f"sun_elevation_deg must lie in (0, 90]; got {sun_elevation_deg}")
+        raise InvalidParameterError(
+            f"sun_elevation_deg must lie in (0, 90]; got {sun_elevation_deg}")
     mu0 = float(np.sin(np.radians(sun_elevation_deg)))
     return transmitted_stokes_cases(taus, albedos, mu0, [MU_MAX], [0.0],
                                     depolarization_ratio=0.0, settings=settings)[:, 0, :]

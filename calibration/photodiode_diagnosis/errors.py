@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+from skysim.exceptions import SkysimWarning
+
 from ..diagnosis import DiagnosisError, InsufficientDataError
 
 __all__ = ["InstrumentDataError", "InsufficientDataError", "NoUsableChannelsError",
@@ -21,7 +23,7 @@ class SunTooLowError(DiagnosisError, ValueError):
     """The sun is below the twilight limit (-10 deg) at a recorded time: the sky is dark."""
 
 
-class YawInRadiansWarning(UserWarning):
+class YawInRadiansWarning(SkysimWarning):
     """Every yaw lies within +-pi (or [0, 2 pi]) while the yaw spans more than 3: the
     ``yaw_deg`` column looks like radians (a full turn then reads as 6.3 deg)."""
 

@@ -7,8 +7,9 @@ subpackages (``cli``, ``workflows``, ``studies``): every module that defines
 inside their command functions so that ``skysim --help`` stays fast.
 
 Errors have one path (:func:`main`). Options are checked when parsed
-(:mod:`experiments.cli.argtypes`). Whatever a command raises for bad input (``ValueError`` and
-its subclasses, ``OSError`` for files, ``RuntimeError``) is printed as one line
+(:mod:`experiments.cli.argtypes`). Whatever a command raises for bad input (a
+:class:`skysim.SkysimError`, the root of the library's errors; a ``ValueError`` of an option
+check; an ``OSError`` of the file system) is printed as one line
 ``skysim CMD: error: ...`` with exit code 2; a missing optional dependency as the command
 that installs it into this checkout (:mod:`skysim.extras`); Ctrl-C as ``interrupted`` (exit
 130), SIGTERM as ``terminated`` (exit 143), each after the clean-up; a closed pipe (``skysim ... | head``) ends quietly (exit 141, as a process killed by
@@ -210,6 +211,7 @@ def _quiet_stdout() -> None:
 def main(argv=None) -> int:
     """Run ``skysim`` with ``argv``; return the exit code (see the module docstring)."""
     from experiments.workflows.progress import install_warning_format
+    from skysim.exceptions import SkysimError
     command = "skysim"
     argv = sys.argv[1:] if argv is None else list(argv)
     install_warning_format()   # a library's warning as one line, not its source line
@@ -242,7 +244,9 @@ def main(argv=None) -> int:
         print(f"{command}: error: out of memory; use a smaller size (fewer trials, directions "
               "or samples)", file=sys.stderr)
         return EXIT_ERROR
-    except (ValueError, OSError, RuntimeError) as exc:
+    except (SkysimError, ValueError, OSError) as exc:
+        # SkysimError: the library's bad-input errors; ValueError: the command line's own
+        # option checks; OSError: the file system (a missing or unreadable file, a full disk)
         print(f"{command}: error: {describe_error(exc)}", file=sys.stderr)
         return EXIT_ERROR
     except Exception as exc:  # a bug

@@ -29,7 +29,7 @@ from pathlib import Path
 
 import numpy as np
 
-from skysim.exceptions import InvalidParameterError, SkysimError
+from skysim.exceptions import InvalidParameterError, MissingFileError, SkysimError
 
 from experiments.cli.argtypes import existing_file, output_dir, output_file
 
@@ -555,7 +555,7 @@ def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
     if truth.is_dir():
         manifest = truth / "manifest.json"
         if not manifest.is_file():
-            raise FileNotFoundError(f"{truth} has no manifest.json (not a skysim generate folder)")
+            raise MissingFileError(f"{truth} has no manifest.json (not a skysim generate folder)")
         try:
             names = list(json.loads(manifest.read_text())["files"])
         except (json.JSONDecodeError, UnicodeDecodeError, KeyError, TypeError) as exc:
@@ -593,15 +593,16 @@ def _parse_tolerances(items) -> dict:
     for item in items or []:
         name, _, value = item.partition("=")
         if name not in TOLERANCES or not value:
-            raise ValueError(f"--tol {item!r}: use NAME=VALUE with NAME one of "
-                             f"{', '.join(TOLERANCES)}")
+            raise InvalidParameterError(f"--tol {item!r}: use NAME=VALUE with NAME one of "
+                                        f"{', '.join(TOLERANCES)}")
         try:
             x = float(value)
         except ValueError:
             x = float("nan")
         if not (np.isfinite(x) and x >= 0):
-            raise ValueError(f"--tol {item!r}: the tolerance must be a number >= 0 (an absolute "
-                             f"error in the unit of {name})")
+            raise InvalidParameterError(
+                f"--tol {item!r}: the tolerance must be a number >= 0 (an absolute "
+                f"error in the unit of {name})")
         tol[name] = x
     return tol
 

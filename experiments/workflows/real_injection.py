@@ -25,6 +25,7 @@ import numpy as np
 import pandas as pd
 
 from sensor.photodiodes_io import PhotodiodeData
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_deg
 
 __all__ = ["INJECTABLE", "inject"]
@@ -86,5 +87,6 @@ def inject(data: PhotodiodeData, effect: str, rng: np.random.Generator):
         table.loc[table.index[start:], col] = float(np.median(table[col]))
         truth["channel"] = col
     else:
-        raise ValueError(f"cannot inject {effect!r}; injectable: {', '.join(INJECTABLE)}")
+        raise InvalidParameterError(
+            f"cannot inject {effect!r}; injectable: {', '.join(INJECTABLE)}")
     return PhotodiodeData(table, side), truth

@@ -16,6 +16,8 @@ import shutil
 import tempfile
 from pathlib import Path
 
+from skysim.io import OutputPathError
+
 __all__ = ["RUN_FILE", "replacing_folder"]
 
 RUN_FILE = "run.json"
@@ -31,13 +33,15 @@ def _check_replaceable(out: Path, run: dict, force: bool) -> None:
     except (OSError, ValueError):
         before = None
     if not isinstance(before, dict) or before.get("target") != run["target"]:
-        raise ValueError(f"--out {out} already holds files that are not a run of "
-                         f"{run['target']}; give a new or empty folder, or --force to replace "
-                         "the folder and everything in it")
+        raise OutputPathError(
+            f"--out {out} already holds files that are not a run of "
+            f"{run['target']}; give a new or empty folder, or --force to replace "
+            "the folder and everything in it")
     if run["quick"] and not before.get("quick", True):
-        raise ValueError(f"--out {out} holds a full run of {run['target']} (seed "
-                         f"{before.get('seed')}); a --quick run would replace it: give another "
-                         "--out, or --force")
+        raise OutputPathError(
+            f"--out {out} holds a full run of {run['target']} (seed "
+            f"{before.get('seed')}); a --quick run would replace it: give another "
+            "--out, or --force")
 
 
 @contextlib.contextmanager
@@ -56,7 +60,7 @@ def replacing_folder(out, run: dict, force: bool = False):
 
     Raises
     ------
-    ValueError
+    OutputPathError
         Before any work, if ``out`` holds files of something else, or a full run that a
         ``quick`` run would replace, and ``force`` is not set.
     """

@@ -20,6 +20,13 @@ import argparse
 import json
 from pathlib import Path
 
+from skysim.exceptions import (
+    BroadcastError,
+    InvalidParameterError,
+    MissingDependencyError,
+    SunBelowHorizonError,
+)
+
 __all__ = ["SERIES_SCHEMA", "write_sky_series", "register"]
 
 SERIES_SCHEMA = "skysim.skyseries/1"
@@ -51,7 +58,7 @@ def _time_ns(times, n):
         return None
     idx = as_utc_index(pd.DatetimeIndex(times))
     if len(idx) != n:
-        raise ValueError(f"times and sun positions differ in length: {len(idx)} vs {n}")
+        raise BroadcastError(f"times and sun positions differ in length: {len(idx)} vs {n}")
     return idx.as_unit("ns").asi8.astype(np.int64)
 
 
@@ -59,8 +66,10 @@ def _write_netcdf(tmp: Path, blocks, el, az, sel, saz, t_ns, dtype, chunk_rows, 
     try:
         import h5netcdf
     except ImportError as exc:  # pragma: no cover - depends on the environment
-        raise RuntimeError("writing .nc needs h5netcdf: pip install 'skysim[series]' "
-                           "(or write .parquet)") from exc
+        from skysim.extras import missing_extra_message
+        raise MissingDependencyError(
+            missing_extra_message("h5netcdf", "writing a sky series as .nc (or write .parquet)"),
+            name="h5netcdf") from exc
     with h5netcdf.File(tmp, "w") as f:
         f.dimensions = {"time": sel.size, "direction": el.size}
         for name, values, dim, units in (("elevation_deg", el, "direction", "degree"),
@@ -138,7 +147,7 @@ def write_sky_series(path, sky, view_elevation_deg, view_azimuth_deg, sun_elevat
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unsupported suffix, mismatched inputs, naive times or a sun below the horizon
         (nothing is written then).
     skysim.io.WriteError
@@ -153,7 +162,8 @@ def write_sky_series(path, sky, view_elevation_deg, view_azimuth_deg, sun_elevat
     path = Path(path)
     suffix = path.suffix.lower()
     if suffix not in (".nc", ".parquet"):
-        raise ValueError(f"a sky series is written to .nc or .parquet; got {path.name!r}")
+        raise InvalidParameterError(
+            f"a sky series is written to .nc or .parquet; got {path.name!r}")
     budget = DEFAULT_MAX_BLOCK_BYTES if max_block_bytes is None else int(max_block_bytes)
     el, az, sel, saz = (np.asarray(a, dtype=float).reshape(-1) for a in (
         view_elevation_deg, view_azimuth_deg, sun_elevation_deg, sun_azimuth_deg))
@@ -210,22 +220,23 @@ def _count_times(args) -> int:
 
     from experiments.cli.argtypes import PANDAS_YEARS
     if args.periods is None and args.end is None:
-        raise ValueError("give the times as --start with --end or --periods")
+        raise InvalidParameterError("give the times as --start with --end or --periods")
     if args.periods is not None and args.end is not None:
-        raise ValueError("give --end or --periods, not both")
+        raise InvalidParameterError("give --end or --periods, not both")
     step = (args.start + args.freq) - args.start
     if args.end is not None:
         if args.end < args.start:
-            raise ValueError(f"--end {args.end.isoformat()} is before --start "
-                             f"{args.start.isoformat()}")
+            raise InvalidParameterError(f"--end {args.end.isoformat()} is before --start "
+                                        f"{args.start.isoformat()}")
         return int((args.end - args.start) // step) + 1
     last_ns = args.start.value + (args.periods - 1) * step.value
     if not last_ns < pd.Timestamp(f"{PANDAS_YEARS[1] + 1}-01-01", tz="UTC").value:
         freq = args.freq.freqstr if args.freq.freqstr[0].isdigit() else f"1{args.freq.freqstr}"
-        raise ValueError(f"--periods {args.periods} of --freq {freq} from --start "
-                         f"{args.start.isoformat()} run beyond the supported years "
-                         f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; use fewer --periods or a "
-                         "shorter --freq")
+        raise InvalidParameterError(
+            f"--periods {args.periods} of --freq {freq} from --start "
+            f"{args.start.isoformat()} run beyond the supported years "
+            f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; use fewer --periods or a "
+            "shorter --freq")
     return args.periods
 
 
@@ -246,9 +257,10 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
                  "longer --freq), a coarser --grid-step or a smaller --max-memory-mb")
     one_step = VALUES_PER_POINT * itemsize * n_directions
     if budget < one_step:
-        raise ValueError(f"--max-memory-mb {args.max_memory_mb:g} is below the arrays of one "
-                         f"time step ({one_step / 2**20:.3g} MiB for {directions}); raise it "
-                         "or use fewer directions")
+        raise InvalidParameterError(
+            f"--max-memory-mb {args.max_memory_mb:g} is below the arrays of one "
+            f"time step ({one_step / 2**20:.3g} MiB for {directions}); raise it "
+            "or use fewer directions")
     suffix = Path(args.out).suffix.lower()
     check_free_space(args.out, n_times * n_directions * series_bytes_per_value(suffix, itemsize),
                      what)
@@ -277,8 +289,9 @@ def _sky_series(args) -> int:
     params = _sky_params(args)
     if args.float32:
         if args.model != "rayleigh":
-            raise ValueError(f"--float32 is available for --model rayleigh; got --model "
-                             f"{args.model}")
+            raise InvalidParameterError(
+                f"--float32 is available for --model rayleigh; got --model "
+                f"{args.model}")
         params["dtype"] = "float32"
     itemsize = 4 if args.float32 else 8
     n_times = _count_times(args)
@@ -294,9 +307,10 @@ def _sky_series(args) -> int:
         print(f"{int((~day).sum())} of {len(times)} times have the sun down; left out")
         times, sel, saz = times[day], sel[day], saz[day]
         if not day.any():
-            raise ValueError(f"the sun is below the horizon at all {day.size} time steps "
-                             f"from {args.start.isoformat()}; choose daytime at this site "
-                             "(check the UTC offset)")
+            raise SunBelowHorizonError(
+                f"the sun is below the horizon at all {day.size} time steps "
+                f"from {args.start.isoformat()}; choose daytime at this site "
+                "(check the UTC offset)")
     el, az = view_directions(args.directions, args.grid_step)
     if n_dir is None:
         _check_size(args, len(times), el.size, itemsize)

@@ -20,7 +20,7 @@ from __future__ import annotations
 import os
 from typing import Callable, Sequence
 
-from skysim.exceptions import SkysimError
+from skysim.exceptions import InvalidParameterError, MissingDependencyError, SkysimError
 
 __all__ = ["BACKENDS", "SchedulerUnreachableError", "run_tasks", "default_workers"]
 
@@ -82,8 +82,8 @@ def _connect(scheduler: str | None, workers: int, timeout_s: float):
         from dask.distributed import Client, LocalCluster
     except ImportError as exc:  # pragma: no cover - depends on the environment
         from skysim.extras import missing_extra_message
-        raise ImportError(missing_extra_message("distributed", "the dask backend"),
-                          name="distributed") from exc
+        raise MissingDependencyError(missing_extra_message("distributed", "the dask backend"),
+                                     name="distributed") from exc
     if scheduler:
         try:
             return Client(scheduler, timeout=f"{timeout_s}s"), None
@@ -140,18 +140,18 @@ def run_tasks(fn: Callable, tasks: Sequence, *, backend: str = "local",
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For an unknown backend, or ``scheduler`` with the local backend.
     SchedulerUnreachableError
         If ``scheduler`` does not answer.
     """
     if backend not in BACKENDS:
-        raise ValueError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
+        raise InvalidParameterError(f"unknown backend {backend!r}; valid: {', '.join(BACKENDS)}")
     if scheduler and backend != "dask":
-        raise ValueError("--scheduler needs --backend dask")
+        raise InvalidParameterError("--scheduler needs --backend dask")
     workers = workers or default_workers()
     if workers < 1:
-        raise ValueError(f"workers must be >= 1; got {workers}")
+        raise InvalidParameterError(f"workers must be >= 1; got {workers}")
     reports = []
 
     def done(report):

@@ -53,7 +53,7 @@ import tomllib
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from skysim.exceptions import InvalidParameterError
+from skysim.exceptions import InvalidParameterError, MissingFileError
 
 __all__ = ["SweepConfigError", "ParameterSpec", "SweepConfig", "load_config", "parse_config",
            "read_toml", "PARAMETERS", "GROUPS", "METHODS", "EPHEMERIS"]
@@ -343,7 +343,7 @@ def load_config(path) -> SweepConfig:
 
     Raises
     ------
-    FileNotFoundError
+    MissingFileError
         If the file does not exist.
     SweepConfigError
         For invalid TOML or an invalid configuration (see :func:`parse_config`).
@@ -362,7 +362,7 @@ def read_toml(path, error_cls: type[Exception]) -> dict:
     if path.is_dir():
         raise error_cls(f"{path} is a folder; give a .toml file")
     if not path.is_file():
-        raise FileNotFoundError(f"no configuration file {path}")
+        raise MissingFileError(f"no configuration file {path}")
     try:
         config = _iso_times(tomllib.loads(path.read_text()))
     except tomllib.TOMLDecodeError as exc:

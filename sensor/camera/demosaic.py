@@ -218,8 +218,9 @@ def demosaic_operator(analysis_dn, method: str = "centred") -> DemosaicOperator:
     weight) and the inverse of the 4-channel normal matrix. Depends on the analysis only, so a
     camera computes it once for its nominal analysis (:func:`camera_stokes`)."""
     if method not in ("centred", "superpixel"):
-        raise ValueError(f"a demosaicing operator is for 'centred' or 'superpixel'; got "
-                         f"{method!r}")
+        raise InvalidParameterError(
+            f"a demosaicing operator is for 'centred' or 'superpixel'; got "
+            f"{method!r}")
     analysis = np.asarray(analysis_dn)
     dtype = _DTYPE[method]
     shape = (analysis.shape[0] // 2, analysis.shape[1] // 2)
@@ -324,14 +325,14 @@ def demosaic(raw_dn, analysis_dn, *, black_level_dn: float = 0.0, valid=None,
 
     Raises
     ------
-    ValueError
-        For an unknown method (the message lists the valid ones).
     InvalidParameterError
-        For shapes that do not match or an odd image size.
+        For an unknown method (the message lists the valid ones), shapes that do not match
+        or an odd image size.
     """
     if method not in DEMOSAIC_METHODS:
-        raise ValueError(f"demosaicing method must be one of {', '.join(DEMOSAIC_METHODS)}; "
-                         f"got {method!r}")
+        raise InvalidParameterError(
+            f"demosaicing method must be one of {', '.join(DEMOSAIC_METHODS)}; "
+            f"got {method!r}")
     raw = np.asarray(raw_dn)
     if raw.ndim != 2 or raw.shape[0] % 2 or raw.shape[1] % 2:
         raise InvalidParameterError(f"raw image must be 2-D with even sides; got shape "

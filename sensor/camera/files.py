@@ -29,67 +29,150 @@ Readers keep unknown keys.
 
 from __future__ import annotations
 
+import contextlib
 import importlib
 import json
+import numbers
+import os
+import tempfile
 from pathlib import Path
 
 import numpy as np
 
-from skysim.exceptions import SkysimError
+from skysim.exceptions import (
+    FileFormatError,
+    InvalidParameterError,
+    MissingDependencyError,
+    MissingFileError,
+)
 from skysim.io import atomic_write_many, find_sidecar, sidecar_path
 
 from .lens import FisheyeLens
 from .mosaic import MosaicSensor, PolarizationCamera
 
 __all__ = ["FLIPS", "IMAGE_SUFFIXES", "ROTATIONS_DEG", "SCHEMA", "DofpFormatError",
-           "camera_from_sidecar", "read_raw", "require_image_codec", "require_tifffile",
+           "camera_from_sidecar", "check_sidecar", "read_raw", "require_image_codec",
+           "require_tifffile",
            "undo_readout", "write_raw"]
 
 SCHEMA = "skysim.dofp/1"
 _REQUIRED = ("site", "time", "attitude", "lens", "sensor", "exposure")
-_REQUIRED_NESTED = {
-    "site": {"latitude_deg": "number", "longitude_deg": "number"},
-    "time": None,
-    "attitude": {},
-    "lens": {"focal_px": "number", "cx": "number", "cy": "number", "fov_deg": "number",
-             "model": "text"},
-    "sensor": {"width": "integer", "height": "integer", "layout_deg": "list",
-               "full_well_e": "number", "read_noise_e": "number", "dark_current_e_s": "number",
-               "adc_bits": "integer", "black_level_dn": "number"},
-    "exposure": {"exposure_s": "number"},
+_FIELDS = {
+    "site": {"latitude_deg": ("number", True), "longitude_deg": ("number", True),
+             "altitude_m": ("number", False)},
+    "attitude": {"yaw_deg": ("number", False), "pitch_deg": ("number", False),
+                 "roll_deg": ("number", False), "yaw_known": ("boolean", False)},
+    "lens": {"model": ("text", True), "focal_px": ("number", True), "cx": ("number", True),
+             "cy": ("number", True), "fov_deg": ("number", True)},
+    "sensor": {"width": ("integer", True), "height": ("integer", True),
+               "layout_deg": ("2x2 angles", True), "full_well_e": ("number", True),
+               "read_noise_e": ("number", True), "dark_current_e_s": ("number", True),
+               "adc_bits": ("integer", True), "black_level_dn": ("number", True),
+               "saturation_dn": ("number", False), "e_per_dn": ("number", False),
+               "crosstalk": ("number", False), "photoelectrons_per_s": ("number", False),
+               "exit_pupil_px": ("number or null", False), "sun_radius_deg": ("number", False),
+               "errors": ("object", False)},
+    "exposure": {"exposure_s": ("number", True)},
 }
-"""The keys of each sidecar section a reader uses, with the kind of value each must hold."""
+"""The fields of each sidecar section: ``key: (kind of value, required)``."""
+
+
+def _is_number(v) -> bool:
+    return isinstance(v, numbers.Real) and not isinstance(v, bool) and bool(np.isfinite(v))
+
+
+_KINDS = {
+    "number": (_is_number, "a finite number"),
+    "number or null": (lambda v: v is None or _is_number(v), "a finite number or null"),
+    "integer": (lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool),
+                "a whole number"),
+    "text": (lambda v: isinstance(v, str), "text"),
+    "boolean": (lambda v: isinstance(v, bool), "true or false"),
+    "object": (lambda v: isinstance(v, dict), "an object {...}"),
+    "2x2 angles": (lambda v: isinstance(v, list) and len(v) == 2 and all(
+        isinstance(r, list) and len(r) == 2 and all(map(_is_number, r)) for r in v),
+        "a 2x2 list of polarizer angles [deg], rows then columns"),
+}
+"""Kind of a sidecar value -> (test, what the message asks for)."""
 
 
 def check_sidecar(doc, side) -> None:
-    """Every key a heading or calibration from the image uses is present with a value of the right kind;
-    otherwise a :class:`DofpFormatError` naming the key and the value."""
+    """Check every field of a ``skysim.dofp/1`` sidecar before any use.
+
+    Each section holds the fields of :data:`_FIELDS` (the required ones present, every one
+    given of its kind), ``time`` is ISO 8601 with a UTC offset, and the site, lens, sensor and
+    exposure values lie in their ranges (those of :class:`skysim.sun.Site`,
+    :class:`~sensor.camera.FisheyeLens`, :class:`~sensor.camera.MosaicSensor` and
+    :class:`~sensor.camera.PolarizationCamera`). Unknown keys are kept, not checked.
+
+    Raises
+    ------
+    DofpFormatError
+        Naming ``side`` (the sidecar's path or a description), the field and its value.
+    """
     if not isinstance(doc, dict):
         raise DofpFormatError(f"{side} holds a JSON {type(doc).__name__}, not an object")
     missing = [k for k in _REQUIRED if k not in doc]
     if missing:
         raise DofpFormatError(f"{side} lacks {', '.join(missing)}")
-    _check_sections(doc, side, _REQUIRED_NESTED)
+    _check_sections(doc, side, _FIELDS)
+    att = doc["attitude"]
+    if att.get("yaw_known", False) and "yaw_deg" not in att:
+        raise DofpFormatError(f"{side}: attitude.yaw_known is true but attitude.yaw_deg is "
+                              "missing; give the heading of the image top [deg] or set "
+                              "yaw_known to false")
+    _check_time(doc["time"], side)
+    exposure = doc["exposure"]["exposure_s"]
+    if not exposure > 0:
+        raise DofpFormatError(f"{side}: exposure.exposure_s must be > 0 [s]; got {exposure!r}")
+    from skysim.sun import Site
+    try:
+        Site.from_dict(doc["site"])
+    except InvalidParameterError as exc:
+        raise DofpFormatError(f"{side}: site: {exc}") from None
+    _camera(doc, side)
 
 
 def _check_sections(doc, side, spec) -> None:
-    import numbers
-    kinds = {"number": lambda v: isinstance(v, numbers.Real) and not isinstance(v, bool)
-             and np.isfinite(v),
-             "integer": lambda v: isinstance(v, numbers.Integral) and not isinstance(v, bool),
-             "text": lambda v: isinstance(v, str), "list": lambda v: isinstance(v, list)}
     for section, keys in spec.items():
-        if keys is None:
-            continue
         value = doc[section]
         if not isinstance(value, dict):
             raise DofpFormatError(f"{side}: {section!r} must be an object; got {value!r}")
-        for key, kind in keys.items():
+        for key, (kind, required) in keys.items():
             if key not in value:
-                raise DofpFormatError(f"{side}: {section!r} lacks {key!r}")
-            if not kinds[kind](value[key]):
-                raise DofpFormatError(f"{side}: {section}.{key} must be a finite {kind}; got "
+                if required:
+                    raise DofpFormatError(f"{side}: {section!r} lacks {key!r}")
+                continue
+            test, what = _KINDS[kind]
+            if not test(value[key]):
+                raise DofpFormatError(f"{side}: {section}.{key} must be {what}; got "
                                       f"{value[key]!r}")
+
+
+def _check_time(value, side) -> None:
+    """The sidecar's ``time``: ISO 8601 text with a UTC offset, in the years pandas holds."""
+    import pandas as pd
+    example = "write ISO 8601 with a UTC offset, e.g. 2013-05-22T17:10:00+08:00 (or Z for UTC)"
+    if not isinstance(value, str):
+        raise DofpFormatError(f"{side}: time must be text; got {value!r}; {example}")
+    try:
+        t = pd.Timestamp(value)
+        out_of_range = t is not pd.NaT and not 1678 <= t.year <= 2261
+    except (pd.errors.OutOfBoundsDatetime, OverflowError):
+        out_of_range = True
+    except (ValueError, TypeError):
+        t = pd.NaT
+        out_of_range = False
+    if out_of_range:  # the years of nanosecond timestamps, which the sun and the Moon use
+        raise DofpFormatError(f"{side}: time {value!r} is outside the supported years "
+                              "1678-2261")
+    if t is pd.NaT:
+        raise DofpFormatError(f"{side}: time {value!r} is not a time; {example}")
+    if t.tzinfo is None:
+        raise DofpFormatError(f"{side}: time {value!r} has no UTC offset (skysim never guesses "
+                              f"the timezone); {example}")
+
+
 IMAGE_SUFFIXES = (".tif", ".tiff", ".png")
 """Raw image formats by file suffix (lower case)."""
 FLIPS = ("none", "horizontal", "vertical")
@@ -98,7 +181,7 @@ ROTATIONS_DEG = (0, 90, 180, 270)
 """Readout rotations [deg, counter-clockwise as displayed] :func:`undo_readout` undoes."""
 
 
-class DofpFormatError(SkysimError, ValueError):
+class DofpFormatError(FileFormatError):
     """A raw camera file or its sidecar does not follow ``skysim.dofp/1``."""
 
 
@@ -107,7 +190,7 @@ def _require(module: str, what: str):
         return importlib.import_module(module)
     except ImportError as exc:
         from skysim.extras import missing_extra_message
-        raise ImportError(missing_extra_message(module, what)) from exc
+        raise MissingDependencyError(missing_extra_message(module, what), name=module) from exc
 
 
 def require_tifffile():
@@ -144,13 +227,73 @@ def _encode_png(raw: np.ndarray) -> bytes:
 
 
 def _read_image(path: Path) -> np.ndarray:
+    """The image of ``path`` as stored; a :class:`DofpFormatError` naming the file and the
+    codec's reason for an empty, truncated or damaged one."""
+    if path.stat().st_size == 0:
+        raise DofpFormatError(f"{path} is empty (0 bytes): not a raw camera image")
     if _suffix(path) != ".png":
-        return require_tifffile().imread(path)
+        tifffile = require_tifffile()
+        try:
+            return tifffile.imread(path)
+        except (OSError, MemoryError):   # the file system's own errors, and memory: as they are
+            raise
+        except Exception as exc:  # tifffile raises ValueError, struct.error, KeyError, ...
+            raise DofpFormatError(f"{path} is not a readable TIFF image ({exc}); is it "
+                                  "truncated or damaged?") from None
     cv2 = require_cv2()
-    img = cv2.imdecode(np.fromfile(path, np.uint8), cv2.IMREAD_UNCHANGED)
+    data = np.fromfile(path, np.uint8)
+    with _c_stderr_captured() as said:
+        try:
+            img = cv2.imdecode(data, cv2.IMREAD_UNCHANGED)
+        except cv2.error:
+            img = None
     if img is None:
-        raise DofpFormatError(f"{path} is not a readable PNG image")
+        why = _codec_reason(said)
+        raise DofpFormatError(f"{path} is not a readable PNG image"
+                              f"{f' ({why})' if why else ''}; is it truncated or damaged?")
     return img
+
+
+@contextlib.contextmanager
+def _c_stderr_captured():
+    """Collect what C code writes to file descriptor 2 inside the block into the yielded list
+    (one string), instead of the terminal: OpenCV's PNG codec reports a damaged file there
+    (``libpng error: ...`` and its own log lines) besides returning no image. The descriptor
+    is shared by the whole process, so another thread's writes during the block (a few
+    milliseconds of decoding) are collected too. Without a usable descriptor 2 the block runs
+    as it is."""
+    said: list[str] = []
+    try:
+        saved = os.dup(2)
+    except OSError:
+        yield said
+        return
+    try:
+        with tempfile.TemporaryFile() as sink:
+            os.dup2(sink.fileno(), 2)
+            try:
+                yield said
+            finally:
+                os.dup2(saved, 2)
+            sink.seek(0)
+            said.append(sink.read().decode("utf-8", "replace"))
+    finally:
+        os.close(saved)
+
+
+def _codec_reason(said: list[str]) -> str:
+    """The reason a PNG decoder gave, from its stderr text: libpng's error, else OpenCV's own
+    error or warning line (without its time stamp and source line)."""
+    import re
+    lines = [ln.strip() for text in said for ln in text.splitlines() if ln.strip()]
+    opencv = r"\]\s*(?:global\s+)?\S+\s+\w+\s+(.+)"   # "] global <file:line> <function> text"
+    for pattern in (r"libpng error:\s*(.+)", r"\[\s*ERROR:[^\]]*" + opencv,
+                    r"\[\s*WARN:[^\]]*" + opencv):
+        for ln in lines:
+            m = re.match(pattern, ln)
+            if m:
+                return m.group(1).strip()
+    return ""
 
 
 def undo_readout(recorded: np.ndarray, flip: str = "none", rotate_deg: int = 0) -> np.ndarray:
@@ -163,14 +306,15 @@ def undo_readout(recorded: np.ndarray, flip: str = "none", rotate_deg: int = 0) 
 
     Raises
     ------
-    ValueError
+    InvalidParameterError
         For a flip not in :data:`FLIPS` or a rotation not in :data:`ROTATIONS_DEG`.
     """
     if flip not in FLIPS:
-        raise ValueError(f"flip must be one of {', '.join(FLIPS)}; got {flip!r}")
+        raise InvalidParameterError(f"flip must be one of {', '.join(FLIPS)}; got {flip!r}")
     if rotate_deg not in ROTATIONS_DEG:
-        raise ValueError(f"rotate_deg must be one of {', '.join(map(str, ROTATIONS_DEG))}; got "
-                         f"{rotate_deg!r}")
+        raise InvalidParameterError(
+            f"rotate_deg must be one of {', '.join(map(str, ROTATIONS_DEG))}; got "
+            f"{rotate_deg!r}")
     img = np.rot90(recorded, -int(rotate_deg) // 90)
     if flip == "horizontal":
         return img[:, ::-1]
@@ -222,11 +366,18 @@ def read_raw(path, *, flip: str = "none", rotate_deg: int = 0) -> tuple[np.ndarr
     Raises
     ------
     DofpFormatError
-        No sidecar, another schema, a missing key, or an image that does not match the
-        sidecar's sensor size.
+        No sidecar, another schema, a missing or invalid field (:func:`check_sidecar`), an
+        empty, truncated or damaged image, or an image that does not match the sidecar's
+        sensor size; each message names the file (and the field).
+    MissingFileError
+        If the image is not there.
     """
     path = Path(path)
     require_image_codec(path)
+    if path.is_dir():
+        raise DofpFormatError(f"{path} is a folder; give a raw image file")
+    if not path.exists():
+        raise MissingFileError(f"no raw image {path}")
     side = find_sidecar(path)
     if side is None:
         raise DofpFormatError(f"no sidecar {sidecar_path(path).name} beside {path}: the lens "
@@ -238,10 +389,7 @@ def read_raw(path, *, flip: str = "none", rotate_deg: int = 0) -> tuple[np.ndarr
     if not isinstance(doc, dict) or doc.get("schema") != SCHEMA:
         got = doc.get("schema") if isinstance(doc, dict) else doc
         raise DofpFormatError(f"{side} has schema {got!r}, expected {SCHEMA!r}")
-    missing = [k for k in _REQUIRED if k not in doc]
-    if missing:
-        raise DofpFormatError(f"{side} lacks {', '.join(missing)}")
-    _check_sections(doc, side, {"sensor": {"width": "integer", "height": "integer"}})
+    check_sidecar(doc, side)
     raw = np.ascontiguousarray(undo_readout(_read_image(path), flip, rotate_deg))
     sensor = doc["sensor"]
     if raw.shape != (sensor["height"], sensor["width"]) or raw.dtype != np.uint16:
@@ -254,13 +402,38 @@ def read_raw(path, *, flip: str = "none", rotate_deg: int = 0) -> tuple[np.ndarr
 
 def camera_from_sidecar(doc: dict) -> PolarizationCamera:
     """The nominal camera a sidecar describes (no per-pixel errors: those are unknown until
-    calibrated)."""
-    lens = FisheyeLens(**{k: doc["lens"][k] for k in ("focal_px", "cx", "cy", "fov_deg",
-                                                       "model")})
+    calibrated).
+
+    Raises
+    ------
+    DofpFormatError
+        For a ``lens`` or ``sensor`` section with a missing field, a value of the wrong kind
+        or out of range (the message names the field).
+    """
+    if not isinstance(doc, dict):
+        raise DofpFormatError(f"sidecar holds a {type(doc).__name__}, not an object")
+    missing = [k for k in ("lens", "sensor") if k not in doc]
+    if missing:
+        raise DofpFormatError(f"sidecar lacks {', '.join(missing)}")
+    _check_sections(doc, "sidecar", {k: _FIELDS[k] for k in ("lens", "sensor")})
+    return _camera(doc, "sidecar")
+
+
+def _camera(doc: dict, side) -> PolarizationCamera:
+    """The camera of a sidecar whose fields have the right kinds; a range error of the lens or
+    sensor as a :class:`DofpFormatError` naming ``side`` and the section."""
+    try:
+        lens = FisheyeLens(**{k: doc["lens"][k] for k in ("focal_px", "cx", "cy", "fov_deg",
+                                                           "model")})
+    except InvalidParameterError as exc:
+        raise DofpFormatError(f"{side}: lens: {exc}") from None
     s = doc["sensor"]
-    sensor = MosaicSensor(s["width"], s["height"], tuple(map(tuple, s["layout_deg"])),
-                          s["full_well_e"], s["read_noise_e"], s["dark_current_e_s"],
-                          s["adc_bits"], s["black_level_dn"])
-    pupil = s.get("exit_pupil_px")
-    return PolarizationCamera(lens, sensor, s.get("photoelectrons_per_s", 2.0e5),
-                              np.inf if pupil is None else pupil)
+    try:
+        sensor = MosaicSensor(s["width"], s["height"], tuple(map(tuple, s["layout_deg"])),
+                              s["full_well_e"], s["read_noise_e"], s["dark_current_e_s"],
+                              s["adc_bits"], s["black_level_dn"])
+        pupil = s.get("exit_pupil_px")
+        return PolarizationCamera(lens, sensor, s.get("photoelectrons_per_s", 2.0e5),
+                                  np.inf if pupil is None else pupil)
+    except InvalidParameterError as exc:
+        raise DofpFormatError(f"{side}: sensor: {exc}") from None

@@ -73,8 +73,8 @@ class FisheyeLens:
 
     def __post_init__(self):
         if self.model not in LENS_MODELS:
-            raise ValueError(f"lens model must be one of {', '.join(LENS_MODELS)}; "
-                             f"got {self.model!r}")
+            raise InvalidParameterError(f"lens model must be one of {', '.join(LENS_MODELS)}; "
+                                        f"got {self.model!r}")
         if not (np.isfinite(self.focal_px) and self.focal_px > 0):
             raise InvalidParameterError(f"focal_px must be > 0; got {self.focal_px!r}")
         if not (0.0 < self.fov_deg < 360.0):
