@@ -14,9 +14,10 @@ import math
 from pathlib import Path
 
 __all__ = ["DefaultsHelpFormatter", "aware_time", "cloud_spec", "data_file_and_sidecars",
-           "existing_file", "float_in", "int_at_least", "nonnegative_float", "nonnegative_int",
-           "output_dir", "output_file", "positive_float", "positive_int",
-           "refuse_replacing_inputs", "seed", "time_step", "wind_spec"]
+           "existing_file", "float_in", "int_at_least", "name_list", "nonnegative_float",
+           "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
+           "refuse_folder_holding_inputs", "refuse_replacing_inputs", "seed", "time_step",
+           "wind_spec", "with_sidecar"]
 
 class DefaultsHelpFormatter(argparse.HelpFormatter):
     """Adds ``(default: X)`` to an option's help unless the help already speaks of its
@@ -231,25 +232,87 @@ def data_file_and_sidecars(path) -> list[Path]:
                            if s.exists()]
 
 
-def refuse_replacing_inputs(outputs, inputs) -> None:
-    """Refuse, before any work, an output that would replace an input file.
+def refuse_replacing_inputs(outputs, inputs=()) -> None:
+    """Refuse, before any work, an output that would replace an input file or another output
+    of the same run.
 
     Parameters
     ----------
     outputs, inputs : iterable of (str, path or None)
         ``(what, path)`` pairs, ``what`` naming the option as the user typed it (e.g.
-        ``"--out"``, ``"the sidecar of --out"``); None paths are skipped.
+        ``"--out"``, ``"the sidecar of --out"``); None paths are skipped. List every file the
+        run writes (sidecars included) as an output, and every file it reads (with the
+        sidecars it may read, :func:`data_file_and_sidecars`) as an input.
 
     Raises
     ------
-    ValueError
-        Naming both paths, if an output is the same file as an input.
+    skysim.io.OutputPathError
+        Naming both paths, if an output is the same file as an input or as another output.
     """
+    from skysim.io import OutputPathError
     inputs = [(what, Path(p)) for what, p in inputs if p is not None]
-    for what_out, out in outputs:
-        if out is None:
-            continue
+    outputs = [(what, Path(p)) for what, p in outputs if p is not None]
+    for i, (what_out, out) in enumerate(outputs):
         for what_in, inp in inputs:
-            if _same_file(Path(out), inp):
-                raise ValueError(f"{what_out} {out} would replace the input {what_in} {inp}; "
+            if _same_file(out, inp):
+                raise OutputPathError(f"{what_out} {out} would replace the input {what_in} {inp}; "
                                  "write the output elsewhere")
+        for what_other, other in outputs[i + 1:]:
+            if _same_file(out, other):
+                raise OutputPathError(f"{what_out} {out} and {what_other} {other} are the same "
+                                 "file: one output would replace the other; give each its "
+                                 "own name")
+
+
+def with_sidecar(what: str, path) -> list[tuple[str, Path | None]]:
+    """``(what, path)`` and ``("the sidecar of what", <path>.json)``: the files a writer of a
+    data file with a JSON sidecar writes (for :func:`refuse_replacing_inputs`)."""
+    if path is None:
+        return [(what, None)]
+    from skysim.io import sidecar_path
+    return [(what, Path(path)), (f"the sidecar of {what}", sidecar_path(path))]
+
+
+def refuse_folder_holding_inputs(what: str, folder, inputs) -> None:
+    """Refuse, before any work, an output folder that a run replaces as a whole (or fills
+    with files of its own names) when it holds one of the run's inputs (or is one).
+
+    Parameters
+    ----------
+    what : str
+        The option of the folder as the user typed it (``"--out"``).
+    folder : path or None
+        The output folder; None is skipped.
+    inputs : iterable of (str, path or None)
+        ``(what, path)`` pairs of the files and folders the run reads; None paths are skipped.
+
+    Raises
+    ------
+    skysim.io.OutputPathError
+        Naming the folder and the input.
+    """
+    from skysim.io import OutputPathError
+    if folder is None:
+        return
+    out = Path(folder).resolve()
+    for what_in, inp in inputs:
+        if inp is None:
+            continue
+        p = Path(inp).resolve()
+        if p == out or out in p.parents:
+            raise OutputPathError(f"{what} {folder} holds the input {what_in} {inp}, which the run "
+                             "would replace; write the output elsewhere")
+
+
+def name_list(text: str) -> tuple[str, ...]:
+    """A comma-separated list of names (``a,b``), at least one; no empty name."""
+    names = tuple(t.strip() for t in text.split(","))
+    if not any(names):
+        raise argparse.ArgumentTypeError(f"give at least one name; got {text!r}")
+    if not all(names):
+        raise argparse.ArgumentTypeError(f"an empty name in the list {text!r}; write "
+                                         "comma-separated names, e.g. a,b")
+    return names
+
+
+name_list.__name__ = "comma-separated names"

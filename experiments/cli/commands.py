@@ -8,8 +8,8 @@ import json
 from pathlib import Path
 
 from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
-                       existing_file, float_in, nonnegative_float, output_file, positive_float,
-                       positive_int, refuse_replacing_inputs, seed)
+                       existing_file, float_in, output_file, positive_float, positive_int,
+                       refuse_replacing_inputs, seed, with_sidecar)
 
 __all__ = ["register", "read_directions", "view_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
 
@@ -23,6 +23,16 @@ SKY_BYTES_PER_DIRECTION = 400
 """Peak memory of ``skysim sky`` per view direction [bytes]: the grid, seven float64 columns
 in the chunks and again in the joined table, the writer's copy; tracemalloc peak 170 B (CSV)
 and 130 B (Parquet) per direction at 520 k directions, 290 B at 130 k; rounded up."""
+
+SKY_SECONDS_PER_DIRECTION = {"rayleigh": 0.1e-6, "berry": 1.0e-6, "multiple": 0.3e-6,
+                             "aerosol": 0.3e-6, "moon": 2.0e-6}
+"""Time of ``skysim sky`` per view direction for each model's field [s] (measured in chunks
+of 1e5 on a shared 2-core machine: rayleigh 0.03, berry 0.48, multiple 0.15 us; doubled,
+aerosol as multiple once its engine runs are done, the moonlit sky as berry)."""
+
+SKY_WRITE_SECONDS_PER_DIRECTION = {".csv": 6.0e-6, ".parquet": 0.2e-6}
+"""Time to write one row of ``skysim sky --out`` [s] (pandas CSV: 5.6 us per row of seven
+floats measured at 3e5 rows; Parquet through pyarrow's buffers, about 30x faster)."""
 
 SAMPLE_BYTES_PER_SAMPLE = 1000
 """Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
@@ -63,6 +73,10 @@ def read_directions(path):
                          "elevation_deg,azimuth_deg and one direction per row") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
         raise ValueError(f"--directions {path} is not a readable CSV ({exc})") from None
+    doubled = [c for c in ("elevation_deg", "azimuth_deg") if f"{c}.1" in d.columns]
+    if doubled:
+        raise ValueError(f"--directions {path}: the column {doubled[0]} appears more than "
+                         "once; keep one")
     missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
     if missing:
         raise ValueError(f"--directions {path}: missing column(s) {sorted(missing)}; found "
@@ -106,15 +120,26 @@ def _flag(option: str) -> str:
 
 def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
     """View directions [deg] from a CSV (:func:`read_directions`), or else the default
-    full-sky grid (:func:`skysim.geometry.sky_grid`), after checking its memory."""
+    full-sky grid (:func:`skysim.geometry.sky_grid`), after checking their memory."""
     from skysim.geometry import sky_grid, sky_grid_size
     from skysim.resources import check_memory, format_count
     if directions_csv:
-        return read_directions(directions_csv)
+        el, az = read_directions(directions_csv)
+        check_memory(el.size * SKY_BYTES_PER_DIRECTION, f"{format_count(el.size)} sky "
+                     f"directions (--directions {directions_csv})", "give fewer directions")
+        return el, az
     check_memory(sky_grid_size(grid_step_deg) * SKY_BYTES_PER_DIRECTION,
                  f"{format_count(sky_grid_size(grid_step_deg))} sky directions (--grid-step "
                  f"{grid_step_deg:g})", "use a coarser --grid-step")
     return sky_grid(grid_step_deg)
+
+
+def sky_seconds(n_directions: int, model: str, out=None) -> float:
+    """Expected wall time of ``skysim sky`` for ``n_directions`` [s]: the field of ``model``
+    (or ``"moon"``) and the writing of ``out`` (:data:`SKY_SECONDS_PER_DIRECTION`,
+    :data:`SKY_WRITE_SECONDS_PER_DIRECTION`)."""
+    write = SKY_WRITE_SECONDS_PER_DIRECTION.get(Path(out).suffix.lower(), 0.0) if out else 0.0
+    return n_directions * (SKY_SECONDS_PER_DIRECTION[model] + write)
 
 
 # --------------------------------------------------------------------------- --source moon
@@ -159,11 +184,30 @@ def moon_sky(args, params: dict):
     sky = _MoonlitSkyMap(args, params)
     pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
                         sky.site.altitude_m).iloc[0]
+    if not pos.elevation_deg > 0.0:
+        raise ValueError(f"--source moon: the Moon is at {pos.elevation_deg:.1f} deg elevation "
+                         f"at --time {args.time.isoformat()} and --lat {args.lat:g} --lon "
+                         f"{args.lon:g}, below the horizon; choose a time when the Moon is up")
     info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
             "elevation_deg": float(pos.elevation_deg), "azimuth_deg": float(pos.azimuth_deg),
             "phase_angle_deg": float(pos.phase_angle_deg),
             "illuminated_fraction": float(pos.illuminated_fraction)}
     return sky, float(pos.elevation_deg), float(pos.azimuth_deg), info
+
+
+def _refuse_two_suns(args) -> None:
+    """The sun's position is given once: by --sun-elevation --sun-azimuth, or by --lat --lon
+    --time (a site and time given with the angles would be ignored)."""
+    if args.sun_azimuth is not None and args.sun_elevation is None:
+        raise ValueError(f"--sun-azimuth {args.sun_azimuth:g} needs --sun-elevation")
+    if args.sun_elevation is None or args.source != "sun":
+        return
+    for flag, value in (("--time", args.time and args.time.isoformat()), ("--lat", args.lat),
+                        ("--lon", args.lon)):
+        if value is not None:
+            raise ValueError(f"{flag} {value} and --sun-elevation {args.sun_elevation:g} both "
+                             "place the sun: give --sun-elevation --sun-azimuth, or --lat --lon "
+                             "--time")
 
 
 def _sky(args) -> int:
@@ -176,9 +220,9 @@ def _sky(args) -> int:
 
     from .cloud_options import with_clouds
     params = _sky_params(args)
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
-                              sidecar_path(args.out)), ("--plot", args.plot)],
+    refuse_replacing_inputs(with_sidecar("--out", args.out) + [("--plot", args.plot)],
                             [("--directions", args.directions)])
+    _refuse_two_suns(args)
     sky = None
     if args.source == "moon":  # the night sky: the Moon as the source (skysim.night)
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
@@ -202,6 +246,10 @@ def _sky(args) -> int:
                          "the Sun")
     sky = with_clouds(make_sky(args.model, **params), args) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
+    from experiments.workflows.progress import check_duration
+    check_duration(sky_seconds(el.size, "moon" if args.source == "moon" else args.model,
+                               args.out), f"skysim sky: {el.size} directions",
+                   "give fewer directions or a coarser --grid-step, or write .parquet")
     chunk = 100_000
     starts = range(0, el.size, chunk)
     if el.size > chunk:
@@ -272,7 +320,6 @@ def _sample(args) -> int:
     from skysim.sky import make_sky
     from skysim.sun import Site
 
-    from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
     from .cloud_options import with_clouds
@@ -280,8 +327,7 @@ def _sample(args) -> int:
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
                          f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
-                                                    sidecar_path(args.out))],
+    refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--errors", args.errors if args.errors not in ("random", "none")
                               else None)])
     total = args.n * args.sweeps
@@ -443,8 +489,8 @@ def register(sub) -> None:
                    help="site altitude [m]")
     s.add_argument("--start", type=aware_time, default="2013-05-22T17:10:00+08:00",
                    help="timezone-aware ISO 8601 start of the first sweep")
-    s.add_argument("--duration", type=nonnegative_float, default=600.0,
-                   help="duration of one sweep [s]")
+    s.add_argument("--duration", type=positive_float, default=600.0,
+                   help="duration of one sweep [s], > 0 (the turntable takes time to turn)")
     s.add_argument("--n", type=positive_int, default=181, help="samples per sweep")
     s.add_argument("--sweeps", type=positive_int, default=1,
                    help="number of sweeps (e.g. 3 for a diagnosis with held-out sweeps)")

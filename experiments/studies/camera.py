@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
-                                      int_at_least, output_file, positive_float, seed)
+from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
+                                      existing_file, float_in, int_at_least, output_file,
+                                      positive_float, refuse_replacing_inputs, seed,
+                                      with_sidecar)
 
 __all__ = ["DEFAULT_SEED", "heading_trials", "run", "stokes_figure", "register",
            "register_reproduce"]
@@ -46,6 +48,10 @@ CLOUDS_BYTES_PER_PIXEL = 300
 rayleigh sky leaves the float32 path for float64, hence more than the difference)."""
 HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
 HEADING_FIGURE_BYTES_PER_PIXEL = 50
+MEMORY_PER_TRIAL_BYTES = 10_000
+"""Memory of ``skysim reproduce camera`` per trial [bytes] (the images are made one at a
+time): the full run's 60 conditions each keep a yaw (8 B) and two Python floats in lists
+(about 64 B) per trial, 4.3 kB; rounded up for the table and its text."""
 
 
 # --- shared helpers ---------------------------------------------------------------------
@@ -118,6 +124,7 @@ def _camera_command(args) -> int:
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
+    refuse_replacing_inputs(with_sidecar("--out", args.out) + [("--figure", args.figure)])
     require_image_codec(args.out)  # before the work, not after it
     check_memory(args.width * args.height * (CAMERA_BYTES_PER_PIXEL[args.sky]
                                              + (CLOUDS_BYTES_PER_PIXEL if args.clouds else 0)
@@ -173,6 +180,8 @@ def _heading_command(args) -> int:
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
+    refuse_replacing_inputs([("--figure", args.figure)],
+                            [("image", p) for p in data_file_and_sidecars(args.image)])
     raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
     check_sidecar(doc, find_sidecar(Path(args.image)))
     check_memory(raw.size * (HEADING_BYTES_PER_PIXEL[args.method]
@@ -216,15 +225,19 @@ def register(sub) -> None:
     p.add_argument("--lat", type=float_in(-90, 90), required=True, help="latitude [deg, north +]")
     p.add_argument("--lon", type=float_in(-180, 180), required=True,
                    help="longitude [deg, east +]")
-    p.add_argument("--alt", type=float, default=0.0, help="altitude [m]")
+    p.add_argument("--alt", type=float_in(-500, 9000, unit="m"), default=0.0,
+                   help="altitude [m]")
     p.add_argument("--time", type=aware_time, required=True,
                    help="exposure time, ISO 8601 with UTC offset")
     p.add_argument("--out", type=output_file(".tif", ".tiff", ".png"), required=True,
                    help="raw image, 16-bit TIFF (.tif, .tiff) or PNG (.png); the sidecar is "
                         "<name>.json")
-    p.add_argument("--yaw", type=float, default=0.0, help="heading of the image top [deg]")
-    p.add_argument("--pitch", type=float, default=0.0, help="camera pitch [deg]")
-    p.add_argument("--roll", type=float, default=0.0, help="camera roll [deg]")
+    p.add_argument("--yaw", type=float_in(unit="deg"), default=0.0,
+                   help="heading of the image top [deg]")
+    p.add_argument("--pitch", type=float_in(unit="deg"), default=0.0,
+                   help="camera pitch [deg]")
+    p.add_argument("--roll", type=float_in(unit="deg"), default=0.0,
+                   help="camera roll [deg]")
     p.add_argument("--width", type=int_at_least(2), default=512, help="pixels (even)")
     p.add_argument("--height", type=int_at_least(2), default=512, help="pixels (even)")
     p.add_argument("--lens", choices=("equidistant", "equisolid"), default="equidistant",
@@ -243,7 +256,7 @@ def register(sub) -> None:
                         "receives (it keeps 1 - 4x its own)")
     p.add_argument("--angle-error-std", type=float_in(0), default=0.0,
                    help="per-pixel polarizer angle error, standard deviation [deg]")
-    p.add_argument("--mosaic-rotation", type=float, default=0.0,
+    p.add_argument("--mosaic-rotation", type=float_in(unit="deg"), default=0.0,
                    help="rotation of the whole polarizer array [deg]")
     p.add_argument("--sky", choices=("rayleigh", "multiple", "berry"), default="rayleigh",
                    help="sky model: single-scattering Rayleigh, multiple scattering (sasktran2) "

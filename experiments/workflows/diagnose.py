@@ -50,11 +50,14 @@ from skysim.io import atomic_write, write_json_atomic
 
 from experiments.cli.argtypes import (
     DefaultsHelpFormatter,
+    data_file_and_sidecars,
     existing_file,
     int_at_least,
+    name_list,
     nonnegative_float,
     output_dir,
     positive_int,
+    refuse_replacing_inputs,
     seed,
 )
 
@@ -395,11 +398,10 @@ def plot_benchmark(cases: pd.DataFrame, confusion: pd.DataFrame, out: Path) -> l
 
 
 # --------------------------------------------------------------------------- command line
-def _effects_arg(text: str | None):
-    """Benchmark effects: all by default, else the comma-separated names (validated)."""
-    if not text:
+def _effects_arg(names: tuple[str, ...] | None):
+    """Benchmark effects: all by default, else the names given (validated)."""
+    if not names:
         return DEFAULT_CANDIDATES
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
     for name in names:
         get_effect(name)  # UnknownEffectError lists the valid names
     return names
@@ -416,18 +418,20 @@ def write_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
 
 def _diagnose_cmd(args) -> int:
     from calibration import diagnose as run_diagnosis
-    names = (None if not args.effects else
-             tuple(x.strip() for x in args.effects.split(",") if x.strip()))
+    names = args.effects or None
     options = {}
     if getattr(args, "pointing_from", None):
-        options["pointing_from"] = [x.strip() for x in args.pointing_from.split(",")
-                                    if x.strip()]
+        options["pointing_from"] = list(args.pointing_from)
     if getattr(args, "light", "sun") != "sun":
         options["light"] = args.light
     if getattr(args, "time_uncertainty", None):
         options["time_uncertainty_s"] = args.time_uncertainty
-    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+    refuse_replacing_inputs(
+        [("--out", out / "diagnosis.json"), ("--out", out / "report.md")],
+        [("data", p) for p in data_file_and_sidecars(args.data)]
+        + [("--pointing-from", p) for p in options.get("pointing_from", ())])
+    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     written = write_diagnosis(report, out)
     v = report.verdict
     # a dimensionless gap (a fraction of the mean reading or signal) is printed bare
@@ -456,7 +460,7 @@ def _real_benchmark_cmd(args) -> int:
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES
     if args.effects:
-        inject = tuple(x.strip() for x in args.effects.split(",") if x.strip())
+        inject = args.effects
     n = 1 if args.quick else (args.n if args.n != 200 else 3)
     if args.quick:
         cands = ("clock_offset", "yaw_scale", "occlusion")
@@ -519,7 +523,7 @@ def register(sub) -> None:
     d.add_argument("data", type=existing_file,
                    help="measurement table or photodiode data (.csv/.parquet + sidecar), or "
                         "a raw polarization-camera frame (.tif/.tiff/.png + sidecar)")
-    d.add_argument("--effects", help="comma-separated candidates (default: all): "
+    d.add_argument("--effects", type=name_list, help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
                    "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
@@ -531,7 +535,7 @@ def register(sub) -> None:
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
     d.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps), 2 .. number of sweeps")
-    d.add_argument("--pointing-from", metavar="REPORTS",
+    d.add_argument("--pointing-from", metavar="REPORTS", type=name_list,
                    help="photodiode instruments: comma-separated diagnosis.json files of other "
                         "sessions of the same instrument whose clocks are right; their fitted "
                         "unit pointing (median per unit) is held, so that a clock error is "
@@ -555,7 +559,7 @@ def register(sub) -> None:
     b.add_argument("--seed", type=seed, default=7, help="master seed, >= 0")
     b.add_argument("--out", type=output_dir,
                    help="output folder (default: results/gap_benchmark)")
-    b.add_argument("--effects", help="comma-separated effects to hide and to try "
+    b.add_argument("--effects", type=name_list, help="comma-separated effects to hide and to try "
                    "(default: all)")
     b.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps)")
