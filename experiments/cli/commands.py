@@ -44,6 +44,10 @@ _AEROSOL_PRESETS = ("continental_clean", "continental_average", "urban", "mariti
 """Keys of ``skysim.aerosol_types.PRESETS`` (listed here so that ``--help`` needs no import;
 tests/test_aerosol_cli.py checks that they match)."""
 
+SAMPLE_SECONDS_PER_SAMPLE = 40e-6
+"""Time of ``skysim sample`` per sample [s]: 20 us measured between 2e3 and 2e5 samples (CSV
+out) on a shared 2-core machine; doubled."""
+
 AOP_CONVENTION = (
     "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
     "direction towards the zenith along the meridian) positive towards increasing azimuth, "
@@ -333,6 +337,9 @@ def _sample(args) -> int:
     total = args.n * args.sweeps
     check_memory(total * SAMPLE_BYTES_PER_SAMPLE, f"{total} samples (--n {args.n} x "
                  f"--sweeps {args.sweeps})", "use fewer samples or sweeps")
+    from experiments.workflows.progress import check_duration
+    check_duration(total * SAMPLE_SECONDS_PER_SAMPLE, f"skysim sample: {total} samples",
+                   "fewer --n or --sweeps make it shorter")
     rng = np.random.default_rng(args.seed)
     site = Site(args.lat, args.lon, args.alt)
     errors = _sensor_errors(args.errors, rng)

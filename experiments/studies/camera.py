@@ -48,6 +48,13 @@ CLOUDS_BYTES_PER_PIXEL = 300
 rayleigh sky leaves the float32 path for float64, hence more than the difference)."""
 HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
 HEADING_FIGURE_BYTES_PER_PIXEL = 50
+CAMERA_SECONDS_PER_PIXEL = {"rayleigh": 1.0e-6, "berry": 1.6e-6, "multiple": 1.0e-6}
+CAMERA_FIGURE_SECONDS_PER_PIXEL = 2.4e-6
+CAMERA_ENGINE_SECONDS = {"multiple": 10.0}
+"""Time of ``skysim camera`` [s]: per pixel of the image (measured on a shared 2-core machine
+from 64x64 to 1024x1024 and 2048x2048: rayleigh 0.5, berry 0.8, multiple 0.3 us; the figure
+1.2 us; doubled) and, for the multiple-scattering sky, its engine runs (7.4 s measured at
+64x64, rounded up)."""
 MEMORY_PER_TRIAL_BYTES = 10_000
 """Memory of ``skysim reproduce camera`` per trial [bytes] (the images are made one at a
 time): the full run's 60 conditions each keep a yaw (8 B) and two Python floats in lists
@@ -135,6 +142,13 @@ def _camera_command(args) -> int:
                  f"{', with --figure' if args.figure else ''})",
                  "use a smaller --width/--height" + (" or leave out --figure" if args.figure
                                                      else ""))
+    from experiments.workflows.progress import check_duration
+    n_px = args.width * args.height
+    check_duration(CAMERA_ENGINE_SECONDS.get(args.sky, 0.0) + n_px * (
+        CAMERA_SECONDS_PER_PIXEL[args.sky] + (CAMERA_FIGURE_SECONDS_PER_PIXEL if args.figure
+                                              else 0.0)),
+        f"skysim camera: a {args.width}x{args.height} image", "a smaller --width/--height "
+        "makes it shorter")
     sun = sun_position([args.time], args.lat, args.lon, args.alt).iloc[0]
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)

@@ -576,4 +576,14 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=output_dir, default=None,
                    help="output folder (default: results/jin2020)")
     p.add_argument("--quick", action="store_true", help="shorter runs (120 s static, 60 s dynamic)")
-    p.set_defaults(func=lambda a: _main(a.trials, a.seed, a.out, a.quick))
+    p.set_defaults(func=_command)
+
+
+def _command(args) -> int:
+    """``skysim jin2020``: its expected duration checked against a day's budget first (as
+    ``skysim reproduce`` does)."""
+    from experiments.workflows.progress import check_duration, expected_reproduction_seconds
+    check_duration(expected_reproduction_seconds("jin2020", args.quick, args.trials),
+                   f"skysim jin2020 with --trials {args.trials}", "fewer --trials or --quick "
+                   "make it shorter")
+    return _main(args.trials, args.seed, args.out, args.quick)

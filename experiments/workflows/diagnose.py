@@ -484,15 +484,15 @@ BENCHMARK_SECONDS_PER_SET = 1.5
 def _benchmark_cmd(args) -> int:
     from skysim.resources import check_memory
 
-    from .progress import announce_duration
+    from .progress import check_duration
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
     check_memory(n * BENCHMARK_BYTES_PER_SET, f"{n} data sets of gap-benchmark", "use a "
                  "smaller --n")
     effects = _effects_arg(args.effects)
-    announce_duration(n * BENCHMARK_SECONDS_PER_SET, f"skysim gap-benchmark: {n} data sets",
-                      "a smaller --n or --quick makes it shorter")
+    check_duration(n * BENCHMARK_SECONDS_PER_SET, f"skysim gap-benchmark: {n} data sets",
+                   "a smaller --n or --quick makes it shorter")
     out = Path(args.out or "results/gap_benchmark")
     t0 = time.perf_counter()
     cases = run_benchmark(n, args.seed, effects, n_folds=args.folds)

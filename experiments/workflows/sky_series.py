@@ -235,7 +235,7 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     from skysim.resources import check_memory, format_count
     from skysim.series import VALUES_PER_POINT
 
-    from .progress import announce_duration
+    from .progress import check_duration
     from experiments.cli.commands import SKY_BYTES_PER_DIRECTION
     directions = f"{format_count(n_directions)} directions"
     what = f"{format_count(n_times)} time steps x {directions}"
@@ -255,7 +255,7 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     seconds = n_times * n_directions * SECONDS_PER_VALUE[suffix] * itemsize / 8
     if args.model == "multiple":
         seconds += n_times * ENGINE_CALL_S
-    announce_duration(seconds, f"skysim sky-series: {what}",
+    check_duration(seconds, f"skysim sky-series: {what}",
                       "fewer --periods, a coarser --grid-step or --float32 make it shorter")
 
 
@@ -264,14 +264,12 @@ def _sky_series(args) -> int:
     import pandas as pd
 
     from skysim.geometry import sky_grid_size
-    from skysim.io import sidecar_path
     from skysim.sky import make_sky
     from skysim.sun import Site, sun_position
 
-    from experiments.cli.argtypes import refuse_replacing_inputs
+    from experiments.cli.argtypes import refuse_replacing_inputs, with_sidecar
     from experiments.cli.commands import _sky_params, view_directions
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
-                                                    sidecar_path(args.out))],
+    refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--directions", args.directions)])
     site = Site(args.lat, args.lon, args.alt)
     params = _sky_params(args)
