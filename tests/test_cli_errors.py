@@ -25,13 +25,18 @@ SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def _fails(argv, capsys, *needles) -> str:
-    """Run ``argv``; assert exit code 2, one error line with every needle, no traceback."""
+def _fails(argv, capsys, *needles, only_line: bool = False) -> str:
+    """Run ``argv``; assert exit code 2, one error line with every needle, no traceback.
+    ``only_line``: nothing else on stderr but argparse's usage block before that line."""
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err
-    last = err.strip().splitlines()[-1]
+    lines = err.strip().splitlines()
+    last = lines[-1]
     assert last.startswith("skysim"), err
+    if only_line and len(lines) > 1:
+        assert lines[0].startswith("usage: skysim ") and all(
+            line.startswith(" ") for line in lines[1:-1]), err
     for n in needles:
         assert n in last, f"{n!r} not in {last!r}"
     return last

@@ -14,7 +14,7 @@ import math
 from pathlib import Path
 
 __all__ = ["DefaultsHelpFormatter", "aware_time", "cloud_spec", "data_file_and_sidecars",
-           "existing_file", "float_in", "int_at_least", "name_list", "nonnegative_float",
+           "existing_file", "float_in", "int_at_least", "int_in", "name_list", "nonnegative_float",
            "nonnegative_int", "output_dir", "output_file", "positive_float", "positive_int",
            "refuse_folder_holding_inputs", "refuse_replacing_inputs", "seed", "time_step",
            "wind_spec", "with_sidecar"]
@@ -63,6 +63,18 @@ def int_at_least(low: int):
             raise argparse.ArgumentTypeError(f"must be an integer >= {low}; got {text!r}")
         return n
     parse.__name__ = f"integer >= {low}"
+    return parse
+
+
+def int_in(low: int, high: int):
+    """An integer in ``[low, high]``."""
+    def parse(text: str) -> int:
+        n = _integer(text)
+        if not low <= n <= high:
+            raise argparse.ArgumentTypeError(f"must be an integer in [{low}, {high}]; got "
+                                             f"{text!r}")
+        return n
+    parse.__name__ = f"integer in [{low}, {high}]"
     return parse
 
 

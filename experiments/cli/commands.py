@@ -57,13 +57,14 @@ AOP_CONVENTION = (
 
 
 def read_directions(path):
-    """View directions from a CSV with columns ``elevation_deg``, ``azimuth_deg`` [deg].
+    """View directions from a CSV with columns ``elevation_deg`` [deg, 0-90] and
+    ``azimuth_deg`` [deg].
 
     Raises
     ------
     ValueError
-        For a folder, an empty file, missing columns, no rows, or a value that is not a
-        number (naming the row and the value).
+        For a folder, an empty file, missing or doubled columns, no rows, a value that is not
+        a number or an elevation outside [0, 90] deg (naming the row and the value).
     """
     import numpy as np
     import pandas as pd
@@ -95,6 +96,11 @@ def read_directions(path):
             raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is "
                              f"{d[c].iloc[bad[0]]!r}, not a number ({bad.size} such value(s))")
         cols.append(x)
+    low = np.flatnonzero((cols[0] < 0.0) | (cols[0] > 90.0))
+    if low.size:
+        raise ValueError(f"--directions {path}: elevation_deg in data row {low[0] + 1} is "
+                         f"{cols[0][low[0]]:g}, outside [0, 90] deg (a sky seen from the "
+                         f"ground; {low.size} such value(s))")
     return cols[0], cols[1]
 
 

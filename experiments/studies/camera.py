@@ -17,7 +17,8 @@ from pathlib import Path
 import numpy as np
 
 from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
-                                      existing_file, float_in, int_at_least, output_file,
+                                      existing_file, float_in, int_at_least, int_in,
+                                      output_file,
                                       positive_float, refuse_replacing_inputs, seed,
                                       with_sidecar)
 
@@ -262,7 +263,7 @@ def register(sub) -> None:
     p.add_argument("--exposure", type=positive_float, default=None,
                    help="exposure [s] (default: the 99th percentile of the sky at 60%% of "
                         "the full well)")
-    p.add_argument("--adc-bits", type=int_at_least(8), default=12, help="ADC bits, 8-16")
+    p.add_argument("--adc-bits", type=int_in(8, 16), default=12, help="ADC bits, 8-16")
     p.add_argument("--extinction-ratio", type=float_in(1, low_open=True), default=np.inf,
                    help="polarizer extinction ratio")
     p.add_argument("--crosstalk", type=float_in(0, 0.25, high_open=True), default=0.0,
