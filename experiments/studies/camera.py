@@ -16,11 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
-                                      existing_file, float_in, int_at_least, int_in,
-                                      output_file,
-                                      positive_float, refuse_replacing_inputs, seed,
-                                      with_sidecar)
+from experiments.workflows.options import (DefaultsHelpFormatter, aware_time,
+                                           data_file_and_sidecars, existing_file, float_in,
+                                           int_at_least, int_in, output_file, positive_float,
+                                           refuse_replacing_inputs, seed, with_sidecar)
 
 __all__ = ["DEFAULT_SEED", "heading_trials", "run", "stokes_figure", "register",
            "register_reproduce"]
@@ -117,7 +116,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
 def _make_sky(args):
     from skysim.sky import make_sky
 
-    from experiments.cli.cloud_options import with_clouds
+    from experiments.workflows.cloud_options import with_clouds
     if args.sky == "multiple":
         return with_clouds(make_sky("multiple", tau=args.tau, albedo=args.albedo), args)
     if args.sky == "rayleigh" and args.clouds is None:
@@ -231,7 +230,7 @@ def _heading_command(args) -> int:
 
 
 def register(sub) -> None:
-    from experiments.cli.cloud_options import add_cloud_options
+    from experiments.workflows.cloud_options import add_cloud_options
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
                        "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "

@@ -55,9 +55,9 @@ from skysim.geometry import wrap_deg
 from skysim.io import atomic_write_many, sidecar_path, write_json_atomic
 from skysim.sun import Site
 
-from experiments.cli.argtypes import output_dir, positive_int
-from experiments.cli.argtypes import seed as seed_type
 from experiments.plotting.figures import pyplot, save_png
+from experiments.workflows.options import output_dir, positive_int
+from experiments.workflows.options import seed as seed_type
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",

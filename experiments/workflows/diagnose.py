@@ -48,7 +48,7 @@ from sensor.yang2014 import ERROR_MODEL, SITE
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from experiments.cli.argtypes import (
+from experiments.workflows.options import (
     DefaultsHelpFormatter,
     data_file_and_sidecars,
     existing_file,
@@ -455,7 +455,7 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from experiments.studies.real_compass import run_real_benchmark
+    from .real_benchmark import run_real_benchmark
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES

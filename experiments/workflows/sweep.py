@@ -56,8 +56,8 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError, SkysimError
 
-from experiments.cli.argtypes import existing_file, output_dir, positive_int
 from experiments.plotting.figures import pyplot, save_png
+from experiments.workflows.options import existing_file, output_dir, positive_int
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
