@@ -80,9 +80,10 @@ def _refuse_two_suns(args) -> None:
         raise ValueError(f"--sun-azimuth {args.sun_azimuth:g} needs --sun-elevation")
     if args.sun_elevation is None or args.source != "sun":
         return
-    for flag, value in (("--time", args.time and args.time.isoformat()), ("--lat", args.lat),
-                        ("--lon", args.lon)):
-        if value is not None:
+    for flag, value in (("--time", args.time and args.time.isoformat()),
+                        ("--lat", args.lat is not None and f"{args.lat:g}"),
+                        ("--lon", args.lon is not None and f"{args.lon:g}")):
+        if value:
             raise ValueError(f"{flag} {value} and --sun-elevation {args.sun_elevation:g} both "
                              "place the sun: give --sun-elevation --sun-azimuth, or --lat --lon "
                              "--time")

@@ -93,8 +93,10 @@ def read_directions(path):
         x = pd.to_numeric(d[c], errors="coerce").to_numpy(float)
         bad = np.flatnonzero(~np.isfinite(x))
         if bad.size:
-            raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is "
-                             f"{d[c].iloc[bad[0]]!r}, not a number ({bad.size} such value(s))")
+            v = d[c].iloc[bad[0]]
+            shown = repr(v) if isinstance(v, str) else v
+            raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is {shown}, "
+                             f"not a number ({bad.size} such value(s))")
         cols.append(x)
     low = np.flatnonzero((cols[0] < 0.0) | (cols[0] > 90.0))
     if low.size:
