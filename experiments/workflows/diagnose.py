@@ -455,7 +455,8 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from .real_benchmark import run_real_benchmark
+    from .progress import check_duration
+    from .real_benchmark import run_real_benchmark, session_files
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES
@@ -465,11 +466,20 @@ def _real_benchmark_cmd(args) -> int:
     if args.quick:
         cands = ("clock_offset", "yaw_scale", "occlusion")
     out = Path(args.out or "results/gap_benchmark_real")
+    n = min(n, len(session_files(args.real, "--real")))   # a missing folder named first
+    check_duration(n * len(inject) * REAL_SECONDS_PER_CASE_AND_CANDIDATE * len(cands),
+                   f"skysim gap-benchmark --real: {n} session(s) x {len(inject)} effect(s)",
+                   "a smaller --n, fewer --effects or --quick make it shorter")
     table = run_real_benchmark(args.real, inject, cands, out, n, args.seed, args.folds)
     print(table.to_string(index=False))
     print(f"wrote {out}/real_cases.csv, real_summary.json")
     return 0
 
+
+REAL_SECONDS_PER_CASE_AND_CANDIDATE = 50.0
+"""Time of ``skysim gap-benchmark --real`` per injected case and candidate effect [s]: the
+``--quick`` run (one session, four injected effects, three candidates) took 610 s on a shared
+2-core machine, 51 s per case and candidate; other candidate lists scaled in proportion."""
 
 BENCHMARK_BYTES_PER_SET = 20_000
 """Memory one data set of the blind benchmark keeps until the end [bytes]: its seed, its
