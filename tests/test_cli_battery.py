@@ -22,6 +22,7 @@ from experiments.cli.main import main
 T = "2013-05-22T12:00+08:00"
 SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 CAM = ["camera", "--lat", "34", "--lon", "108", "--time", T, "--width", "64", "--height", "64"]
+EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 MOON_DOWN = "2026-12-06T00:00+08:00"
 """The Moon 58 deg below the horizon at the Xi'an site (34.14 N, 108.55 E)."""
 
@@ -51,6 +52,8 @@ def folder(tmp_path_factory):
     (root / "schema.csv").write_text("el,az\n10,20\n")
     (root / "up.csv").write_text("elevation_deg,azimuth_deg\n10,20\n95,40\n")
     (root / "bad.toml").write_text("[sweep\nname = ")
+    (root / "sweep_in").mkdir()                                  # a configuration named like
+    shutil.copy(EXAMPLES / "sweep_montecarlo.toml", root / "sweep_in" / "summary.md")  # output
     (root / "a_folder").mkdir()
     (root / "real").mkdir()
     return root
@@ -77,6 +80,9 @@ CASES = {
     "reproduction folder holding its data": (
         ["reproduce", "real-sky-compass", "--data", "real", "--out", "."],
         ["--out .", "--data real"]),
+    "sweep into the folder of its configuration": (
+        ["sweep", "sweep_in/summary.md", "--out", "sweep_in"],
+        ["--out sweep_in/summary.md", "config sweep_in/summary.md"]),
     # contradictory options
     "time with sun angles": (["sky", *SUN, "--time", T], ["--time 2013-05-22T12:00:00+08:00",
                                                           "--sun-elevation 30"]),
