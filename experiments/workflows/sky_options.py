@@ -30,9 +30,11 @@ SKY_SECONDS_PER_DIRECTION = {"rayleigh": 0.1e-6, "berry": 1.0e-6, "multiple": 0.
 of 1e5 on a shared 2-core machine: rayleigh 0.03, berry 0.48, multiple 0.15 us; doubled,
 aerosol as multiple once its engine runs are done, the moonlit sky as berry)."""
 
-SKY_WRITE_SECONDS_PER_DIRECTION = {".csv": 6.0e-6, ".parquet": 0.2e-6}
-"""Time to write one row of ``skysim sky --out`` [s] (pandas CSV: 5.6 us per row of seven
-floats measured at 3e5 rows; Parquet through pyarrow's buffers, about 30x faster)."""
+SKY_WRITE_SECONDS_PER_DIRECTION = {".csv": 12.0e-6, ".parquet": 0.4e-6}
+"""Time to write one row of ``skysim sky --out`` [s]: pandas CSV of seven floats took
+5.6 us per row at 3e5 rows on a 2-core machine with one core free, 29 us with both cores
+busy (``skysim sky`` with 1e6 and 3e6 directions: 33 and 85 s then); twice the first here.
+Parquet through pyarrow's buffers is about 30x faster."""
 
 SAMPLE_BYTES_PER_SAMPLE = 1000
 """Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
