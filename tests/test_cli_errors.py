@@ -25,13 +25,18 @@ SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def _fails(argv, capsys, *needles) -> str:
-    """Run ``argv``; assert exit code 2, one error line with every needle, no traceback."""
+def _fails(argv, capsys, *needles, only_line: bool = False) -> str:
+    """Run ``argv``; assert exit code 2, one error line with every needle, no traceback.
+    ``only_line``: nothing else on stderr but argparse's usage block before that line."""
     assert main(argv) == 2
     err = capsys.readouterr().err
     assert "Traceback" not in err
-    last = err.strip().splitlines()[-1]
+    lines = err.strip().splitlines()
+    last = lines[-1]
     assert last.startswith("skysim"), err
+    if only_line and len(lines) > 1:
+        assert lines[0].startswith("usage: skysim ") and all(
+            line.startswith(" ") for line in lines[1:-1]), err
     for n in needles:
         assert n in last, f"{n!r} not in {last!r}"
     return last
@@ -755,6 +760,28 @@ def test_long_runs_state_their_expected_duration(capsys):
     err = capsys.readouterr().err
     assert err == "skysim reproduce sky-gap: expected duration about 14 min; --quick is " \
                   "shorter\n"
+
+
+def test_runs_over_the_time_budget_are_refused_unless_forced(capsys, monkeypatch):
+    import experiments.workflows.progress as progress
+    assert progress.TIME_BUDGET_S == 24 * 3600.0
+    progress.check_duration(2 * progress.TIME_BUDGET_S, "a forced run", force=True)
+    assert capsys.readouterr().err == "a forced run: expected duration about 2 days\n"
+    monkeypatch.setattr(progress, "TIME_BUDGET_S", 3600.0)
+    with pytest.raises(ValueError, match=r"a run: expected duration about 2\.0 h, more than "
+                                         r"the 1 h one run may take.*\(--force runs it"):
+        progress.check_duration(7200.0, "a run", force_flag="--force")
+
+
+def test_sky_states_its_duration_from_its_directions(tmp_path, capsys, monkeypatch):
+    """The estimate (per direction, from the model and the output's format) is printed
+    before the work, from the number of rows of --directions."""
+    import experiments.workflows.sky_options as sky_options
+    monkeypatch.setitem(sky_options.SKY_SECONDS_PER_DIRECTION, "rayleigh", 1.0)
+    d = tmp_path / "d.csv"
+    d.write_text("elevation_deg,azimuth_deg\n" + "".join(f"{k},{k}\n" for k in range(30)))
+    assert main(["sky", *SUN, "--directions", str(d)]) == 0
+    assert "skysim sky: 30 directions: expected duration about 30 s" in capsys.readouterr().err
 
 
 def test_warnings_are_one_readable_line():

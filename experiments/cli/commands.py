@@ -7,114 +7,17 @@ import argparse
 import json
 from pathlib import Path
 
-from .argtypes import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time, data_file_and_sidecars,
-                       existing_file, float_in, nonnegative_float, output_file, positive_float,
-                       positive_int, refuse_replacing_inputs, seed)
+from experiments.workflows.options import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time,
+                                           data_file_and_sidecars, existing_file, float_in,
+                                           output_file, positive_float, positive_int,
+                                           refuse_replacing_inputs, seed, with_sidecar)
+from experiments.workflows.sky_options import (AEROSOL_PRESETS as _AEROSOL_PRESETS,  # noqa: F401
+                                               AOP_CONVENTION, MODEL_OPTIONS,
+                                               SAMPLE_BYTES_PER_SAMPLE, SAMPLE_SECONDS_PER_SAMPLE,
+                                               add_sky_model_options, read_directions,
+                                               sky_params, sky_seconds, view_directions)
 
 __all__ = ["register", "read_directions", "view_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
-
-MODEL_OPTIONS = {"rayleigh": ("dmax",),
-                 "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
-                 "berry": ("delta_deg", "dmax"),
-                 "aerosol": ("preset", "aod_550", "albedo", "wavelength_nm", "pressure_hPa")}
-"""The ``skysim sky`` options of each sky model (attribute names of the parsed arguments)."""
-
-SKY_BYTES_PER_DIRECTION = 400
-"""Peak memory of ``skysim sky`` per view direction [bytes]: the grid, seven float64 columns
-in the chunks and again in the joined table, the writer's copy; tracemalloc peak 170 B (CSV)
-and 130 B (Parquet) per direction at 520 k directions, 290 B at 130 k; rounded up."""
-
-SAMPLE_BYTES_PER_SAMPLE = 1000
-"""Peak memory of ``skysim sample`` per sample [bytes] (times, sun vectors, Stokes, channels,
-the table and its CSV text): tracemalloc peak 343 B per sample at 1e5 samples, 1.1 kB at
-2e4 (fixed costs included); about 3x the large-run value."""
-
-_AEROSOL_PRESETS = ("continental_clean", "continental_average", "urban", "maritime_clean",
-                    "desert")
-"""Keys of ``skysim.aerosol_types.PRESETS`` (listed here so that ``--help`` needs no import;
-tests/test_aerosol_cli.py checks that they match)."""
-
-AOP_CONVENTION = (
-    "AoP (aop_deg) is the E-vector orientation measured from the local meridian (the "
-    "direction towards the zenith along the meridian) positive towards increasing azimuth, "
-    "i.e. clockwise as seen by an observer looking along the view direction, wrapped to "
-    "[-90, 90). Q = I dop cos(2 aop), U = I dop sin(2 aop) in that basis. Azimuths are "
-    "clockwise from geographic north; at the zenith the meridian is that of the row's azimuth.")
-
-
-def read_directions(path):
-    """View directions from a CSV with columns ``elevation_deg``, ``azimuth_deg`` [deg].
-
-    Raises
-    ------
-    ValueError
-        For a folder, an empty file, missing columns, no rows, or a value that is not a
-        number (naming the row and the value).
-    """
-    import numpy as np
-    import pandas as pd
-    path = Path(path)
-    if path.is_dir():
-        raise ValueError(f"--directions {path} is a folder; give a CSV file")
-    try:
-        d = pd.read_csv(path)
-    except pd.errors.EmptyDataError:
-        raise ValueError(f"--directions {path} is empty; write a CSV with the header "
-                         "elevation_deg,azimuth_deg and one direction per row") from None
-    except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--directions {path} is not a readable CSV ({exc})") from None
-    missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
-    if missing:
-        raise ValueError(f"--directions {path}: missing column(s) {sorted(missing)}; found "
-                         f"{list(d.columns)}")
-    if d.empty:
-        raise ValueError(f"--directions {path} has a header but no directions")
-    cols = []
-    for c in ("elevation_deg", "azimuth_deg"):
-        x = pd.to_numeric(d[c], errors="coerce").to_numpy(float)
-        bad = np.flatnonzero(~np.isfinite(x))
-        if bad.size:
-            raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is "
-                             f"{d[c].iloc[bad[0]]!r}, not a number ({bad.size} such value(s))")
-        cols.append(x)
-    return cols[0], cols[1]
-
-
-def _sky_params(args) -> dict:
-    """The sky-model options given, checked against ``--model`` (another model's option is
-    an error, not silently ignored)."""
-    given = {k for opts in MODEL_OPTIONS.values() for k in opts
-             if getattr(args, k, None) is not None}
-    foreign = sorted(given - set(MODEL_OPTIONS[args.model]))
-    if foreign:
-        flag = _flag(foreign[0])
-        owners = " or ".join(m for m, o in MODEL_OPTIONS.items() if foreign[0] in o)
-        takes = ", ".join(_flag(k) for k in MODEL_OPTIONS[args.model])
-        raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
-                         f"takes {takes}")
-    if args.model == "multiple" and not given & {"tau", "wavelength_nm"}:
-        raise ValueError("--model multiple needs --tau (Rayleigh optical thickness, about "
-                         "0.097 at 550 nm) or --wavelength-nm")
-    return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
-
-
-def _flag(option: str) -> str:
-    """The command-line flag of a parsed sky option (``aod_550`` -> ``--aod``)."""
-    return {"preset": "--aerosol", "aod_550": "--aod"}.get(
-        option, "--" + option.replace("_", "-").replace("-hpa", "-hPa"))
-
-
-def view_directions(directions_csv=None, grid_step_deg: float = 2.0):
-    """View directions [deg] from a CSV (:func:`read_directions`), or else the default
-    full-sky grid (:func:`skysim.geometry.sky_grid`), after checking its memory."""
-    from skysim.geometry import sky_grid, sky_grid_size
-    from skysim.resources import check_memory, format_count
-    if directions_csv:
-        return read_directions(directions_csv)
-    check_memory(sky_grid_size(grid_step_deg) * SKY_BYTES_PER_DIRECTION,
-                 f"{format_count(sky_grid_size(grid_step_deg))} sky directions (--grid-step "
-                 f"{grid_step_deg:g})", "use a coarser --grid-step")
-    return sky_grid(grid_step_deg)
 
 
 # --------------------------------------------------------------------------- --source moon
@@ -159,11 +62,31 @@ def moon_sky(args, params: dict):
     sky = _MoonlitSkyMap(args, params)
     pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
                         sky.site.altitude_m).iloc[0]
+    if not pos.elevation_deg > 0.0:
+        raise ValueError(f"--source moon: the Moon is at {pos.elevation_deg:.1f} deg elevation "
+                         f"at --time {args.time.isoformat()} and --lat {args.lat:g} --lon "
+                         f"{args.lon:g}, below the horizon; choose a time when the Moon is up")
     info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
             "elevation_deg": float(pos.elevation_deg), "azimuth_deg": float(pos.azimuth_deg),
             "phase_angle_deg": float(pos.phase_angle_deg),
             "illuminated_fraction": float(pos.illuminated_fraction)}
     return sky, float(pos.elevation_deg), float(pos.azimuth_deg), info
+
+
+def _refuse_two_suns(args) -> None:
+    """The sun's position is given once: by --sun-elevation --sun-azimuth, or by --lat --lon
+    --time (a site and time given with the angles would be ignored)."""
+    if args.sun_azimuth is not None and args.sun_elevation is None:
+        raise ValueError(f"--sun-azimuth {args.sun_azimuth:g} needs --sun-elevation")
+    if args.sun_elevation is None or args.source != "sun":
+        return
+    for flag, value in (("--time", args.time and args.time.isoformat()),
+                        ("--lat", args.lat is not None and f"{args.lat:g}"),
+                        ("--lon", args.lon is not None and f"{args.lon:g}")):
+        if value:
+            raise ValueError(f"{flag} {value} and --sun-elevation {args.sun_elevation:g} both "
+                             "place the sun: give --sun-elevation --sun-azimuth, or --lat --lon "
+                             "--time")
 
 
 def _sky(args) -> int:
@@ -174,11 +97,11 @@ def _sky(args) -> int:
     from skysim.io import atomic_write_many, sidecar_path
     from skysim.sky import make_sky
 
-    from .cloud_options import with_clouds
-    params = _sky_params(args)
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out", args.out and
-                              sidecar_path(args.out)), ("--plot", args.plot)],
+    from experiments.workflows.cloud_options import with_clouds
+    params = sky_params(args)
+    refuse_replacing_inputs(with_sidecar("--out", args.out) + [("--plot", args.plot)],
                             [("--directions", args.directions)])
+    _refuse_two_suns(args)
     sky = None
     if args.source == "moon":  # the night sky: the Moon as the source (skysim.night)
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
@@ -202,6 +125,10 @@ def _sky(args) -> int:
                          "the Sun")
     sky = with_clouds(make_sky(args.model, **params), args) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
+    from experiments.workflows.progress import check_duration
+    check_duration(sky_seconds(el.size, "moon" if args.source == "moon" else args.model,
+                               args.out), f"skysim sky: {el.size} directions",
+                   "give fewer directions or a coarser --grid-step, or write .parquet")
     chunk = 100_000
     starts = range(0, el.size, chunk)
     if el.size > chunk:
@@ -272,21 +199,22 @@ def _sample(args) -> int:
     from skysim.sky import make_sky
     from skysim.sun import Site
 
-    from skysim.io import sidecar_path
     from skysim.resources import check_memory
 
-    from .cloud_options import with_clouds
+    from experiments.workflows.cloud_options import with_clouds
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
         raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
                          f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
-                                                    sidecar_path(args.out))],
+    refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--errors", args.errors if args.errors not in ("random", "none")
                               else None)])
     total = args.n * args.sweeps
     check_memory(total * SAMPLE_BYTES_PER_SAMPLE, f"{total} samples (--n {args.n} x "
                  f"--sweeps {args.sweeps})", "use fewer samples or sweeps")
+    from experiments.workflows.progress import check_duration
+    check_duration(total * SAMPLE_SECONDS_PER_SAMPLE, f"skysim sample: {total} samples",
+                   "fewer --n or --sweeps make it shorter")
     rng = np.random.default_rng(args.seed)
     site = Site(args.lat, args.lon, args.alt)
     errors = _sensor_errors(args.errors, rng)
@@ -367,7 +295,7 @@ def _calibrate(args) -> int:
 
 
 def register(sub) -> None:
-    from .cloud_options import add_cloud_options
+    from experiments.workflows.cloud_options import add_cloud_options
     fmt = DefaultsHelpFormatter
     p = sub.add_parser("sky", help="sky polarization as ground truth (DoP, AoP, Stokes)",
                        description="Evaluate a sky model for view directions. " + AOP_CONVENTION,
@@ -381,7 +309,9 @@ def register(sub) -> None:
     p.add_argument("--time", type=aware_time,
                    help="timezone-aware ISO 8601 time, e.g. 2013-05-22T17:10+08:00")
     p.add_argument("--sun-elevation", type=float_in(-90, 90, unit="deg"),
-                   help="sun elevation [deg] (instead of site and time)")
+                   help="sun elevation [deg] (instead of site and time); rayleigh and berry "
+                        "hold in twilight down to -10 deg, multiple and aerosol need the sun "
+                        "above the horizon")
     p.add_argument("--sun-azimuth", type=float_in(unit="deg"),
                    help="sun azimuth [deg, clockwise from north]")
     p.add_argument("--source", default="sun", choices=("sun", "moon"),
@@ -394,31 +324,7 @@ def register(sub) -> None:
                    help="CSV with columns elevation_deg, azimuth_deg [deg] (instead of a grid)")
     p.add_argument("--grid-step", type=float_in(0, 90, low_open=True, unit="deg"), default=2.0,
                    help="spacing of the elevation-azimuth grid [deg]")
-    p.add_argument("--model", default="rayleigh", choices=sorted(MODEL_OPTIONS),
-                   help="sky model; berry: Berry-Dennis-Lee singularity sky, DoP "
-                        "dmax |w|/(2 - |w|) (Rayleigh for delta 0), without horizon "
-                        "depolarization (too high near the horizon)")
-    p.add_argument("--dmax", type=float_in(0, 1, low_open=True),
-                   help="rayleigh, berry: maximum degree of polarization, in (0, 1] (model "
-                        "default 1)")
-    p.add_argument("--tau", type=positive_float,
-                   help="multiple: Rayleigh optical thickness (or give --wavelength-nm)")
-    p.add_argument("--albedo", type=float_in(0, 1),
-                   help="multiple, aerosol: Lambertian ground albedo [1] (model default 0)")
-    p.add_argument("--wavelength-nm", type=positive_float,
-                   help="multiple: wavelength [nm], sets tau instead of --tau; aerosol: "
-                        "wavelength [nm] (model default 550)")
-    p.add_argument("--pressure-hPa", type=positive_float, dest="pressure_hPa",
-                   help="multiple (with --wavelength-nm), aerosol: surface pressure [hPa] "
-                        "(model default 1013.25)")
-    p.add_argument("--aerosol", dest="preset", choices=sorted(_AEROSOL_PRESETS),
-                   help="aerosol: aerosol type, OPAC mixture (model default "
-                        "continental_average)")
-    p.add_argument("--aod", dest="aod_550", type=float_in(0, 2),
-                   help="aerosol: aerosol optical depth at 550 nm [1] (model default 0.1)")
-    p.add_argument("--delta-deg", type=float_in(0, 90, low_open=True, high_open=True,
-                                                unit="deg"),
-                   help="berry: separation of the neutral-point pairs [deg] (model default 40)")
+    add_sky_model_options(p)
     add_cloud_options(p)
     p.add_argument("--out", type=output_file(".csv", ".parquet"),
                    help="output table (.csv or .parquet); its JSON sidecar is <out>.json")
@@ -443,8 +349,8 @@ def register(sub) -> None:
                    help="site altitude [m]")
     s.add_argument("--start", type=aware_time, default="2013-05-22T17:10:00+08:00",
                    help="timezone-aware ISO 8601 start of the first sweep")
-    s.add_argument("--duration", type=nonnegative_float, default=600.0,
-                   help="duration of one sweep [s]")
+    s.add_argument("--duration", type=positive_float, default=600.0,
+                   help="duration of one sweep [s], > 0 (the turntable takes time to turn)")
     s.add_argument("--n", type=positive_int, default=181, help="samples per sweep")
     s.add_argument("--sweeps", type=positive_int, default=1,
                    help="number of sweeps (e.g. 3 for a diagnosis with held-out sweeps)")

@@ -82,7 +82,7 @@ def _run_target(targets: dict, args) -> int:
     Options the target does not use are errors; the memory of ``--trials`` is checked and
     the expected duration announced before any work; the output folder is replaced as a
     whole (:func:`experiments.workflows.run_folder.replacing_folder`)."""
-    from experiments.workflows.progress import announce_duration, expected_reproduction_seconds
+    from experiments.workflows.progress import check_duration, expected_reproduction_seconds
     from experiments.workflows.run_folder import replacing_folder
     func = targets[args.target]
     for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
@@ -98,12 +98,16 @@ def _run_target(targets: dict, args) -> int:
         args.seed = getattr(sys.modules.get(func.__module__), "DEFAULT_SEED", DEFAULT_SEED)
     run = {"target": args.target, "quick": bool(args.quick), "trials": args.trials,
            "seed": args.seed}
+    from experiments.cli.argtypes import refuse_folder_holding_inputs
+    refuse_folder_holding_inputs("--out", args.out or _default_out(args.target),
+                                 [("--data", args.data), ("--reference", args.reference)])
+    check_duration(expected_reproduction_seconds(args.target, args.quick, args.trials),
+                   f"{args.target}" + (f" with --trials {args.trials}" if args.trials else ""),
+                   "" if args.quick else "fewer --trials or --quick (a small run of a few "
+                                         "seconds to minutes) make it shorter",
+                   force=args.force, force_flag="--force")
     with replacing_folder(args.out or _default_out(args.target), run, force=args.force) as out:
         args.out = out
-        announce_duration(expected_reproduction_seconds(args.target, args.quick, args.trials),
-                          f"skysim reproduce {args.target}",
-                          "" if args.quick else "--quick is a small run of a few seconds to "
-                                                "minutes")
         return func(args)
 
 
@@ -150,7 +154,7 @@ def build_parser(command: str | None = "") -> argparse.ArgumentParser:
                           "or failed run leaves the earlier one) (default: results/<target>)")
     rep.add_argument("--force", action="store_true",
                      help="replace an --out folder that holds other files, or a full run by a "
-                          "--quick one")
+                          "--quick one; run even when the expected duration exceeds a day")
     rep.add_argument("--data", default=None, metavar="DIR",
                      help="real-sky-compass: folder of recorded photodiode sessions; "
                           "moonlit-sky: folder of the FORS2 moonlit-sky table (default: the "

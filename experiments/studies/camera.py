@@ -16,8 +16,10 @@ from pathlib import Path
 
 import numpy as np
 
-from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
-                                      int_at_least, output_file, positive_float, seed)
+from experiments.workflows.options import (DefaultsHelpFormatter, aware_time,
+                                           data_file_and_sidecars, existing_file, float_in,
+                                           int_at_least, int_in, output_file, positive_float,
+                                           refuse_replacing_inputs, seed, with_sidecar)
 
 __all__ = ["DEFAULT_SEED", "heading_trials", "run", "stokes_figure", "register",
            "register_reproduce"]
@@ -46,6 +48,17 @@ CLOUDS_BYTES_PER_PIXEL = 300
 rayleigh sky leaves the float32 path for float64, hence more than the difference)."""
 HEADING_BYTES_PER_PIXEL = {"centred": 130, "superpixel": 175, "bilinear": 320}
 HEADING_FIGURE_BYTES_PER_PIXEL = 50
+CAMERA_SECONDS_PER_PIXEL = {"rayleigh": 1.0e-6, "berry": 1.6e-6, "multiple": 1.0e-6}
+CAMERA_FIGURE_SECONDS_PER_PIXEL = 2.4e-6
+CAMERA_ENGINE_SECONDS = {"multiple": 10.0}
+"""Time of ``skysim camera`` [s]: per pixel of the image (measured on a shared 2-core machine
+from 64x64 to 1024x1024 and 2048x2048: rayleigh 0.5, berry 0.8, multiple 0.3 us; the figure
+1.2 us; doubled) and, for the multiple-scattering sky, its engine runs (7.4 s measured at
+64x64, rounded up)."""
+MEMORY_PER_TRIAL_BYTES = 10_000
+"""Memory of ``skysim reproduce camera`` per trial [bytes] (the images are made one at a
+time): the full run's 60 conditions each keep a yaw (8 B) and two Python floats in lists
+(about 64 B) per trial, 4.3 kB; rounded up for the table and its text."""
 
 
 # --- shared helpers ---------------------------------------------------------------------
@@ -103,7 +116,7 @@ def stokes_figure(stokes, lens, attitude, path, title: str = ""):
 def _make_sky(args):
     from skysim.sky import make_sky
 
-    from experiments.cli.cloud_options import with_clouds
+    from experiments.workflows.cloud_options import with_clouds
     if args.sky == "multiple":
         return with_clouds(make_sky("multiple", tau=args.tau, albedo=args.albedo), args)
     if args.sky == "rayleigh" and args.clouds is None:
@@ -118,6 +131,7 @@ def _camera_command(args) -> int:
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
+    refuse_replacing_inputs(with_sidecar("--out", args.out) + [("--figure", args.figure)])
     require_image_codec(args.out)  # before the work, not after it
     check_memory(args.width * args.height * (CAMERA_BYTES_PER_PIXEL[args.sky]
                                              + (CLOUDS_BYTES_PER_PIXEL if args.clouds else 0)
@@ -128,6 +142,13 @@ def _camera_command(args) -> int:
                  f"{', with --figure' if args.figure else ''})",
                  "use a smaller --width/--height" + (" or leave out --figure" if args.figure
                                                      else ""))
+    from experiments.workflows.progress import check_duration
+    n_px = args.width * args.height
+    check_duration(CAMERA_ENGINE_SECONDS.get(args.sky, 0.0) + n_px * (
+        CAMERA_SECONDS_PER_PIXEL[args.sky] + (CAMERA_FIGURE_SECONDS_PER_PIXEL if args.figure
+                                              else 0.0)),
+        f"skysim camera: a {args.width}x{args.height} image", "a smaller --width/--height "
+        "makes it shorter")
     sun = sun_position([args.time], args.lat, args.lon, args.alt).iloc[0]
     sun_el, sun_az = float(sun["elevation_deg"]), float(sun["azimuth_deg"])
     rng = np.random.default_rng(args.seed)
@@ -173,6 +194,8 @@ def _heading_command(args) -> int:
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
+    refuse_replacing_inputs([("--figure", args.figure)],
+                            [("image", p) for p in data_file_and_sidecars(args.image)])
     raw, doc = read_raw(args.image, flip=args.flip, rotate_deg=args.rotate)
     check_sidecar(doc, find_sidecar(Path(args.image)))
     check_memory(raw.size * (HEADING_BYTES_PER_PIXEL[args.method]
@@ -207,7 +230,7 @@ def _heading_command(args) -> int:
 
 
 def register(sub) -> None:
-    from experiments.cli.cloud_options import add_cloud_options
+    from experiments.workflows.cloud_options import add_cloud_options
     p = sub.add_parser("camera", help="simulate a raw fisheye polarization-camera image "
                        "(16-bit TIFF or PNG + sidecar)", formatter_class=DefaultsHelpFormatter,
                        description="Image the sky with a division-of-focal-plane polarization "
@@ -216,15 +239,19 @@ def register(sub) -> None:
     p.add_argument("--lat", type=float_in(-90, 90), required=True, help="latitude [deg, north +]")
     p.add_argument("--lon", type=float_in(-180, 180), required=True,
                    help="longitude [deg, east +]")
-    p.add_argument("--alt", type=float, default=0.0, help="altitude [m]")
+    p.add_argument("--alt", type=float_in(-500, 9000, unit="m"), default=0.0,
+                   help="altitude [m]")
     p.add_argument("--time", type=aware_time, required=True,
                    help="exposure time, ISO 8601 with UTC offset")
     p.add_argument("--out", type=output_file(".tif", ".tiff", ".png"), required=True,
                    help="raw image, 16-bit TIFF (.tif, .tiff) or PNG (.png); the sidecar is "
                         "<name>.json")
-    p.add_argument("--yaw", type=float, default=0.0, help="heading of the image top [deg]")
-    p.add_argument("--pitch", type=float, default=0.0, help="camera pitch [deg]")
-    p.add_argument("--roll", type=float, default=0.0, help="camera roll [deg]")
+    p.add_argument("--yaw", type=float_in(unit="deg"), default=0.0,
+                   help="heading of the image top [deg]")
+    p.add_argument("--pitch", type=float_in(unit="deg"), default=0.0,
+                   help="camera pitch [deg]")
+    p.add_argument("--roll", type=float_in(unit="deg"), default=0.0,
+                   help="camera roll [deg]")
     p.add_argument("--width", type=int_at_least(2), default=512, help="pixels (even)")
     p.add_argument("--height", type=int_at_least(2), default=512, help="pixels (even)")
     p.add_argument("--lens", choices=("equidistant", "equisolid"), default="equidistant",
@@ -235,7 +262,7 @@ def register(sub) -> None:
     p.add_argument("--exposure", type=positive_float, default=None,
                    help="exposure [s] (default: the 99th percentile of the sky at 60%% of "
                         "the full well)")
-    p.add_argument("--adc-bits", type=int_at_least(8), default=12, help="ADC bits, 8-16")
+    p.add_argument("--adc-bits", type=int_in(8, 16), default=12, help="ADC bits, 8-16")
     p.add_argument("--extinction-ratio", type=float_in(1, low_open=True), default=np.inf,
                    help="polarizer extinction ratio")
     p.add_argument("--crosstalk", type=float_in(0, 0.25, high_open=True), default=0.0,
@@ -243,7 +270,7 @@ def register(sub) -> None:
                         "receives (it keeps 1 - 4x its own)")
     p.add_argument("--angle-error-std", type=float_in(0), default=0.0,
                    help="per-pixel polarizer angle error, standard deviation [deg]")
-    p.add_argument("--mosaic-rotation", type=float, default=0.0,
+    p.add_argument("--mosaic-rotation", type=float_in(unit="deg"), default=0.0,
                    help="rotation of the whole polarizer array [deg]")
     p.add_argument("--sky", choices=("rayleigh", "multiple", "berry"), default="rayleigh",
                    help="sky model: single-scattering Rayleigh, multiple scattering (sasktran2) "

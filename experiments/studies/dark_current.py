@@ -74,8 +74,8 @@ from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
 
-__all__ = ["Config", "DEFAULT_SEED", "run", "register_reproduce", "format_summary",
-           "underwater_conditions"]
+__all__ = ["Config", "DEFAULT_SEED", "calibration_grid", "run", "register_reproduce",
+           "format_summary", "underwater_conditions"]
 
 DEFAULT_SEED = 20210401
 MEMORY_PER_TRIAL_BYTES = 600_000
@@ -131,7 +131,9 @@ def _three_sigma(err, axis=-1):
     return 3.0 * np.sqrt(np.mean(np.square(err), axis=axis))
 
 
-def _calibration_grid(cfg: Config):
+def calibration_grid(cfg: Config):
+    """The calibration conditions of ``cfg``: illuminance [lx], E-vector angle [deg] and DoP,
+    every combination of its levels, ``cal_angles`` angles over 180 deg and DoPs, flattened."""
     phis = np.linspace(-90.0, 90.0, cfg.cal_angles, endpoint=False)
     I, phi, d = np.meshgrid(np.asarray(cfg.cal_levels_lx), phis, np.asarray(cfg.cal_dops),
                             indexing="ij")
@@ -200,7 +202,7 @@ def _trial(k: int, seed_seq, cfg: Config, daq: Daq, water: pd.DataFrame):
     params = PhotodiodeChannels.draw(rng)
     noise = rng.uniform(*cfg.noise_range_V, 3)
     noise_total = np.sqrt(noise ** 2 + daq.lsb_V ** 2 / 12.0)   # + quantisation
-    I_c, phi_c, d_c = _calibration_grid(cfg)
+    I_c, phi_c, d_c = calibration_grid(cfg)
     U_c, _ = params.sample(I_c, phi_c, d_c, rng, noise_V=noise, bandwidth_Hz=cfg.bandwidth_Hz,
                            daq=daq)
     cal_b = calibrate_dark_current(U_c, I_c, phi_c, d_c, noise_V=noise_total, daq=daq)

@@ -55,9 +55,9 @@ from skysim.geometry import wrap_deg
 from skysim.io import atomic_write_many, sidecar_path, write_json_atomic
 from skysim.sun import Site
 
-from experiments.cli.argtypes import output_dir, positive_int
-from experiments.cli.argtypes import seed as seed_type
 from experiments.plotting.figures import pyplot, save_png
+from experiments.workflows.options import output_dir, positive_int
+from experiments.workflows.options import seed as seed_type
 
 __all__ = ["SITE", "DATE", "TZ", "PAPER_SUN", "Scenario", "SCENARIO", "QUICK",
            "azimuth_from_south", "sun_discrepancy_table", "run", "format_table",
@@ -576,4 +576,14 @@ def register(subparsers) -> None:
     p.add_argument("--out", type=output_dir, default=None,
                    help="output folder (default: results/jin2020)")
     p.add_argument("--quick", action="store_true", help="shorter runs (120 s static, 60 s dynamic)")
-    p.set_defaults(func=lambda a: _main(a.trials, a.seed, a.out, a.quick))
+    p.set_defaults(func=_command)
+
+
+def _command(args) -> int:
+    """``skysim jin2020``: its expected duration checked against a day's budget first (as
+    ``skysim reproduce`` does)."""
+    from experiments.workflows.progress import check_duration, expected_reproduction_seconds
+    check_duration(expected_reproduction_seconds("jin2020", args.quick, args.trials),
+                   f"skysim jin2020 with --trials {args.trials}", "fewer --trials or --quick "
+                   "make it shorter")
+    return _main(args.trials, args.seed, args.out, args.quick)

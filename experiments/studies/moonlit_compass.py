@@ -121,7 +121,7 @@ QUICK = Config(step_min=30.0, night_step_days=4, elevations_deg=(20.0, 45.0, 70.
 
 
 def _paranal():
-    from .moonlit_sky import _paranal as site
+    from .moonlit_sky import paranal as site
     return site()
 
 
@@ -194,7 +194,7 @@ def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool 
     from sensor.photodiode import PhotodiodeChannels
     from skysim.geometry import wrap_axial_deg
 
-    from .dark_current import Config as DarkConfig, _calibration_grid
+    from .dark_current import Config as DarkConfig, calibration_grid
     from sensor.yang2014 import ERROR_MODEL
 
     daq = Daq(ERROR_MODEL.daq_bits, ERROR_MODEL.daq_range_V)
@@ -202,7 +202,7 @@ def _three_pair_trial(rng, cond: pd.DataFrame, cfg: Config, *, noise_free: bool 
     noise = rng.uniform(*ERROR_MODEL.noise_range_V, 3)
     noise_total = np.sqrt(noise ** 2 + daq.lsb_V ** 2 / 12.0)
     dark_cfg = DarkConfig()
-    I_c, phi_c, d_c = _calibration_grid(dark_cfg)
+    I_c, phi_c, d_c = calibration_grid(dark_cfg)
     U_c, _ = params.sample(I_c, phi_c, d_c, rng, noise_V=noise, bandwidth_Hz=cfg.bandwidth_Hz,
                            daq=daq)
     cal_b = calibrate_dark_current(U_c, I_c, phi_c, d_c, noise_V=noise_total, daq=daq)

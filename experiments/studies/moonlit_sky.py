@@ -43,7 +43,7 @@ from skysim.io import atomic_write, write_json_atomic
 from experiments.plotting.figures import pyplot, save_png
 
 __all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "compare", "measured_polarization",
-           "read_fors2", "register_reproduce", "run"]
+           "paranal", "read_fors2", "register_reproduce", "run"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "moonskypol"
 """The FORS2 moonlit-sky rows beside the checkout (``../shared/reference/moonskypol``)."""
@@ -59,7 +59,8 @@ the multiple-scattering sky (the standard atmosphere gives 740 hPa at that heigh
 OFFSET_ARCMIN = 1.0
 
 
-def _paranal():
+def paranal():
+    """The site of the FORS2 moonlit-sky observations, ESO Paranal (:class:`skysim.sun.Site`)."""
     from skysim.sun import Site
     return Site(PARANAL_LATITUDE_DEG, PARANAL_LONGITUDE_DEG, PARANAL_ALTITUDE_M, "Paranal")
 
@@ -145,7 +146,7 @@ def measured_polarization(table: pd.DataFrame) -> pd.DataFrame:
         dop_err = np.hypot(q * table.Q_err, uu * table.U_err) / dop
         aop_err = np.degrees(0.5 * np.hypot(q * table.U_err, uu * table.Q_err) / dop ** 2)
     aop_eq = 0.5 * np.degrees(np.arctan2(uu, q))
-    site = _paranal()
+    site = paranal()
     loc = EarthLocation.from_geodetic(site.longitude_deg * u.deg, site.latitude_deg * u.deg,
                                       site.altitude_m * u.m)
     t = Time(table.time.dt.tz_convert("UTC").dt.tz_localize(None).to_numpy(), scale="utc")
@@ -195,7 +196,7 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
     from skysim.geometry import wrap_axial_deg
     from skysim.night import night_sky
 
-    site = _paranal()
+    site = paranal()
     meas = measured_polarization(table)
     out = pd.concat([table, meas], axis=1)
     for model, skies in pattern_skies(sorted(table.band.unique()), with_multiple).items():

@@ -39,8 +39,8 @@ import pandas as pd
 from skysim.io import atomic_write, write_json_atomic
 from skysim.natraj import NATRAJ_FILE, natraj_path, read_natraj
 
-from experiments.cli.argtypes import output_dir
 from experiments.plotting.figures import save_png
+from experiments.workflows.options import output_dir
 
 __all__ = [
     "neutral_point_curves",

@@ -48,13 +48,16 @@ from sensor.yang2014 import ERROR_MODEL, SITE
 from skysim import __version__
 from skysim.io import atomic_write, write_json_atomic
 
-from experiments.cli.argtypes import (
+from experiments.workflows.options import (
     DefaultsHelpFormatter,
+    data_file_and_sidecars,
     existing_file,
     int_at_least,
+    name_list,
     nonnegative_float,
     output_dir,
     positive_int,
+    refuse_replacing_inputs,
     seed,
 )
 
@@ -397,11 +400,10 @@ def plot_benchmark(cases: pd.DataFrame, confusion: pd.DataFrame, out: Path) -> l
 
 
 # --------------------------------------------------------------------------- command line
-def _effects_arg(text: str | None):
-    """Benchmark effects: all by default, else the comma-separated names (validated)."""
-    if not text:
+def _effects_arg(names: tuple[str, ...] | None):
+    """Benchmark effects: all by default, else the names given (validated)."""
+    if not names:
         return DEFAULT_CANDIDATES
-    names = tuple(x.strip() for x in text.split(",") if x.strip())
     for name in names:
         get_effect(name)  # UnknownEffectError lists the valid names
     return names
@@ -418,18 +420,20 @@ def write_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
 
 def _diagnose_cmd(args) -> int:
     from calibration import diagnose as run_diagnosis
-    names = (None if not args.effects else
-             tuple(x.strip() for x in args.effects.split(",") if x.strip()))
+    names = args.effects or None
     options = {}
     if getattr(args, "pointing_from", None):
-        options["pointing_from"] = [x.strip() for x in args.pointing_from.split(",")
-                                    if x.strip()]
+        options["pointing_from"] = list(args.pointing_from)
     if getattr(args, "light", "sun") != "sun":
         options["light"] = args.light
     if getattr(args, "time_uncertainty", None):
         options["time_uncertainty_s"] = args.time_uncertainty
-    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     out = Path(args.out or Path("results") / "diagnose" / Path(args.data).stem)
+    refuse_replacing_inputs(
+        [("--out", out / "diagnosis.json"), ("--out", out / "report.md")],
+        [("data", p) for p in data_file_and_sidecars(args.data)]
+        + [("--pointing-from", p) for p in options.get("pointing_from", ())])
+    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     written = write_diagnosis(report, out)
     v = report.verdict
     # a dimensionless gap (a fraction of the mean reading or signal) is printed bare
@@ -453,21 +457,31 @@ def _diagnose_cmd(args) -> int:
 def _real_benchmark_cmd(args) -> int:
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
 
-    from experiments.studies.real_compass import run_real_benchmark
+    from .progress import check_duration
+    from .real_benchmark import run_real_benchmark, session_files
     from .real_injection import INJECTABLE
     inject = INJECTABLE
     cands = RING_EFFECT_NAMES
     if args.effects:
-        inject = tuple(x.strip() for x in args.effects.split(",") if x.strip())
+        inject = args.effects
     n = 1 if args.quick else (args.n if args.n != 200 else 3)
     if args.quick:
         cands = ("clock_offset", "yaw_scale", "occlusion")
     out = Path(args.out or "results/gap_benchmark_real")
+    n = min(n, len(session_files(args.real, "--real")))   # a missing folder named first
+    check_duration(n * len(inject) * REAL_SECONDS_PER_CASE_AND_CANDIDATE * len(cands),
+                   f"skysim gap-benchmark --real: {n} session(s) x {len(inject)} effect(s)",
+                   "a smaller --n, fewer --effects or --quick make it shorter")
     table = run_real_benchmark(args.real, inject, cands, out, n, args.seed, args.folds)
     print(table.to_string(index=False))
     print(f"wrote {out}/real_cases.csv, real_summary.json")
     return 0
 
+
+REAL_SECONDS_PER_CASE_AND_CANDIDATE = 50.0
+"""Time of ``skysim gap-benchmark --real`` per injected case and candidate effect [s]: the
+``--quick`` run (one session, four injected effects, three candidates) took 610 s on a shared
+2-core machine, 51 s per case and candidate; other candidate lists scaled in proportion."""
 
 BENCHMARK_BYTES_PER_SET = 20_000
 """Memory one data set of the blind benchmark keeps until the end [bytes]: its seed, its
@@ -482,15 +496,15 @@ BENCHMARK_SECONDS_PER_SET = 1.5
 def _benchmark_cmd(args) -> int:
     from skysim.resources import check_memory
 
-    from .progress import announce_duration
+    from .progress import check_duration
     if getattr(args, "real", None):
         return _real_benchmark_cmd(args)
     n = 27 if args.quick else args.n
     check_memory(n * BENCHMARK_BYTES_PER_SET, f"{n} data sets of gap-benchmark", "use a "
                  "smaller --n")
     effects = _effects_arg(args.effects)
-    announce_duration(n * BENCHMARK_SECONDS_PER_SET, f"skysim gap-benchmark: {n} data sets",
-                      "a smaller --n or --quick makes it shorter")
+    check_duration(n * BENCHMARK_SECONDS_PER_SET, f"skysim gap-benchmark: {n} data sets",
+                   "a smaller --n or --quick makes it shorter")
     out = Path(args.out or "results/gap_benchmark")
     t0 = time.perf_counter()
     cases = run_benchmark(n, args.seed, effects, n_folds=args.folds)
@@ -521,7 +535,7 @@ def register(sub) -> None:
     d.add_argument("data", type=existing_file,
                    help="measurement table or photodiode data (.csv/.parquet + sidecar), or "
                         "a raw polarization-camera frame (.tif/.tiff/.png + sidecar)")
-    d.add_argument("--effects", help="comma-separated candidates (default: all): "
+    d.add_argument("--effects", type=name_list, help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
                    "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
@@ -533,7 +547,7 @@ def register(sub) -> None:
     d.add_argument("--seed", type=seed, default=0, help="seed of the bootstrap, >= 0")
     d.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps), 2 .. number of sweeps")
-    d.add_argument("--pointing-from", metavar="REPORTS",
+    d.add_argument("--pointing-from", metavar="REPORTS", type=name_list,
                    help="photodiode instruments: comma-separated diagnosis.json files of other "
                         "sessions of the same instrument whose clocks are right; their fitted "
                         "unit pointing (median per unit) is held, so that a clock error is "
@@ -557,7 +571,7 @@ def register(sub) -> None:
     b.add_argument("--seed", type=seed, default=7, help="master seed, >= 0")
     b.add_argument("--out", type=output_dir,
                    help="output folder (default: results/gap_benchmark)")
-    b.add_argument("--effects", help="comma-separated effects to hide and to try "
+    b.add_argument("--effects", type=name_list, help="comma-separated effects to hide and to try "
                    "(default: all)")
     b.add_argument("--folds", type=int_at_least(2), default=3,
                    help="held-out folds (whole sweeps)")

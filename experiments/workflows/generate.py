@@ -31,7 +31,7 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError, MissingFileError, SkysimError
 
-from experiments.cli.argtypes import existing_file, output_dir, output_file
+from experiments.workflows.options import existing_file, output_dir, output_file
 
 __all__ = ["GROUNDTRUTH_SCHEMA", "TOLERANCES", "GenerateConfigError", "CompareError",
            "dataset_rng", "generate", "compare_tables", "compare_paths", "register"]
@@ -132,7 +132,7 @@ def _times(entry: dict, where: str):
                                   "e.g. 2013-05-22T17:10:00+08:00")
     from skysim.resources import check_memory
 
-    from experiments.cli.commands import SAMPLE_BYTES_PER_SAMPLE
+    from .sky_options import SAMPLE_BYTES_PER_SAMPLE
     check_memory(n * SAMPLE_BYTES_PER_SAMPLE * max(1, entry.get("n_units", 1) / 3)
                  if isinstance(entry.get("n_units", 1), int) else 0,
                  f"{n} samples", "lower n")
@@ -203,7 +203,7 @@ def _sky_map(entry: dict, site, seed: int, path: Path, where: str) -> None:
     from skysim.resources import check_memory
     from skysim.sun import sun_position
 
-    from experiments.cli.commands import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION
+    from .sky_options import AOP_CONVENTION, SKY_BYTES_PER_DIRECTION
     sky = _cloudy(_sky(entry, where), entry, where)
     if "time" in entry:
         pos = sun_position([entry["time"]], site.latitude_deg, site.longitude_deg,
@@ -574,7 +574,7 @@ def compare_paths(theirs, truth, tolerances: dict | None = None) -> dict:
 def _generate_command(args) -> int:
     from skysim.io import sidecar_path
 
-    from experiments.cli.argtypes import refuse_replacing_inputs
+    from experiments.workflows.options import refuse_replacing_inputs
     config = load_generate_config(args.config)
     written = [Path(args.out) / "manifest.json"] + [
         f for kind in _KINDS for e in config.get(kind, [])
@@ -610,7 +610,7 @@ def _parse_tolerances(items) -> dict:
 def _compared_files(what: str, path) -> list[tuple[str, Path]]:
     """The files ``compare`` reads from ``path`` (a data file and its sidecars, or a generated
     folder's manifest and the files it lists), each with the argument that names it."""
-    from experiments.cli.argtypes import data_file_and_sidecars
+    from experiments.workflows.options import data_file_and_sidecars
     path = Path(path)
     if not path.is_dir():
         return [(what, p) for p in data_file_and_sidecars(path)]
@@ -626,7 +626,7 @@ def _compared_files(what: str, path) -> list[tuple[str, Path]]:
 def _compare_command(args) -> int:
     from skysim.io import write_json_atomic
 
-    from experiments.cli.argtypes import refuse_replacing_inputs
+    from experiments.workflows.options import refuse_replacing_inputs
     refuse_replacing_inputs([("--report", args.report)], _compared_files("theirs", args.theirs)
                             + _compared_files("truth", args.truth))
     tolerances = _parse_tolerances(args.tol)

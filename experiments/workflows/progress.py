@@ -12,7 +12,7 @@ import sys
 import warnings
 
 __all__ = ["ANNOUNCE_AFTER_S", "COMMAND_SECONDS", "ESTIMATE_OVER_CPU", "REPRODUCTION_SECONDS",
-           "STEP_SECONDS", "Steps", "announce_duration",
+           "STEP_SECONDS", "Steps", "TIME_BUDGET_S", "announce_duration", "check_duration",
            "expected_reproduction_seconds", "format_duration", "install_warning_format",
            "report_run", "reproduction", "working"]
 
@@ -197,6 +197,45 @@ def working(what: str, expected_s: float) -> Steps:
             report = diagnose(...)
     """
     return Steps(what, {"": expected_s})
+
+
+TIME_BUDGET_S = 24 * 3600.0
+"""Longest expected duration of one run [s] started without ``--force``: a day. Longer runs
+are refused before any work, with the estimate (a mistyped size, e.g. 1e9 trials, would
+otherwise hold the machine for months)."""
+
+
+def check_duration(seconds: float, what: str, how_to_shorten: str = "", *,
+                   force: bool = False, force_flag: str = "") -> None:
+    """Refuse a run expected to take longer than :data:`TIME_BUDGET_S`, unless ``force``;
+    else announce its expected duration (:func:`announce_duration`).
+
+    Parameters
+    ----------
+    seconds : float
+        Expected wall time [s].
+    what : str
+        The run, e.g. ``"skysim reproduce camera"``.
+    how_to_shorten : str
+        The option that makes it shorter.
+    force : bool
+        Run even over the budget (the user asked for it).
+    force_flag : str
+        The option that sets ``force`` (named in the message), or "" if the command has none.
+
+    Raises
+    ------
+    skysim.exceptions.InvalidParameterError
+        If the run would exceed the budget and ``force`` is not set.
+    """
+    if seconds > TIME_BUDGET_S and not force:
+        from skysim.exceptions import InvalidParameterError
+        override = f" ({force_flag} runs it anyway)" if force_flag else ""
+        hint = f"; {how_to_shorten}" if how_to_shorten else ""
+        raise InvalidParameterError(
+            f"{what}: expected duration about {format_duration(seconds)}, more than the "
+            f"{TIME_BUDGET_S / 3600:g} h one run may take{hint}{override}")
+    announce_duration(seconds, what, how_to_shorten)
 
 
 def _one_line(message, category, filename, lineno, line=None) -> str:

@@ -16,7 +16,6 @@ complete (written to a temporary file and renamed).
 
 from __future__ import annotations
 
-import argparse
 import json
 from pathlib import Path
 
@@ -42,7 +41,7 @@ _CHUNK_BYTES = 4 * 2**20  # netCDF chunks of ~4 MiB: whole time steps, cheap to 
 def _metadata(sky, times, n_directions, n_suns) -> dict:
     from skysim import __version__
 
-    from experiments.cli.commands import AOP_CONVENTION
+    from .sky_options import AOP_CONVENTION
     return {"schema": SERIES_SCHEMA, "sky": sky.describe(), "aop_convention": AOP_CONVENTION,
             "n_times": int(n_suns), "n_directions": int(n_directions),
             "times": "given" if times is not None else "none (index of the sun positions)",
@@ -218,7 +217,7 @@ def _count_times(args) -> int:
     """Number of time steps the options ask for, computed without building them."""
     import pandas as pd
 
-    from experiments.cli.argtypes import PANDAS_YEARS
+    from .options import PANDAS_YEARS
     if args.periods is None and args.end is None:
         raise InvalidParameterError("give the times as --start with --end or --periods")
     if args.periods is not None and args.end is not None:
@@ -246,8 +245,8 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     from skysim.resources import check_memory, format_count
     from skysim.series import VALUES_PER_POINT
 
-    from .progress import announce_duration
-    from experiments.cli.commands import SKY_BYTES_PER_DIRECTION
+    from .progress import check_duration
+    from .sky_options import SKY_BYTES_PER_DIRECTION
     directions = f"{format_count(n_directions)} directions"
     what = f"{format_count(n_times)} time steps x {directions}"
     n_directions = float(min(n_directions, 10**300))
@@ -267,7 +266,7 @@ def _check_size(args, n_times: int, n_directions: int, itemsize: int) -> None:
     seconds = n_times * n_directions * SECONDS_PER_VALUE[suffix] * itemsize / 8
     if args.model == "multiple":
         seconds += n_times * ENGINE_CALL_S
-    announce_duration(seconds, f"skysim sky-series: {what}",
+    check_duration(seconds, f"skysim sky-series: {what}",
                       "fewer --periods, a coarser --grid-step or --float32 make it shorter")
 
 
@@ -276,17 +275,15 @@ def _sky_series(args) -> int:
     import pandas as pd
 
     from skysim.geometry import sky_grid_size
-    from skysim.io import sidecar_path
     from skysim.sky import make_sky
     from skysim.sun import Site, sun_position
 
-    from experiments.cli.argtypes import refuse_replacing_inputs
-    from experiments.cli.commands import _sky_params, view_directions
-    refuse_replacing_inputs([("--out", args.out), ("the sidecar of --out",
-                                                    sidecar_path(args.out))],
+    from .options import refuse_replacing_inputs, with_sidecar
+    from .sky_options import sky_params, view_directions
+    refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--directions", args.directions)])
     site = Site(args.lat, args.lon, args.alt)
-    params = _sky_params(args)
+    params = sky_params(args)
     if args.float32:
         if args.model != "rayleigh":
             raise InvalidParameterError(
@@ -322,25 +319,10 @@ def _sky_series(args) -> int:
     return 0
 
 
-def _copy_sky_model_options(p) -> None:
-    """Add ``skysim sky``'s sky-model options (``--model``, ``--dmax``, ``--tau``, ...) to
-    ``p``: one definition, so a model or option added there is offered here too."""
-    from experiments.cli.commands import MODEL_OPTIONS
-    from experiments.cli.commands import register as register_foundation
-    probe = argparse.ArgumentParser(add_help=False)
-    register_foundation(probe.add_subparsers())
-    sky = next(a for a in probe._actions if a.choices and "sky" in a.choices).choices["sky"]
-    wanted = {"model"} | {k for opts in MODEL_OPTIONS.values() for k in opts}
-    group = p.add_argument_group("sky model")
-    for action in sky._actions:
-        if action.dest in wanted:
-            group._add_action(action)
-
-
 def register(sub) -> None:
-    from experiments.cli.argtypes import (DefaultsHelpFormatter, aware_time, existing_file,
-                                          float_in, output_file, positive_float, positive_int,
-                                          time_step)
+    from .options import (DefaultsHelpFormatter, aware_time, existing_file, float_in,
+                          output_file, positive_float, positive_int, time_step)
+    from .sky_options import add_sky_model_options
     p = sub.add_parser("sky-series", help="time series of sky maps (many suns x many "
                        "directions), streamed to netCDF or Parquet",
                        description="Evaluate a sky model for every time step and view "
@@ -368,7 +350,7 @@ def register(sub) -> None:
                    help="CSV with columns elevation_deg, azimuth_deg [deg] (instead of a grid)")
     p.add_argument("--grid-step", type=float_in(0, 90, low_open=True, unit="deg"), default=2.0,
                    help="spacing of the elevation-azimuth grid [deg]")
-    _copy_sky_model_options(p)
+    add_sky_model_options(p.add_argument_group("sky model"))
     p.add_argument("--float32", action="store_true",
                    help="rayleigh: float32 arithmetic and storage (AoP within 1e-3 deg beyond "
                         "2 deg from the sun, DoP within 1e-5)")

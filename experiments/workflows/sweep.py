@@ -56,8 +56,9 @@ import numpy as np
 
 from skysim.exceptions import InvalidParameterError, SkysimError
 
-from experiments.cli.argtypes import existing_file, output_dir, positive_int
 from experiments.plotting.figures import pyplot, save_png
+from experiments.workflows.options import (existing_file, output_dir, positive_int,
+                                           refuse_replacing_inputs)
 from .sweep_config import GROUPS, PARAMETERS, SweepConfig, SweepConfigError, load_config
 
 __all__ = ["BLOCK_TRIALS", "SweepMemoryError", "SweepStateError", "block_seed", "design",
@@ -886,10 +887,17 @@ def run_sweep(cfg: SweepConfig, out, *, backend: str = "local", scheduler: str |
     return {"trials": trials, "summary": summary, "indices": indices, "info": info}
 
 
+SWEEP_FILES = ("sweep.json", "trials.parquet", "summary.csv", "summary.md", "indices.csv",
+               "indices.png", "error_vs_sun_elevation.png", "error_vs_noise.png")
+"""The files a sweep writes into its output folder (besides ``chunks/``)."""
+
+
 def _sweep_command(args) -> int:
     import pandas as pd
     cfg = load_config(args.config)
     out = Path(args.out or f"results/sweep_{cfg.name}")
+    refuse_replacing_inputs([("--out", out / name) for name in SWEEP_FILES],
+                            [("config", args.config)])
     res = run_sweep(cfg, out, backend=args.backend, scheduler=args.scheduler,
                     workers=args.workers, progress=not args.no_progress,
                     figures=not args.no_figures)
