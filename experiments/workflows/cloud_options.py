@@ -4,6 +4,8 @@ front of the command's clear sky."""
 
 from __future__ import annotations
 
+from skysim.exceptions import InvalidParameterError
+
 from .options import cloud_spec, float_in, wind_spec
 
 __all__ = ["add_cloud_options", "with_clouds"]
@@ -46,7 +48,7 @@ def with_clouds(sky, args, times=None):
                             ("--wind", getattr(args, "wind", None))) if v is not None]
     if args.clouds is None:
         if extra:
-            raise ValueError(f"{extra[0]} describes the clouds of --clouds; give --clouds "
+            raise InvalidParameterError(f"{extra[0]} describes the clouds of --clouds; give --clouds "
                              "COVER[,TAU[,SEED]] too")
         return sky
     from skysim.cloud_field import CloudField

@@ -9,6 +9,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.exceptions import MissingFileError
 from skysim.io import atomic_write, write_json_atomic
 
 __all__ = ["run_real_benchmark", "session_files"]
@@ -20,7 +21,7 @@ def session_files(folder, option: str = "--data") -> list[Path]:
     import json
     folder = Path(folder)
     if not folder.is_dir():
-        raise FileNotFoundError(
+        raise MissingFileError(
             f"no session folder {folder}: give {option} DIR with skysim.photodiodes/1 files "
             "(e.g. the ring-compass recordings of Gkanias et al. 2023)")
     out = []
@@ -36,7 +37,7 @@ def session_files(folder, option: str = "--data") -> list[Path]:
                     pass
                 break
     if not out:
-        raise FileNotFoundError(f"{folder} holds no skysim.photodiodes/1 session")
+        raise MissingFileError(f"{folder} holds no skysim.photodiodes/1 session")
     return out
 
 

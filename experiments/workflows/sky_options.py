@@ -6,6 +6,8 @@ from __future__ import annotations
 
 from pathlib import Path
 
+from skysim.exceptions import FileFormatError, InvalidParameterError
+
 from .options import float_in, positive_float
 
 __all__ = ["AEROSOL_PRESETS", "AOP_CONVENTION", "MODEL_OPTIONS", "SAMPLE_BYTES_PER_SAMPLE",
@@ -72,24 +74,24 @@ def read_directions(path):
     import pandas as pd
     path = Path(path)
     if path.is_dir():
-        raise ValueError(f"--directions {path} is a folder; give a CSV file")
+        raise FileFormatError(f"--directions {path} is a folder; give a CSV file")
     try:
         d = pd.read_csv(path)
     except pd.errors.EmptyDataError:
-        raise ValueError(f"--directions {path} is empty; write a CSV with the header "
+        raise FileFormatError(f"--directions {path} is empty; write a CSV with the header "
                          "elevation_deg,azimuth_deg and one direction per row") from None
     except (pd.errors.ParserError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--directions {path} is not a readable CSV ({exc})") from None
+        raise FileFormatError(f"--directions {path} is not a readable CSV ({exc})") from None
     doubled = [c for c in ("elevation_deg", "azimuth_deg") if f"{c}.1" in d.columns]
     if doubled:
-        raise ValueError(f"--directions {path}: the column {doubled[0]} appears more than "
+        raise FileFormatError(f"--directions {path}: the column {doubled[0]} appears more than "
                          "once; keep one")
     missing = {"elevation_deg", "azimuth_deg"} - set(d.columns)
     if missing:
-        raise ValueError(f"--directions {path}: missing column(s) {sorted(missing)}; found "
+        raise FileFormatError(f"--directions {path}: missing column(s) {sorted(missing)}; found "
                          f"{list(d.columns)}")
     if d.empty:
-        raise ValueError(f"--directions {path} has a header but no directions")
+        raise FileFormatError(f"--directions {path} has a header but no directions")
     cols = []
     for c in ("elevation_deg", "azimuth_deg"):
         x = pd.to_numeric(d[c], errors="coerce").to_numpy(float)
@@ -97,12 +99,12 @@ def read_directions(path):
         if bad.size:
             v = d[c].iloc[bad[0]]
             shown = repr(v) if isinstance(v, str) else v
-            raise ValueError(f"--directions {path}: {c} in data row {bad[0] + 1} is {shown}, "
+            raise FileFormatError(f"--directions {path}: {c} in data row {bad[0] + 1} is {shown}, "
                              f"not a number ({bad.size} such value(s))")
         cols.append(x)
     low = np.flatnonzero((cols[0] < 0.0) | (cols[0] > 90.0))
     if low.size:
-        raise ValueError(f"--directions {path}: elevation_deg in data row {low[0] + 1} is "
+        raise FileFormatError(f"--directions {path}: elevation_deg in data row {low[0] + 1} is "
                          f"{cols[0][low[0]]:g}, outside [0, 90] deg (a sky seen from the "
                          f"ground; {low.size} such value(s))")
     return cols[0], cols[1]
@@ -118,10 +120,10 @@ def sky_params(args) -> dict:
         flag = _flag(foreign[0])
         owners = " or ".join(m for m, o in MODEL_OPTIONS.items() if foreign[0] in o)
         takes = ", ".join(_flag(k) for k in MODEL_OPTIONS[args.model])
-        raise ValueError(f"{flag} is an option of --model {owners}; --model {args.model} "
+        raise InvalidParameterError(f"{flag} is an option of --model {owners}; --model {args.model} "
                          f"takes {takes}")
     if args.model == "multiple" and not given & {"tau", "wavelength_nm"}:
-        raise ValueError("--model multiple needs --tau (Rayleigh optical thickness, about "
+        raise InvalidParameterError("--model multiple needs --tau (Rayleigh optical thickness, about "
                          "0.097 at 550 nm) or --wavelength-nm")
     return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
 
