@@ -29,7 +29,7 @@ import skysim
 from skysim.exceptions import SkysimError, SkysimWarning
 
 ROOT = Path(__file__).resolve().parents[1]
-SCANNED = ("skysim", "sensor", "calibration", "experiments/workflows")
+SCANNED = ("skysim", "sensor", "calibration", "experiments")
 """The library: what a user's Python code calls (the command line sits on top of it)."""
 
 BUILTIN_EXCEPTIONS = frozenset(

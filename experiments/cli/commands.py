@@ -7,6 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
+from skysim.exceptions import InvalidParameterError
 from experiments.workflows.options import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time,
                                            data_file_and_sidecars, existing_file, float_in,
                                            output_file, positive_float, positive_int,
@@ -54,16 +55,16 @@ class _MoonlitSkyMap:
 def moon_sky(args, params: dict):
     """For ``skysim sky --source moon``: ``(sky, moon elevation, moon azimuth, info)``."""
     if args.lat is None or args.lon is None or args.time is None:
-        raise ValueError("--source moon needs --lat --lon --time (timezone-aware ISO 8601)")
+        raise InvalidParameterError("--source moon needs --lat --lon --time (timezone-aware ISO 8601)")
     if args.sun_elevation is not None or args.sun_azimuth is not None:
-        raise ValueError("--sun-elevation/--sun-azimuth give the Sun; with --source moon the "
+        raise InvalidParameterError("--sun-elevation/--sun-azimuth give the Sun; with --source moon the "
                          "Moon's position follows from --lat --lon --time")
     from skysim.moon import moon_position
     sky = _MoonlitSkyMap(args, params)
     pos = moon_position([args.time], sky.site.latitude_deg, sky.site.longitude_deg,
                         sky.site.altitude_m).iloc[0]
     if not pos.elevation_deg > 0.0:
-        raise ValueError(f"--source moon: the Moon is at {pos.elevation_deg:.1f} deg elevation "
+        raise InvalidParameterError(f"--source moon: the Moon is at {pos.elevation_deg:.1f} deg elevation "
                          f"at --time {args.time.isoformat()} and --lat {args.lat:g} --lon "
                          f"{args.lon:g}, below the horizon; choose a time when the Moon is up")
     info = {"site": sky.site.to_dict(), "time": args.time.isoformat(), "source": "moon",
@@ -77,14 +78,14 @@ def _refuse_two_suns(args) -> None:
     """The sun's position is given once: by --sun-elevation --sun-azimuth, or by --lat --lon
     --time (a site and time given with the angles would be ignored)."""
     if args.sun_azimuth is not None and args.sun_elevation is None:
-        raise ValueError(f"--sun-azimuth {args.sun_azimuth:g} needs --sun-elevation")
+        raise InvalidParameterError(f"--sun-azimuth {args.sun_azimuth:g} needs --sun-elevation")
     if args.sun_elevation is None or args.source != "sun":
         return
     for flag, value in (("--time", args.time and args.time.isoformat()),
                         ("--lat", args.lat is not None and f"{args.lat:g}"),
                         ("--lon", args.lon is not None and f"{args.lon:g}")):
         if value:
-            raise ValueError(f"{flag} {value} and --sun-elevation {args.sun_elevation:g} both "
+            raise InvalidParameterError(f"{flag} {value} and --sun-elevation {args.sun_elevation:g} both "
                              "place the sun: give --sun-elevation --sun-azimuth, or --lat --lon "
                              "--time")
 
@@ -107,12 +108,12 @@ def _sky(args) -> int:
         sky, sun_el, sun_az, sun_info = moon_sky(args, params)
     elif args.sun_elevation is not None:
         if args.sun_azimuth is None:
-            raise ValueError("--sun-elevation needs --sun-azimuth")
+            raise InvalidParameterError("--sun-elevation needs --sun-azimuth")
         sun_el, sun_az, sun_info = args.sun_elevation, args.sun_azimuth, {
             "elevation_deg": args.sun_elevation, "azimuth_deg": args.sun_azimuth}
     else:
         if args.lat is None or args.lon is None or args.time is None:
-            raise ValueError("give the sun as --lat --lon --time (timezone-aware ISO 8601) "
+            raise InvalidParameterError("give the sun as --lat --lon --time (timezone-aware ISO 8601) "
                              "or as --sun-elevation --sun-azimuth")
         from skysim.sun import Site, sun_position
         site = Site(args.lat, args.lon, args.alt)
@@ -121,7 +122,7 @@ def _sky(args) -> int:
         sun_info = {"site": site.to_dict(), "time": args.time.isoformat(),
                     "elevation_deg": sun_el, "azimuth_deg": sun_az}
     if sky is not None and args.clouds is not None:
-        raise ValueError("--clouds needs the sunlit sky (--source sun): the clouds are lit by "
+        raise InvalidParameterError("--clouds needs the sunlit sky (--source sun): the clouds are lit by "
                          "the Sun")
     sky = with_clouds(make_sky(args.model, **params), args) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
@@ -204,7 +205,7 @@ def _sample(args) -> int:
     from experiments.workflows.cloud_options import with_clouds
     interval = args.duration + 60.0 if args.sweep_interval is None else args.sweep_interval
     if args.sweeps > 1 and interval < args.duration:
-        raise ValueError(f"--sweep-interval {interval:g} s is shorter than --duration "
+        raise InvalidParameterError(f"--sweep-interval {interval:g} s is shorter than --duration "
                          f"{args.duration:g} s: one sensor cannot do overlapping sweeps")
     refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--errors", args.errors if args.errors not in ("random", "none")
@@ -227,7 +228,7 @@ def _sample(args) -> int:
     except (OverflowError, ValueError):    # beyond what a pandas time difference holds
         end = pd.Timestamp.max.tz_localize("UTC")
     if end.year > PANDAS_YEARS[1]:
-        raise ValueError(f"the last sample ({end}) is beyond the supported years "
+        raise InvalidParameterError(f"the last sample ({end}) is beyond the supported years "
                          f"{PANDAS_YEARS[0]}-{PANDAS_YEARS[1]}; shorten --duration, "
                          "--sweeps or --sweep-interval")
     times = pd.DatetimeIndex(args.start + pd.to_timedelta(offsets_s.ravel(), unit="s"))
@@ -258,7 +259,7 @@ def _sensor_errors(spec: str, rng):
     try:
         d = json.loads(path.read_text())
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
-        raise ValueError(f"--errors {path}: not valid JSON ({exc})") from None
+        raise InvalidParameterError(f"--errors {path}: not valid JSON ({exc})") from None
     return OpponentErrors.from_dict(d, where=f"--errors {path}")
 
 
@@ -267,7 +268,7 @@ def existing_file_or_error(text: str, flag: str) -> Path:
     try:
         return existing_file(text)
     except argparse.ArgumentTypeError as exc:
-        raise ValueError(f"{flag}: {exc} (or give 'random' or 'none')") from None
+        raise InvalidParameterError(f"{flag}: {exc} (or give 'random' or 'none')") from None
 
 
 def _calibrate(args) -> int:

@@ -39,6 +39,7 @@ import sys  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import experiments
+from skysim.exceptions import InvalidParameterError
 from experiments.cli.argtypes import output_dir, positive_int, seed
 
 __all__ = ["main", "build_parser", "EXIT_ERROR", "EXIT_INTERRUPTED", "EXIT_TERMINATED",
@@ -88,7 +89,7 @@ def _run_target(targets: dict, args) -> int:
     for option, attr in (("reference", "takes_reference"), ("data", "takes_data")):
         if getattr(args, option) is not None and not getattr(func, attr, False):
             takers = sorted(n for n, f in targets.items() if getattr(f, attr, False))
-            raise ValueError(f"--{option} applies to {', '.join(takers)}, not {args.target}")
+            raise InvalidParameterError(f"--{option} applies to {', '.join(takers)}, not {args.target}")
     per_trial = getattr(sys.modules.get(func.__module__), "MEMORY_PER_TRIAL_BYTES", None)
     if per_trial and args.trials:
         from skysim.resources import check_memory

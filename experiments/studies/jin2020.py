@@ -51,6 +51,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.exceptions import InvalidParameterError
 from skysim.geometry import wrap_deg
 from skysim.io import atomic_write_many, sidecar_path, write_json_atomic
 from skysim.sun import Site
@@ -90,7 +91,7 @@ def _clock_time(hhmm: str, reading: str) -> pd.Timestamp:
     if reading == "apparent_solar":
         return clock_time_from_apparent_solar_time(DATE, h + m / 60.0, SITE.longitude_deg, TZ,
                                                    SITE.latitude_deg)
-    raise ValueError(f"unknown time reading {reading!r}; valid: 'beijing', 'apparent_solar'")
+    raise InvalidParameterError(f"unknown time reading {reading!r}; valid: 'beijing', 'apparent_solar'")
 
 
 def sun_discrepancy_table() -> pd.DataFrame:

@@ -64,6 +64,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.exceptions import InvalidParameterError
 from skysim.io import atomic_write, write_json_atomic
 
 from experiments.plotting.figures import pyplot, save_png
@@ -166,7 +167,7 @@ def night_conditions(cfg: Config = Config(), site=None) -> pd.DataFrame:
             if miss[j] <= cfg.elevation_tolerance_deg:
                 rows.append((m.index[j], day.date().isoformat(), target))
     if not rows:
-        raise ValueError(f"no time from {cfg.start} to {cfg.end} has the Moon within "
+        raise InvalidParameterError(f"no time from {cfg.start} to {cfg.end} has the Moon within "
                          f"{cfg.elevation_tolerance_deg} deg of {list(cfg.elevations_deg)} deg "
                          "elevation in astronomical night; widen the span or the tolerance")
     t = pd.DatetimeIndex([r[0] for r in rows])

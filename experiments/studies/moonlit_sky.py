@@ -38,6 +38,7 @@ from pathlib import Path
 import numpy as np
 import pandas as pd
 
+from skysim.exceptions import InvalidParameterError, MissingFileError
 from skysim.io import atomic_write, write_json_atomic
 
 from experiments.plotting.figures import pyplot, save_png
@@ -79,10 +80,10 @@ def data_file(folder) -> Path:
         return p
     files = sorted(p.glob("*.csv")) if p.is_dir() else []
     if not files:
-        raise FileNotFoundError(f"--data {p}: no FORS2 moonlit-sky table (*.csv) there; give "
+        raise MissingFileError(f"--data {p}: no FORS2 moonlit-sky table (*.csv) there; give "
                                 "the folder of the table or the file itself")
     if len(files) > 1:
-        raise ValueError(f"--data {p}: several CSV files ({', '.join(f.name for f in files)});"
+        raise InvalidParameterError(f"--data {p}: several CSV files ({', '.join(f.name for f in files)});"
                          " give the file")
     return files[0]
 
@@ -104,9 +105,9 @@ def read_fors2(path) -> pd.DataFrame:
     d.columns = [c.strip() for c in d.columns]
     missing = [c for c in REQUIRED_COLUMNS if c not in d.columns]
     if missing:
-        raise ValueError(f"{path}: missing column(s) {missing}; found {list(d.columns)}")
+        raise InvalidParameterError(f"{path}: missing column(s) {missing}; found {list(d.columns)}")
     if d.empty:
-        raise ValueError(f"{path} has a header but no rows")
+        raise InvalidParameterError(f"{path} has a header but no rows")
     out = pd.DataFrame({"field": d["FIELD"].str.strip(), "band": d["BAND"].str.strip(),
                         "condition": d["CONDITION"].str.strip()})
     for src, dst in (("RA", "ra_deg"), ("DEC", "dec_deg"), ("Q", "Q"), ("error Q", "Q_err"),
@@ -114,13 +115,13 @@ def read_fors2(path) -> pd.DataFrame:
         x = pd.to_numeric(d[src], errors="coerce")
         bad = np.flatnonzero(~np.isfinite(x.to_numpy(float)))
         if bad.size:
-            raise ValueError(f"{path}: {src} in data row {bad[0] + 1} is {d[src].iloc[bad[0]]!r},"
+            raise InvalidParameterError(f"{path}: {src} in data row {bad[0] + 1} is {d[src].iloc[bad[0]]!r},"
                              " not a number")
         out[dst] = x.to_numpy(float)
     t = pd.to_datetime(d["MED OBS"].str.strip(), errors="coerce", utc=True)  # the source: UTC
     bad = np.flatnonzero(t.isna())
     if bad.size:
-        raise ValueError(f"{path}: MED OBS in data row {bad[0] + 1} is "
+        raise InvalidParameterError(f"{path}: MED OBS in data row {bad[0] + 1} is "
                          f"{d['MED OBS'].iloc[bad[0]]!r}, not a time")
     out["time"] = t
     return out
@@ -301,7 +302,7 @@ def run(data, out, with_multiple: bool = True) -> dict:
 def _reproduce(args) -> int:
     folder = Path(args.data) if args.data else DEFAULT_DATA
     if not folder.exists():
-        raise FileNotFoundError(f"--data {folder}: no such folder; give the folder of the "
+        raise MissingFileError(f"--data {folder}: no such folder; give the folder of the "
                                 "FORS2 moonlit-sky table")
     out = Path(args.out or "results/moonlit-sky")
     summary = run(folder, out, with_multiple=not args.quick)
