@@ -138,3 +138,41 @@ def test_response_from_csv(tmp_path):
     bad.write_text("lambda,r\n400,0\n")
     with pytest.raises(InvalidParameterError, match="bad.csv.*missing response, wavelength_nm"):
         get_response(bad)
+
+
+# --------------------------------------------------------------------------- command line
+
+@pytest.mark.slow
+def test_sky_command_through_a_response(tmp_path, capsys):
+    """``skysim sky --model multiple --response V`` writes the band sky of the Python API,
+    its nodes and weights in the sidecar (8 engine runs, about 7 s of processor time, up to
+    two minutes on a loaded machine)."""
+    pytest.importorskip("sasktran2", reason="the multiple-scattering sky needs sasktran2")
+    import json
+
+    import pandas as pd
+
+    from experiments.cli.main import main
+    from skysim.multiple import MultipleScatteringSky
+    out = tmp_path / "v.csv"
+    assert main(["sky", "--model", "multiple", "--response", "V", "--albedo", "0.1",
+                 "--sun-elevation", "30", "--sun-azimuth", "120", "--grid-step", "30",
+                 "--out", str(out)]) == 0
+    table = pd.read_csv(out)
+    side = json.loads((tmp_path / "v.csv.json").read_text())
+    assert side["sky"]["model"] == "band" and side["sky"]["band"] == "V"
+    assert len(side["sky"]["nodes_nm"]) == 8
+    ref = band_sky(lambda lam: MultipleScatteringSky(wavelength_nm=lam, albedo=0.1), "V").field(
+        table.elevation_deg.to_numpy(), table.azimuth_deg.to_numpy(), 30.0, 120.0)
+    np.testing.assert_allclose(table.I, ref.I, rtol=1e-12)
+    np.testing.assert_allclose(table.dop, ref.dop, atol=1e-12)
+
+
+@pytest.mark.parametrize("extra, needles", [
+    (["--model", "multiple", "--response", "B", "--tau", "0.1"], ["--response B", "--tau"]),
+    (["--model", "multiple", "--response", "Z"], ["unknown spectral band 'Z'"]),
+    (["--model", "rayleigh", "--response", "B"], ["--response", "--model multiple or aerosol"]),
+])
+def test_sky_command_refuses_bad_responses(extra, needles, capsys):
+    from test_cli_errors import _fails
+    _fails(["sky", "--sun-elevation", "30", "--sun-azimuth", "10", *extra], capsys, *needles)

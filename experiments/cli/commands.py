@@ -16,7 +16,8 @@ from experiments.workflows.sky_options import (AEROSOL_PRESETS as _AEROSOL_PRESE
                                                AOP_CONVENTION, MODEL_OPTIONS,
                                                SAMPLE_BYTES_PER_SAMPLE, SAMPLE_SECONDS_PER_SAMPLE,
                                                add_sky_model_options, read_directions,
-                                               sky_params, sky_seconds, view_directions)
+                                               model_sky, sky_params, sky_seconds,
+                                               view_directions)
 
 __all__ = ["register", "read_directions", "view_directions", "AOP_CONVENTION", "MODEL_OPTIONS"]
 
@@ -30,6 +31,10 @@ class _MoonlitSkyMap:
         from skysim.sun import Site
         self.site = Site(args.lat, args.lon, args.alt)
         self.time, self.band = args.time, args.band
+        if "response" in params:
+            raise InvalidParameterError(
+                f"--response {params['response']} weights a sunlit sky over wavelength; the "
+                "night sky's band is --band (B, V, R or I)")
         if args.model == "multiple" and "tau" not in params and "wavelength_nm" not in params:
             from skysim.bands import get_band
             params = {**params, "wavelength_nm": get_band(args.band).wavelength_nm}
@@ -124,7 +129,7 @@ def _sky(args) -> int:
     if sky is not None and args.clouds is not None:
         raise InvalidParameterError("--clouds needs the sunlit sky (--source sun): the clouds are lit by "
                          "the Sun")
-    sky = with_clouds(make_sky(args.model, **params), args) if sky is None else sky
+    sky = with_clouds(model_sky(args.model, params), args) if sky is None else sky
     el, az = view_directions(args.directions, args.grid_step)
     from experiments.workflows.progress import check_duration
     check_duration(sky_seconds(el.size, "moon" if args.source == "moon" else args.model,

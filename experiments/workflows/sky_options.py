@@ -13,12 +13,13 @@ from .options import float_in, positive_float
 __all__ = ["AEROSOL_PRESETS", "AOP_CONVENTION", "MODEL_OPTIONS", "SAMPLE_BYTES_PER_SAMPLE",
            "SAMPLE_SECONDS_PER_SAMPLE", "SKY_BYTES_PER_DIRECTION", "SKY_SECONDS_PER_DIRECTION",
            "SKY_WRITE_SECONDS_PER_DIRECTION", "add_sky_model_options", "read_directions",
-           "sky_params", "sky_seconds", "view_directions"]
+           "model_sky", "sky_params", "sky_seconds", "view_directions"]
 
 MODEL_OPTIONS = {"rayleigh": ("dmax",),
-                 "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa"),
+                 "multiple": ("tau", "albedo", "wavelength_nm", "pressure_hPa", "response"),
                  "berry": ("delta_deg", "dmax"),
-                 "aerosol": ("preset", "aod_550", "albedo", "wavelength_nm", "pressure_hPa")}
+                 "aerosol": ("preset", "aod_550", "albedo", "wavelength_nm", "pressure_hPa",
+                             "response")}
 """The ``skysim sky`` options of each sky model (attribute names of the parsed arguments)."""
 
 SKY_BYTES_PER_DIRECTION = 400
@@ -122,10 +123,33 @@ def sky_params(args) -> dict:
         takes = ", ".join(_flag(k) for k in MODEL_OPTIONS[args.model])
         raise InvalidParameterError(f"{flag} is an option of --model {owners}; --model {args.model} "
                          f"takes {takes}")
-    if args.model == "multiple" and not given & {"tau", "wavelength_nm"}:
-        raise InvalidParameterError("--model multiple needs --tau (Rayleigh optical thickness, about "
-                         "0.097 at 550 nm) or --wavelength-nm")
+    if args.model == "multiple" and not given & {"tau", "wavelength_nm", "response"}:
+        raise InvalidParameterError("--model multiple needs --tau (Rayleigh optical thickness, "
+                                    "about 0.097 at 550 nm), --wavelength-nm or --response")
+    if "response" in given:
+        other = sorted(given & {"tau", "wavelength_nm"})
+        if other:
+            raise InvalidParameterError(f"--response {args.response} and {_flag(other[0])} "
+                                        "both set the wavelength; give one")
     return {k: getattr(args, k) for k in MODEL_OPTIONS[args.model] if k in given}
+
+
+BAND_NODES = 8
+"""Wavelengths at which a ``--response`` sky is computed (:func:`skysim.spectral.band_sky`)."""
+
+
+def model_sky(model: str, params: dict):
+    """The sky of ``model`` with the options of :func:`sky_params`; with ``response`` among
+    them, the band-integrated sky (:func:`skysim.spectral.band_sky`, :data:`BAND_NODES` wavelengths,
+    docs/spectral.md)."""
+    from skysim.sky import make_sky
+    params = dict(params)
+    band = params.pop("response", None)
+    if band is None:
+        return make_sky(model, **params)
+    from skysim.spectral import band_sky
+    return band_sky(lambda lam: make_sky(model, wavelength_nm=lam, **params), band,
+                    n_nodes=BAND_NODES)
 
 
 def _flag(option: str) -> str:
@@ -175,6 +199,13 @@ def add_sky_model_options(p) -> None:
     p.add_argument("--wavelength-nm", type=positive_float,
                    help="multiple: wavelength [nm], sets tau instead of --tau; aerosol: "
                         "wavelength [nm] (model default 550)")
+    p.add_argument("--response",
+                   help="multiple, aerosol: the sky through a sensor's spectral response "
+                        "instead of one wavelength: U, B, V, R or I (Johnson-Cousins, as "
+                        "Gaussians of "
+                        "Bessell's effective wavelength and FWHM) or a CSV of wavelength_nm, "
+                        f"response; {BAND_NODES} wavelengths, each an engine run "
+                        "(docs/spectral.md)")
     p.add_argument("--pressure-hPa", type=positive_float, dest="pressure_hPa",
                    help="multiple (with --wavelength-nm), aerosol: surface pressure [hPa] "
                         "(model default 1013.25)")

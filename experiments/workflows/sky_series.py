@@ -279,7 +279,7 @@ def _sky_series(args) -> int:
     from skysim.sun import Site, sun_position
 
     from .options import refuse_replacing_inputs, with_sidecar
-    from .sky_options import sky_params, view_directions
+    from .sky_options import model_sky, sky_params, view_directions
     refuse_replacing_inputs(with_sidecar("--out", args.out),
                             [("--directions", args.directions)])
     site = Site(args.lat, args.lon, args.alt)
@@ -294,7 +294,7 @@ def _sky_series(args) -> int:
     n_times = _count_times(args)
     n_dir = None if args.directions else sky_grid_size(args.grid_step)
     _check_size(args, n_times, n_dir or 1, itemsize)   # before the times are built
-    sky = make_sky(args.model, **params)
+    sky = model_sky(args.model, params)
     times = pd.date_range(start=args.start, end=args.end, periods=args.periods,
                           freq=args.freq)
     pos = sun_position(times, site.latitude_deg, site.longitude_deg, site.altitude_m)
