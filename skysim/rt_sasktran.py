@@ -62,6 +62,7 @@ __all__ = [
     "DEFAULT_SETTINGS",
     "MU_MAX",
     "MU_MIN",
+    "SOURCE_GRID_MU_STEP",
     "EngineSettings",
     "SasktranUnavailableError",
     "TABLE_TAU_RANGE",
@@ -88,6 +89,20 @@ MU_MIN = 1.0e-4
 
 MU_MAX = 1.0 - 1.0e-6
 """Largest view cosine passed to the engine (exactly mu = 1 gives wrong Q, U): 0.08 deg off zenith."""
+
+SOURCE_GRID_MU_STEP = 0.02
+"""Spacing of the view cosines (1, 0.98, 0.96, ...) at which the engine evaluates its
+discrete-ordinates multiple-scatter source in this (spherical) set-up; between them the
+source's azimuthal Fourier modes are interpolated linearly in the cosine. That is exact at
+the nodes and close between them, except next to the zenith: a mode ``m >= 1`` of the
+source vanishes as ``sin^m`` of the zenith angle (``sin`` for ``m = 1``: not a linear
+function of the cosine), so for ``1 > mu > 0.98`` (11.5 deg around the zenith) the engine's
+``m = 1`` multiple scatter falls linearly in the angle instead of staying proportional to
+its sine: for a Rayleigh slab of tau 0.5, sun at 30 deg zenith, the ``m = 1`` multiple
+scatter at 5 deg from the zenith is half of what it should be, 0.6 % of I. Measured from
+the engine's own rays (the kinks of ``I_1 / sin(theta)`` at mu = 0.98 and 0.96, whatever
+the number of streams); the tables of :mod:`skysim.multiple` and :mod:`skysim.clouds` take
+their nodes near the zenith at these cosines (:func:`skysim.multiple.mode_nodes_deg`)."""
 
 
 TABLE_TAU_RANGE = (1.0e-3, 1.0)
