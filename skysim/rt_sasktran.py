@@ -387,7 +387,7 @@ def rayleigh_greek_coefficients(delta: float, n_moments: int) -> np.ndarray:
 
 def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
                          settings: EngineSettings = DEFAULT_SETTINGS,
-                         delta_m: bool = False) -> np.ndarray:
+                         delta_m: bool = False, multiple_scatter: bool = True) -> np.ndarray:
     """Diffuse Stokes of slabs whose scattering properties vary with optical depth, several
     cases (one engine "wavelength" each) at one sun in one engine call.
 
@@ -418,6 +418,8 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
         (Wiscombe 1977, J. Atmos. Sci. 34:1408,
         doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2), for forward-peaked (aerosol)
         phase functions.
+    multiple_scatter : bool
+        False: the engine's exact single scatter alone (no multiple-scatter source).
 
     Returns
     -------
@@ -444,6 +446,8 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
     sk = require_sasktran2()
     altitudes = np.linspace(0.0, settings.slab_height_m, n_levels)
     cfg, geometry, viewing = _engine_setup(sk, settings, mu0, mu, phi, altitudes)
+    if not multiple_scatter:
+        cfg.multiple_scatter_source = sk.MultipleScatterSource.NoSource
     cfg.num_singlescatter_moments = n_moments
     cfg.delta_m_scaling = bool(delta_m)
     atmosphere = sk.Atmosphere(geometry, cfg, numwavel=m, calculate_derivatives=False)
