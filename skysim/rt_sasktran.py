@@ -99,10 +99,12 @@ source vanishes as ``sin^m`` of the zenith angle (``sin`` for ``m = 1``: not a l
 function of the cosine), so for ``1 > mu > 0.98`` (11.5 deg around the zenith) the engine's
 ``m = 1`` multiple scatter falls linearly in the angle instead of staying proportional to
 its sine: for a Rayleigh slab of tau 0.5, sun at 30 deg zenith, the ``m = 1`` multiple
-scatter at 5 deg from the zenith is half of what it should be, 0.6 % of I. Measured from
-the engine's own rays (the kinks of ``I_1 / sin(theta)`` at mu = 0.98 and 0.96, whatever
-the number of streams); the tables of :mod:`skysim.multiple` and :mod:`skysim.clouds` take
-their nodes near the zenith at these cosines (:func:`skysim.multiple.mode_nodes_deg`)."""
+scatter at 5 deg from the zenith is less than half of what it should be, 0.7 % of I.
+Measured from the engine's own rays (the kinks of ``I_1 / sin(theta)`` at mu = 0.98 and
+0.96, whatever the number of streams); the tables of :mod:`skysim.multiple`,
+:mod:`skysim.clouds` and :mod:`skysim.aerosol` sample the engine near the zenith only at
+these cosines (:func:`skysim.multiple.mode_nodes_deg`,
+:func:`skysim.aerosol.zenith_cap_repaired`)."""
 
 
 TABLE_TAU_RANGE = (1.0e-3, 1.0)
