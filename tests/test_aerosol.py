@@ -169,7 +169,10 @@ def test_table_against_direct_engine():
                                phi, preset=PRESET, wavelength_nm=LAM,
                                depolarization_ratio=0.0)[0]
     f = AerosolSky(PRESET, 0.3, ALB, LAM, depolarization_ratio=0.0).field(el, phi, sun, 0.0)
-    far = _sun_distance(el, phi, sun) > 20.0
+    # within 11.5 deg of the zenith the engine's own rays are no reference (its multiple-
+    # scatter source is interpolated linearly in the cosine there, up to 1.5 % off in I):
+    # that cap is checked by reciprocity in tests/test_zenith_region.py
+    far = (_sun_distance(el, phi, sun) > 20.0) & (el < 78.4)
     assert far.sum() > 200
     assert np.max(np.abs(f.I[far] / ref[far, 0] - 1)) < 7e-3
     assert np.max(np.abs(f.dop[far] - np.hypot(ref[far, 1], ref[far, 2]) / ref[far, 0])) < 3e-3

@@ -231,23 +231,36 @@ def test_aerosol_cap_rows_by_reciprocity(mu0):
 
 
 @pytest.mark.slow
-def test_overcast_modes_leave_one_out():
-    """The overcast's multiply scattered light (cloud tau 1) without its node at 0.98 still
-    gives the exact ray there within 1e-3 of the total I, Q and U separately at oblique
-    azimuths (the same check as the clear sky; tolerance: the clear sky's 4e-4 times the
-    cloud's stronger forward scattering of the multiply scattered light, measured below)."""
+def test_overcast_multiple_scatter_in_the_cap_by_reciprocity():
+    """A cloud (tau 1, droplets) mixed evenly through the slab, so that reciprocity holds;
+    sun at 40.5 deg (cosine 0.76, a node). The overcast's multiply scattered light from its
+    modes (:func:`skysim.clouds.overcast_modes`' nodes and spline) plus the engine's exact
+    single scatter gives I at 3-9 deg from the zenith within 4e-3 of the reciprocal rays
+    (measured 2.8e-3; the reference's own floor here is 1.1e-3, at the node cosine 0.98);
+    the engine's own rays there err by up to 5 %, which the modes do not inherit (the
+    previous nodes did: 5 %)."""
     needs_engine()
-    from skysim.clouds import AzimuthModes, CloudLayer, overcast_modes
-    from skysim.rt_sasktran import layered_particle_stokes_cases
-    cloud, mu0 = CloudLayer(1.0), 0.8
-    modes = overcast_modes(0.1, 0.1, cloud, mu0)
-    keep = ~np.isclose(np.cos(np.radians(modes.theta_deg)), 0.98, atol=1e-9)
-    loo = AzimuthModes(modes.theta_deg[keep], modes.coefficients[..., keep])
-    st = [layered_particle_stokes_cases(0.1, 0.1, [cloud.tau], cloud.particle_layer(), mu0,
-                                        np.full(OBLIQUE_PHI.size, 0.98), OBLIQUE_PHI,
-                                        multiple_scatter=ms)[0] for ms in (True, False)]
-    ms_exact = st[0] - st[1]
-    got = np.stack(loo.evaluate(np.full(OBLIQUE_PHI.size, np.degrees(np.arccos(0.98))),
-                                OBLIQUE_PHI), axis=-1)
-    err = np.abs(got - ms_exact) / st[0][:, :1]
-    assert err.max() < 1e-3, err
+    from skysim.clouds import AzimuthModes, CloudLayer, fit_azimuths_deg
+    from skysim.rt_sasktran import MU_MAX, layered_particle_stokes_cases
+    layer = dataclasses.replace(CloudLayer(1.0).particle_layer(), base_fraction=0.0,
+                                top_fraction=1.0)
+    mu0 = 0.76
+
+    def run(sun_mu, mu, phi, ms=True):
+        return layered_particle_stokes_cases(0.1, 0.0, [1.0], layer, sun_mu,
+                                             np.asarray(mu, float), np.asarray(phi, float),
+                                             multiple_scatter=ms)[0]
+
+    az = fit_azimuths_deg(7.5)
+    mu = np.clip(np.cos(np.radians(mode_nodes_deg(25))), 0.0, MU_MAX)
+    M, P = np.meshgrid(mu, az, indexing="ij")
+    multiple = run(mu0, M.ravel(), P.ravel()) - run(mu0, M.ravel(), P.ravel(), False)
+    modes = AzimuthModes.from_samples(np.degrees(np.arccos(mu)), multiple.reshape(M.shape + (3,)))
+    phi = np.array([0.0, 60.0, 120.0, 180.0])
+    for theta in (3.0, 6.0, 9.0):
+        m = float(np.cos(np.radians(theta)))
+        truth = mu0 / m * run(m, np.full(phi.size, mu0), phi)[:, 0]
+        single = run(mu0, np.full(phi.size, m), phi, False)[:, 0]
+        got = single + modes.evaluate(np.full(phi.size, theta), phi)[0]
+        err = np.abs(got / truth - 1.0)
+        assert err.max() < 4e-3, (theta, err)
