@@ -614,7 +614,8 @@ class MultipleScatteringSky(Sky):
         Molecular depolarization ratio; 0 (default) as in the Coulson/Natraj tables; "bodhaine"
         uses :func:`bodhaine_depolarization_ratio` at ``wavelength_nm``.
     n_zenith : int
-        Zenith nodes of the Fourier-mode interpolation (default 25).
+        Zenith nodes of the Fourier-mode interpolation, as :func:`mode_nodes_deg` (default
+        25: 24 nodes).
     sun_step_deg : float, optional
         For many sun positions (time series): compute the modes only at sun elevations
         ``sun_node_origin_deg + k sun_step_deg`` and interpolate the Stokes vector linearly
