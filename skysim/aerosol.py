@@ -340,7 +340,8 @@ def zenith_cap_repaired(theta_deg, phi_deg, total, single) -> np.ndarray:
     (:class:`skysim.clouds.AzimuthModes`, cosine/sine series over the grid's azimuths)
     interpolated in zenith angle by :class:`skysim.multiple.PoleSpline` over the zenith row,
     the rows at the cosines 0.98 and 0.96 and the rows beyond, and the single scatter is added
-    back.
+    back. Cost: the single-scatter engine call adds about a fifth to a table's (measured 0.9 s
+    against 4.6 s of CPU, 999 rays).
 
     Parameters
     ----------

@@ -186,8 +186,8 @@ def test_sun_step_interpolation_error_and_engine_calls(monkeypatch):
     aerosol.clear_tables_cache()   # engine calls are counted: none may come from the cache
     calls = []
     real = aerosol.aerosol_stokes_cases
-    # multiple-scatter calls (each table adds a single-scatter one of a few hundredths of a
-    # second for its rows near the zenith: aerosol.zenith_cap_repaired)
+    # multiple-scatter calls (each table adds a single-scatter one, a fifth of the cost, for
+    # its rows near the zenith: aerosol.zenith_cap_repaired)
     monkeypatch.setattr(aerosol, "aerosol_stokes_cases",
                         lambda *a, **k: (k.get("multiple_scatter", True) and calls.append(a[2]))
                         or real(*a, **k))
