@@ -237,8 +237,7 @@ def test_overcast_multiple_scatter_in_the_cap_by_reciprocity():
     modes (:func:`skysim.clouds.overcast_modes`' nodes and spline) plus the engine's exact
     single scatter gives I at 3-9 deg from the zenith within 4e-3 of the reciprocal rays
     (measured 2.8e-3; the reference's own floor here is 1.1e-3, at the node cosine 0.98);
-    the engine's own rays there err by up to 5 %, which the modes do not inherit (the
-    previous nodes did: 5 %)."""
+    the engine's own rays there err by up to 5 %, which the modes do not inherit."""
     needs_engine()
     from skysim.clouds import AzimuthModes, CloudLayer, fit_azimuths_deg
     from skysim.rt_sasktran import MU_MAX, layered_particle_stokes_cases
