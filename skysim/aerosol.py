@@ -60,7 +60,8 @@ from .validation import check_finite, check_in_range
 
 __all__ = ["AOD_RANGE", "AerosolSky", "AerosolTable", "AerosolType", "N_AZIMUTH", "N_ZENITH",
            "RAYLEIGH_SCALE_HEIGHT_KM", "aerosol_fraction_levels", "aerosol_stokes_cases",
-           "aerosol_tables_cases", "clear_tables_cache", "prefetch_tables", "table_grid"]
+           "aerosol_tables_cases", "clear_tables_cache", "prefetch_tables", "table_grid",
+           "zenith_cap_repaired"]
 
 RAYLEIGH_SCALE_HEIGHT_KM = 8.0
 """Scale height of the molecular extinction [km] (US Standard Atmosphere 1976, lower
@@ -118,7 +119,8 @@ def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
                          wavelength_nm: float, pressure_hPa: float = 1013.25,
                          depolarization_ratio: float = 0.0,
                          settings: EngineSettings = DEFAULT_SETTINGS,
-                         n_moments: int = N_MOMENTS) -> np.ndarray:
+                         n_moments: int = N_MOMENTS,
+                         multiple_scatter: bool = True) -> np.ndarray:
     """Diffuse Stokes of the Rayleigh + aerosol sky for several (AOD, albedo) cases at one
     sun, in one engine call.
 
@@ -143,6 +145,8 @@ def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
     settings : EngineSettings
     n_moments : int
         Greek moments of the exact single scatter.
+    multiple_scatter : bool
+        False: the engine's exact single scatter alone.
 
     Returns
     -------
@@ -166,7 +170,8 @@ def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
     greek = (scat_r[..., None, None] * g_r + scat_a[..., None, None] * optics.greek) \
         / ssa[..., None, None]
     return layered_stokes_cases(tau_r + tau_a, ssa, greek, albedos, mu0, mu, phi_deg,
-                                settings=settings, delta_m=True)
+                                settings=settings, delta_m=True,
+                                multiple_scatter=multiple_scatter)
 
 
 # --------------------------------------------------------------------------------------------
@@ -303,16 +308,75 @@ def aerosol_tables_cases(aods_550, albedos, mu0: float, *, preset, wavelength_nm
     keys = [(float(a), float(b)) + shared for a, b in zip(aods, albedos)]
     missing = list(dict.fromkeys(k for k in keys if k not in _TABLES))
     if missing:
+        from .rt_sasktran import SOURCE_GRID_MU_STEP
         theta, phi = table_grid(n_zenith, n_azimuth)
-        stokes = aerosol_stokes_cases(
-            [k[0] for k in missing], [k[1] for k in missing], float(mu0),
-            np.cos(np.radians(theta.ravel())), phi.ravel(), preset=t,
+        cap = 1.0 - SOURCE_GRID_MU_STEP * np.arange(1, 3)
+        mu = np.concatenate([np.cos(np.radians(theta.ravel())), np.repeat(cap, phi.shape[1])])
+        az = np.concatenate([phi.ravel(), np.tile(phi[0], cap.size)])
+        total, single = (aerosol_stokes_cases(
+            [k[0] for k in missing], [k[1] for k in missing], float(mu0), mu, az, preset=t,
             wavelength_nm=wavelength_nm, pressure_hPa=pressure_hPa,
             depolarization_ratio=depolarization_ratio, settings=settings,
-            n_moments=n_moments)
-        for key, st in zip(missing, stokes):
-            _TABLES[key] = AerosolTable(st.reshape(theta.shape + (3,)))
+            n_moments=n_moments, multiple_scatter=ms) for ms in (True, False))
+        shape = (theta.shape[0] + cap.size,) + theta.shape[1:] + (3,)
+        for key, st, ss in zip(missing, total, single):
+            _TABLES[key] = AerosolTable(zenith_cap_repaired(
+                np.concatenate([theta[:, 0], np.degrees(np.arccos(cap))]), phi[0],
+                st.reshape(shape), ss.reshape(shape))[:theta.shape[0]])
     return lru_take(_TABLES, keys, TABLES_CACHE_SIZE)
+
+
+def zenith_cap_repaired(theta_deg, phi_deg, total, single) -> np.ndarray:
+    """Engine Stokes on a (view zenith x relative azimuth) grid with the multiply scattered
+    light of the rows near the zenith replaced by its interpolation from the rows where the
+    engine's multiple-scatter source is exact.
+
+    Between the zenith and the view cosine 0.98 (11.5 deg) the engine interpolates its
+    multiple-scatter source linearly in the cosine, which gives its azimuthal modes the wrong
+    shape (:data:`skysim.rt_sasktran.SOURCE_GRID_MU_STEP`); at the zenith and at the cosines
+    0.98, 0.96 it is exact, and the single scatter is exact everywhere (the aerosol's forward
+    peak included). So the multiple scatter (``total - single``) of the rows within 16.8 deg
+    of the zenith (other than the zenith's) is taken from its azimuthal Fourier modes
+    (:class:`skysim.clouds.AzimuthModes`, cosine/sine series over the grid's azimuths)
+    interpolated in zenith angle by :class:`skysim.multiple.PoleSpline` over the zenith row,
+    the rows at the cosines 0.98 and 0.96 and the rows beyond, and the single scatter is added
+    back. Cost: the single-scatter engine call adds about a fifth to a table's (measured 0.9 s
+    against 4.6 s of CPU, 999 rays).
+
+    Parameters
+    ----------
+    theta_deg : ndarray (n,)
+        View zenith angles [deg] of the rows (the first the zenith's, below 1 deg), among
+        them the cosines 0.98 and 0.96 (any order after the first).
+    phi_deg : ndarray (k,)
+        Relative azimuths [deg], equally spaced from 0 to 180.
+    total, single : ndarray (n, k, 3)
+        The engine's ``I, Q, U`` with and without its multiple-scatter source.
+
+    Returns
+    -------
+    ndarray (n, k, 3)
+        ``total`` with the rows within 16.8 deg of the zenith repaired.
+    """
+    from .clouds import AzimuthModes
+    from .rt_sasktran import SOURCE_GRID_MU_STEP
+    th = np.asarray(theta_deg, float)
+    mu = np.cos(np.radians(th))
+    exact = np.isclose(mu, 1.0 - SOURCE_GRID_MU_STEP, atol=1e-9) | np.isclose(
+        mu, 1.0 - 2.0 * SOURCE_GRID_MU_STEP, atol=1e-9)
+    cap_edge = np.degrees(np.arccos(1.0 - 2.0 * SOURCE_GRID_MU_STEP)) + 0.5
+    bad = (th > 1.0) & (th < cap_edge) & ~exact
+    use = np.flatnonzero(~bad)
+    use = use[np.argsort(th[use])]
+    multiple = np.asarray(total, float) - np.asarray(single, float)
+    modes = AzimuthModes.from_samples(th[use], multiple[use])
+    out = np.array(total, dtype=float)
+    rows = np.flatnonzero(bad)
+    if rows.size:
+        fixed = np.stack(modes.evaluate(th[rows][:, None], np.asarray(phi_deg, float)[None, :]),
+                         axis=-1)
+        out[rows] = np.asarray(single, float)[rows] + fixed
+    return out
 
 
 # --------------------------------------------------------------------------------------------

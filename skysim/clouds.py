@@ -51,7 +51,7 @@ import numpy as np
 
 from .disk_cache import finite_float_arrays, library_versions, load_entry, store_entry
 from .exceptions import InvalidParameterError
-from .multiple import MultipleScatteringSky, _mu0, zenith_nodes_deg
+from .multiple import MultipleScatteringSky, PoleSpline, _mu0, mode_nodes_deg, pole_orders
 from .rt_sasktran import DEFAULT_SETTINGS, EngineSettings, ParticleLayer
 from .validation import check_in_range
 
@@ -310,7 +310,9 @@ class AzimuthModes:
     """Cosine (I, Q) and sine (U) series in relative azimuth of a field that is symmetric
     about the solar meridian, interpolating engine values at equally spaced azimuths
     0..180 deg (trigonometric interpolation, the discrete cosine/sine transform), each mode
-    a cubic spline in view zenith angle with the parity of :class:`skysim.multiple.FourierModes`.
+    interpolated in view zenith angle as :class:`skysim.multiple.FourierModes` does
+    (:class:`skysim.multiple.PoleSpline`: divided by its power of ``sin(theta)`` at the zenith,
+    a cubic spline even in ``theta``), on the nodes of :func:`skysim.multiple.mode_nodes_deg`.
 
     Attributes
     ----------
@@ -344,15 +346,9 @@ class AzimuthModes:
 
     @functools.cached_property
     def _spline(self):
-        from scipy.interpolate import CubicSpline
-        n_modes = self.coefficients.shape[1]
-        parity = np.where(np.arange(n_modes) % 2 == 0, 1.0, -1.0)[None, :, None]
-        th = self.theta_deg
-        keep = th > 0
-        theta = np.concatenate([-th[keep][::-1], th])
-        values = np.concatenate([parity * self.coefficients[:, :, keep][:, :, ::-1],
-                                 self.coefficients], axis=2)
-        return CubicSpline(theta, values, axis=2)
+        m = np.arange(self.coefficients.shape[1])
+        orders = np.stack([pole_orders(m, "I"), pole_orders(m, "Q"), pole_orders(m, "U")])
+        return PoleSpline(self.theta_deg, self.coefficients, orders)
 
     def evaluate(self, theta_deg, phi_deg):
         """Return ``(I, Q, U)`` at view zenith ``theta_deg`` and relative azimuth ``phi_deg``
@@ -396,7 +392,7 @@ def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
     mu0 : float
         Cosine of the solar zenith angle, in (0, 1].
     n_zenith : int
-        View zenith nodes (:func:`skysim.multiple.zenith_nodes_deg`).
+        View zenith nodes (:func:`skysim.multiple.mode_nodes_deg`).
     azimuth_step_deg : float
         Spacing of the engine's relative azimuths [deg] (divides 180).
     """
@@ -404,7 +400,7 @@ def overcast_modes(tau: float, albedo: float, cloud: CloudLayer, mu0: float, *,
            float(depolarization_ratio), settings)
     if key not in _OVERCAST_CACHE:
         from .rt_sasktran import MU_MAX, MU_MIN, layered_particle_stokes_cases
-        mu = np.clip(np.cos(np.radians(zenith_nodes_deg(int(n_zenith)))), MU_MIN, MU_MAX)
+        mu = np.clip(np.cos(np.radians(mode_nodes_deg(int(n_zenith)))), MU_MIN, MU_MAX)
         az = fit_azimuths_deg(azimuth_step_deg)
         M, P = np.meshgrid(mu, az, indexing="ij")
         st = [layered_particle_stokes_cases(tau, albedo, [cloud.tau], cloud.particle_layer(),

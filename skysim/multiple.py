@@ -16,11 +16,13 @@ relative azimuth ``phi`` only through ``cos(m phi)`` (I, Q) and ``sin(m phi)`` (
 several (tau, albedo) at one sun: :func:`fourier_modes_cases`), fits the five mode
 functions ``I_m, Q_m (m = 0, 1, 2)`` and ``U_m (m = 1, 2)`` per zenith angle (the residual of
 that fit measures how well the engine obeys ``m <= 2``), and interpolates them in view zenith
-angle with a cubic spline. The spline is made smooth through the zenith by the parity of the
-modes: a path through the zenith continues at ``phi + 180 deg`` with the meridian basis turned
-by 180 deg (which leaves Q and U unchanged), so ``f_m(-theta) = (-1)^m f_m(theta)``.
-The interpolation error (tested in ``tests/test_multiple.py`` against direct engine calls) is
-below 1e-3 in DoLP and in I/I for the default 25 nodes.
+angle (:class:`PoleSpline`: each mode divided by its known power of ``sin(theta)`` at the
+zenith, a cubic spline even in ``theta``). Near the zenith the nodes are the view cosines at
+which the engine's multiple-scatter source is exact (1, 0.98, 0.96:
+:data:`skysim.rt_sasktran.SOURCE_GRID_MU_STEP`, :func:`mode_nodes_deg`); the engine's own
+rays in between are wrong there and are not used. The interpolation error (tested in
+``tests/test_multiple.py`` and ``tests/test_zenith_region.py``; stated in
+``docs/physical_sky.md``) is below 1e-3 in DoLP and in I/I for the default 25 nodes.
 
 Units: ``I`` (and Q, U) are normalised to an incident solar flux of ``pi`` per unit area normal
 to the beam, as in the tables; the direct solar beam is not included.
@@ -34,6 +36,12 @@ References
    calculations", J. Atmos. Oceanic Technol. 16:1854-1861 (1999),
    doi:10.1175/1520-0426(1999)016<1854:ORODC>2.0.CO;2.
 .. [4] S. Chandrasekhar, *Radiative Transfer*, Oxford (1950; Dover 1960), ch. X.
+.. [5] J. W. Hovenier, C. V. M. van der Mee, H. Domke, *Transfer of Polarized Light in
+   Planetary Atmospheres: Basic Concepts and Practical Methods*, Kluwer (2004), ch. 2 and 4
+   (Fourier decomposition of the Stokes vector and of the reflection and transmission
+   matrices in the meridian-plane basis).
+.. [6] J. F. de Haan, P. B. Bosma, J. W. Hovenier, "The adding method for multiple
+   scattering calculations of polarized light", A&A 183:371-391 (1987).
 """
 
 from __future__ import annotations
@@ -59,6 +67,7 @@ __all__ = [
     "WAVELENGTH_RANGE_NM",
     "FourierModes",
     "MultipleScatteringSky",
+    "PoleSpline",
     "bodhaine_depolarization_ratio",
     "bodhaine_optical_thickness",
     "bodhaine_optical_thickness_fit",
@@ -66,7 +75,10 @@ __all__ = [
     "fourier_modes",
     "fourier_modes_cases",
     "interval_stokes",
+    "SNAP_MU_MIN",
     "mix_modes",
+    "mode_nodes_deg",
+    "pole_orders",
     "prefetch_modes",
     "session_sun_nodes",
     "sun_bracket",
@@ -92,6 +104,120 @@ def zenith_nodes_deg(n_zenith: int) -> np.ndarray:
     return 90.0 * np.sin(0.5 * np.pi * k / (int(n_zenith) - 1))
 
 
+SNAP_MU_MIN = 0.1
+"""Nodes of :func:`zenith_nodes_deg` with a view cosine at least this are moved to the
+nearest view cosine at which the engine's multiple-scatter source is exact
+(:func:`mode_nodes_deg`); closer to the horizon the nodes are left where they are (their
+sine spacing follows the radiance's steep rise there, and the source's interpolation error is
+below 1e-4 of I)."""
+
+
+def mode_nodes_deg(n_zenith: int) -> np.ndarray:
+    """View zenith nodes [deg] of the Fourier-mode tables.
+
+    The engine's multiple-scatter source is exact at view cosines ``1 - 0.02 k``
+    (:data:`skysim.rt_sasktran.SOURCE_GRID_MU_STEP`) and interpolated linearly in the cosine
+    between them, which is wrong between the zenith and ``mu = 0.98`` (11.5 deg) and errs by up
+    to about 1e-3 of I between the next few. So the nodes are: the zenith (0, traced at
+    :data:`skysim.rt_sasktran.MU_MAX`), the cosines 0.98 and 0.96 (11.48, 16.26 deg), the
+    nodes of :func:`zenith_nodes_deg` beyond them moved to the nearest exact cosine down to
+    :data:`SNAP_MU_MIN`, and the remaining ones near the horizon as they are. The engine's
+    rays between the zenith and 11.48 deg are not used; :class:`PoleSpline` bridges them.
+    """
+    from .rt_sasktran import SOURCE_GRID_MU_STEP as step
+    mu = np.cos(np.radians(zenith_nodes_deg(n_zenith)))
+    snapped = np.round(mu / step) * step
+    mu = np.where(mu >= SNAP_MU_MIN, snapped, mu)
+    mu = np.unique(np.concatenate([[1.0, 1.0 - step, 1.0 - 2.0 * step],
+                                   mu[mu < 1.0 - 2.5 * step]]))[::-1]
+    return np.degrees(np.arccos(np.clip(mu, 0.0, 1.0)))
+
+
+def pole_orders(m, stokes: str) -> np.ndarray:
+    """Power of ``sin(theta)`` with which the azimuthal Fourier mode ``m`` of a Stokes
+    parameter (``"I"``, or ``"Q"``/``"U"`` in the local meridian basis) vanishes at the
+    zenith: ``m`` for I, ``|m - 2|`` for Q and U.
+
+    Near the zenith the field is smooth in the Cartesian direction coordinates
+    ``(x, y) = theta (cos phi, sin phi)``, so a mode ``m`` of I behaves as ``theta^m``; Q and U
+    refer to the meridian, which turns with ``phi``: ``Q + iU`` is the Cartesian-frame
+    ``Q_c + i U_c`` (smooth) times ``exp(-2 i phi)``, so its modes behave as
+    ``theta^|m -+ 2|`` (the Fourier decomposition in the meridian-plane basis [5]_ [6]_). At the
+    zenith itself only ``I_0`` and ``Q_2``, ``U_2`` (the zenith's linear polarization seen in
+    the turning basis) survive, as the engine's zenith rays show.
+    """
+    m = np.abs(np.asarray(m, int))
+    return m if stokes == "I" else np.abs(m - 2)
+
+
+class PoleSpline:
+    """Cubic-spline interpolation in view zenith angle of azimuthal Fourier modes, exact in
+    its behaviour through the zenith.
+
+    A mode ``f`` vanishing as ``sin^p(theta)`` at the zenith (:func:`pole_orders`) is
+    interpolated as ``g = f / sin^q(theta)`` (``q = p`` up to 2, above that 1 or 2 with the
+    parity of ``p``), times ``sin^q(theta)``. ``g`` is even in ``theta`` (a path through the
+    zenith continues at ``phi + 180 deg`` with the meridian basis turned by 180 deg, which
+    leaves Q and U unchanged, so ``f(-theta) = (-1)^m f(theta)`` and ``p = m`` mod 2), so the
+    spline runs over the nodes mirrored to ``-theta``. Its value at the zenith is the node's
+    where ``p = 0``, zero where ``p > q``, and free (no zenith node) where ``p = q > 0``. A
+    spline of ``f`` itself (or one linear in ``mu``) would give a mode ``m = 1`` the wrong
+    shape between the zenith and the next node: linear in ``mu`` it is ``theta^2`` instead of
+    ``theta``. References: Hovenier, van der Mee & Domke (2004) [5]_; de Haan et al.
+    (1987) [6]_.
+
+    Parameters
+    ----------
+    theta_deg : array-like (n,)
+        Nodes [deg] in [0, 90], increasing; a node below 1 deg is the zenith's (the engine
+        traces it at :data:`skysim.rt_sasktran.MU_MAX`).
+    values : array-like (..., n)
+        Modes at the nodes.
+    orders : array-like (...)
+        Their powers ``p`` (:func:`pole_orders`), one per mode.
+    """
+
+    POLE_NODE_DEG = 1.0
+
+    def __init__(self, theta_deg, values, orders):
+        from scipy.interpolate import CubicSpline
+        th = np.asarray(theta_deg, float)
+        v = np.asarray(values, float)
+        self._shape = v.shape[:-1]
+        v = v.reshape(-1, th.size)
+        p = np.broadcast_to(np.asarray(orders, int), self._shape).ravel()
+        self._q = np.where(p <= 2, p, 2 - p % 2)
+        pole = th < self.POLE_NODE_DEG
+        if pole.sum() != 1 or not pole[0]:
+            raise InvalidParameterError(
+                f"the first node (and only it) must be the zenith's, below "
+                f"{self.POLE_NODE_DEG} deg; got nodes starting {th[:3].tolist()}")
+        off = th[1:]
+        g = v[:, 1:] / np.sin(np.radians(off))[None, :] ** self._q[:, None]
+        g = np.concatenate([g[:, ::-1], g], axis=1)
+        x = np.concatenate([-off[::-1], off])
+        anchored = (p == 0) | (p > self._q)
+        self._anchored = anchored
+        self._splines = []
+        if anchored.any():
+            at_pole = np.where(p[anchored] == 0, v[anchored, 0], 0.0)
+            k = off.size
+            y = np.concatenate([g[anchored, :k], at_pole[:, None], g[anchored, k:]], axis=1)
+            self._splines.append((anchored, CubicSpline(np.concatenate([x[:k], [0.0], x[k:]]),
+                                                         y, axis=1)))
+        if (~anchored).any():
+            self._splines.append((~anchored, CubicSpline(x, g[~anchored], axis=1)))
+
+    def __call__(self, theta_deg) -> np.ndarray:
+        """Modes at view zenith angles ``theta_deg`` [deg] (1-d, in [0, 90]): ``(..., N)``."""
+        t = np.ravel(np.asarray(theta_deg, float))
+        out = np.empty((self._q.size, t.size))
+        for rows, spline in self._splines:
+            out[rows] = spline(t)
+        out *= np.sin(np.radians(t))[None, :] ** self._q[:, None]
+        return out.reshape(self._shape + (t.size,))
+
+
 @dataclass(frozen=True)
 class FourierModes:
     """Azimuthal Fourier modes of the diffuse Stokes field for one (tau, albedo, mu0).
@@ -103,7 +229,7 @@ class FourierModes:
     Attributes
     ----------
     theta_deg : ndarray (n,)
-        View zenith angles of the engine rays [deg].
+        View zenith angles of the engine rays [deg] (:func:`mode_nodes_deg`).
     coefficients : ndarray (8, n)
         Rows ``I_0, I_1, I_2, Q_0, Q_1, Q_2, U_1, U_2`` at ``theta_deg``.
     fit_residual : float
@@ -114,16 +240,13 @@ class FourierModes:
     coefficients: np.ndarray
     fit_residual: float
 
+    ORDERS = np.concatenate([pole_orders([0, 1, 2], "I"), pole_orders([0, 1, 2], "Q"),
+                             pole_orders([1, 2], "U")])
+    """Powers of ``sin(theta)`` of the rows at the zenith (:func:`pole_orders`)."""
+
     @functools.cached_property
     def _spline(self):
-        from scipy.interpolate import CubicSpline
-        parity = np.array([1, -1, 1, 1, -1, 1, -1, 1], dtype=float)[:, None]
-        th = self.theta_deg
-        keep = th > 0
-        theta = np.concatenate([-th[keep][::-1], th])
-        values = np.concatenate([parity * self.coefficients[:, keep][:, ::-1],
-                                 self.coefficients], axis=1)
-        return CubicSpline(theta, values, axis=1)
+        return PoleSpline(self.theta_deg, self.coefficients, self.ORDERS)
 
     def evaluate(self, theta_deg, phi_deg):
         """Return ``(I, Q, U)`` at view zenith ``theta_deg`` [deg] and azimuth ``phi_deg`` [deg]."""
@@ -148,8 +271,8 @@ def fourier_modes(tau: float, albedo: float, mu0: float, *, n_zenith: int = 25,
     mu0 : float
         Cosine of the solar zenith angle, in (0, 1].
     n_zenith : int
-        Number of view zenith nodes (:func:`zenith_nodes_deg`); the engine traces
-        ``5 n_zenith`` rays.
+        Number of view zenith nodes of :func:`zenith_nodes_deg`, the basis of
+        :func:`mode_nodes_deg` (25 gives 25 nodes); the engine traces 5 rays per node.
     depolarization_ratio : float
         Molecular depolarization ratio (0 in the tables).
     settings : EngineSettings
@@ -192,7 +315,7 @@ def fourier_modes_cases(taus, albedos, mu0: float, *, n_zenith: int = 25,
     missing = list(dict.fromkeys(k for k in keys if k not in _MODES_CACHE))
     if missing:
         from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes_cases
-        nodes = zenith_nodes_deg(int(n_zenith))
+        nodes = mode_nodes_deg(int(n_zenith))
         mu = np.clip(np.cos(np.radians(nodes)), MU_MIN, MU_MAX)
         theta = np.degrees(np.arccos(mu))  # the angles the engine actually traces
         M, P = np.meshgrid(mu, FIT_AZIMUTHS_DEG, indexing="ij")
@@ -399,7 +522,8 @@ class MultipleScatteringSky(Sky):
         Molecular depolarization ratio; 0 (default) as in the Coulson/Natraj tables; "bodhaine"
         uses :func:`bodhaine_depolarization_ratio` at ``wavelength_nm``.
     n_zenith : int
-        Zenith nodes of the Fourier-mode interpolation (default 25).
+        Zenith nodes of the Fourier-mode interpolation, as :func:`mode_nodes_deg` (default
+        25: 24 nodes).
     sun_step_deg : float, optional
         For many sun positions (time series): compute the modes only at sun elevations
         ``sun_node_origin_deg + k sun_step_deg`` and interpolate the Stokes vector linearly

@@ -62,6 +62,7 @@ __all__ = [
     "DEFAULT_SETTINGS",
     "MU_MAX",
     "MU_MIN",
+    "SOURCE_GRID_MU_STEP",
     "EngineSettings",
     "SasktranUnavailableError",
     "TABLE_TAU_RANGE",
@@ -88,6 +89,22 @@ MU_MIN = 1.0e-4
 
 MU_MAX = 1.0 - 1.0e-6
 """Largest view cosine passed to the engine (exactly mu = 1 gives wrong Q, U): 0.08 deg off zenith."""
+
+SOURCE_GRID_MU_STEP = 0.02
+"""Spacing of the view cosines (1, 0.98, 0.96, ...) at which the engine evaluates its
+discrete-ordinates multiple-scatter source in this (spherical) set-up; between them the
+source's azimuthal Fourier modes are interpolated linearly in the cosine. That is exact at
+the nodes and close between them, except next to the zenith: a mode ``m >= 1`` of the
+source vanishes as ``sin^m`` of the zenith angle (``sin`` for ``m = 1``: not a linear
+function of the cosine), so for ``1 > mu > 0.98`` (11.5 deg around the zenith) the engine's
+``m = 1`` multiple scatter falls linearly in the angle instead of staying proportional to
+its sine: for a Rayleigh slab of tau 0.5, sun at 30 deg zenith, the ``m = 1`` multiple
+scatter at 5 deg from the zenith is less than half of what it should be, 0.7 % of I.
+Measured from the engine's own rays (the kinks of ``I_1 / sin(theta)`` at mu = 0.98 and
+0.96, whatever the number of streams); the tables of :mod:`skysim.multiple`,
+:mod:`skysim.clouds` and :mod:`skysim.aerosol` sample the engine near the zenith only at
+these cosines (:func:`skysim.multiple.mode_nodes_deg`,
+:func:`skysim.aerosol.zenith_cap_repaired`)."""
 
 
 TABLE_TAU_RANGE = (1.0e-3, 1.0)
@@ -372,7 +389,7 @@ def rayleigh_greek_coefficients(delta: float, n_moments: int) -> np.ndarray:
 
 def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
                          settings: EngineSettings = DEFAULT_SETTINGS,
-                         delta_m: bool = False) -> np.ndarray:
+                         delta_m: bool = False, multiple_scatter: bool = True) -> np.ndarray:
     """Diffuse Stokes of slabs whose scattering properties vary with optical depth, several
     cases (one engine "wavelength" each) at one sun in one engine call.
 
@@ -403,6 +420,8 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
         (Wiscombe 1977, J. Atmos. Sci. 34:1408,
         doi:10.1175/1520-0469(1977)034<1408:TDMRYA>2.0.CO;2), for forward-peaked (aerosol)
         phase functions.
+    multiple_scatter : bool
+        False: the engine's exact single scatter alone (no multiple-scatter source).
 
     Returns
     -------
@@ -429,6 +448,8 @@ def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
     sk = require_sasktran2()
     altitudes = np.linspace(0.0, settings.slab_height_m, n_levels)
     cfg, geometry, viewing = _engine_setup(sk, settings, mu0, mu, phi, altitudes)
+    if not multiple_scatter:
+        cfg.multiple_scatter_source = sk.MultipleScatterSource.NoSource
     cfg.num_singlescatter_moments = n_moments
     cfg.delta_m_scaling = bool(delta_m)
     atmosphere = sk.Atmosphere(geometry, cfg, numwavel=m, calculate_derivatives=False)

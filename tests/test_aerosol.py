@@ -169,7 +169,10 @@ def test_table_against_direct_engine():
                                phi, preset=PRESET, wavelength_nm=LAM,
                                depolarization_ratio=0.0)[0]
     f = AerosolSky(PRESET, 0.3, ALB, LAM, depolarization_ratio=0.0).field(el, phi, sun, 0.0)
-    far = _sun_distance(el, phi, sun) > 20.0
+    # within 11.5 deg of the zenith the engine's own rays are no reference (its multiple-
+    # scatter source is interpolated linearly in the cosine there, up to 1.5 % off in I):
+    # that cap is checked by reciprocity in tests/test_zenith_region.py
+    far = (_sun_distance(el, phi, sun) > 20.0) & (el < 78.4)
     assert far.sum() > 200
     assert np.max(np.abs(f.I[far] / ref[far, 0] - 1)) < 7e-3
     assert np.max(np.abs(f.dop[far] - np.hypot(ref[far, 1], ref[far, 2]) / ref[far, 0])) < 3e-3
@@ -183,8 +186,11 @@ def test_sun_step_interpolation_error_and_engine_calls(monkeypatch):
     aerosol.clear_tables_cache()   # engine calls are counted: none may come from the cache
     calls = []
     real = aerosol.aerosol_stokes_cases
+    # multiple-scatter calls (each table adds a single-scatter one, a fifth of the cost, for
+    # its rows near the zenith: aerosol.zenith_cap_repaired)
     monkeypatch.setattr(aerosol, "aerosol_stokes_cases",
-                        lambda *a, **k: calls.append(a[2]) or real(*a, **k))
+                        lambda *a, **k: (k.get("multiple_scatter", True) and calls.append(a[2]))
+                        or real(*a, **k))
     sky = AerosolSky(PRESET, 0.2, ALB, LAM, sun_step_deg=1.0)
     el, phi = _random_directions(2000, seed=9)
     suns = np.random.default_rng(1).uniform(29.0, 31.0, el.size)
@@ -204,7 +210,8 @@ def test_prefetch_several_aods_in_one_call(monkeypatch):
     calls = []
     real = aerosol.aerosol_stokes_cases
     monkeypatch.setattr(aerosol, "aerosol_stokes_cases",
-                        lambda *a, **k: calls.append(len(a[0])) or real(*a, **k))
+                        lambda *a, **k: (k.get("multiple_scatter", True)
+                                         and calls.append(len(a[0]))) or real(*a, **k))
     aods = [0.05, 0.5]
     sky = AerosolSky(PRESET, 0.05, ALB, LAM)
     prefetch_tables(aods, [20.0], sky=sky)

@@ -259,6 +259,11 @@ def test_overcast_sky_matches_the_engine_off_its_nodes(tau_c, sun):
     # at 5 deg from the sun
     cloud = CloudLayer(tau_c)
     el, az = _test_directions(sun, 5.0, 40, 7)
+    # the engine's own rays within 11.5 deg of the zenith are no reference (its multiple-
+    # scatter source is interpolated linearly in the cosine there, up to 5 % off in I):
+    # that cap is checked by reciprocity in tests/test_zenith_region.py
+    keep = el < 78.4
+    el, az = el[keep], az[keep]
     sky = CloudySky(cloud, tau=0.1, albedo=0.1)
     nodes = sky.modes(sun).theta_deg
     phi = (az + 180.0) % 360.0 - 180.0
