@@ -146,6 +146,7 @@ def test_yaw_scale_named_and_recovered(session):
     assert 0 < v["gap_before_se"] < v["gap_before"] and 0 < v["shrink_se"] < 1
 
 
+@pytest.mark.slow
 def test_clock_offset_hours_found(session):
     """A 2.5 h clock error (recorded times early) is found by the half-hour search and
     refined to within 10 min (the sun moves 0.25 deg/min; the fit is far finer)."""
@@ -552,6 +553,7 @@ def test_candidate_engine_streams_within_stated_bound(mu0):
     assert np.max(d_aop[dolp(ref) > 0.05]) <= 0.06
 
 
+@pytest.mark.slow
 def test_candidate_sky_at_per_sample_times_matches_brute_force():
     """A session whose sun moves 2.6 deg (per-sample times): the multiple_scattering
     candidate's sky, interpolated between two sun nodes (the session's lowest sun and one
