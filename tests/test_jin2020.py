@@ -77,7 +77,6 @@ def test_acceptance_over_20_seeds(tmp_path):
     assert sidecar["schema"] == "skysim.jin2020.timeseries/1" and sidecar["seed"] == 11
 
 
-@pytest.mark.slow
 def test_cli_quick_writes_figures(tmp_path, capsys):
     assert main(["jin2020", "--quick", "--trials", "2", "--out", str(tmp_path)]) == 0
     out = capsys.readouterr().out

@@ -82,7 +82,6 @@ def test_the_sun_in_place_of_the_moon_is_refused():
         diagnose_photodiodes(moonlit_session(), ("fov",))
 
 
-@pytest.mark.slow
 def test_moonlit_needs_the_moon_up_and_the_sun_down():
     day = moonlit_session().table.copy()
     day["time"] = day["time"] + pd.Timedelta(hours=12)     # Moon set, Sun up

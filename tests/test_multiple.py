@@ -365,7 +365,6 @@ def test_set_up_converged_beyond_the_tables_at_tau_3():
     assert np.max(np.abs(4.0 / 3.0 * (dop_a - dop_b))) < 4e-4
 
 
-@pytest.mark.slow
 def test_sun_step_many_suns_matches_one_by_one():
     """A time series of suns (one per sample, as a logger with a per-sample clock gives) is
     evaluated per node interval at once; the result equals the sky evaluated sun by sun
@@ -393,7 +392,6 @@ def test_sun_step_many_suns_matches_one_by_one():
     assert len(sky.sun_node_set(sun)) <= 6
 
 
-@pytest.mark.slow
 def test_sun_step_low_sun_error():
     """Near the horizon the nodes close in geometrically (spacing ~ 1/8 of the elevation).
     Reference: exact engine runs, tau 0.1, black ground, at suns between nodes. Measured

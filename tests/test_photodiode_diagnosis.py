@@ -553,7 +553,6 @@ def test_candidate_engine_streams_within_stated_bound(mu0):
     assert np.max(d_aop[dolp(ref) > 0.05]) <= 0.06
 
 
-@pytest.mark.slow
 def test_candidate_sky_at_per_sample_times_matches_brute_force():
     """A session whose sun moves 2.6 deg (per-sample times): the multiple_scattering
     candidate's sky, interpolated between two sun nodes (the session's lowest sun and one

@@ -129,7 +129,6 @@ def test_solar_noon_matches_pvlib():
     assert abs(noon - ref) < 30.0
 
 
-@pytest.mark.slow
 def test_aerosol_candidate_at_a_node_is_the_aerosol_sky():
     """At one of its AOD nodes the candidate's interpolated sky is the node's
     :class:`skysim.aerosol.AerosolSky` itself (weights 1 and 0: to rounding, 1e-12), and it
