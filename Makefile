@@ -1,4 +1,4 @@
-# skysim: `make run` (set up + Yang 2014 reproduction), `make test`, `make bench`.
+# skysim: `make run` (set up + Yang 2014 reproduction), `make test`, `make test-all`, `make bench`.
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test bench clean venv
+.PHONY: run test test-slow test-all bench clean venv
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -32,10 +32,23 @@ run: $(VENV)/.installed-run
 	@echo "skysim is installed in $(VENV): run it as $(BIN)/skysim ..., or once per shell"
 	@echo "  . $(BIN)/activate    and then   skysim --help"
 
-# benchmarks (tests/benchmarks) run under `make bench`: some call the radiative-transfer
-# engine dozens of times, which would triple the suite's time on 2 cores
+# `make test`: every test not marked slow, on TEST_WORKERS processes (pytest-xdist; a test
+# module's tests share a process, so its module fixtures are built once); `make test-slow`: the
+# tests marked slow (long reference runs, reproductions, recoveries on real sessions);
+# `make test-all`: both. Benchmarks (tests/benchmarks) run under `make bench`: some call the
+# radiative-transfer engine dozens of times. A selection that collects no test (pytest exit
+# 5, e.g. no slow test left) is not a failure.
+TEST_WORKERS ?= 2
+PYTEST := $(BIN)/python -m pytest -q --ignore=tests/benchmarks -n $(TEST_WORKERS) --dist loadscope
+
 test: $(VENV)/.installed-test
-	$(BIN)/python -m pytest -q --ignore=tests/benchmarks
+	$(PYTEST) -m "not slow" || [ $$? -eq 5 ]
+
+test-slow: $(VENV)/.installed-test
+	$(PYTEST) -m slow || [ $$? -eq 5 ]
+
+test-all: $(VENV)/.installed-test
+	$(PYTEST) || [ $$? -eq 5 ]
 
 bench: $(VENV)/.installed-test
 	@mkdir -p .benchmarks

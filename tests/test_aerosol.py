@@ -78,6 +78,7 @@ def test_siewert2000_problem_IIA_downwelling(reference_dir, n_streams):
 
 # ------------------------------------------------------------------ Mie optics vs miepython
 
+@pytest.mark.slow
 def test_mie_moments_against_miepython():
     """Greek moments alpha1_l, beta1_l (l <= 32, those of the multiple scatter), the
     single-scattering albedo and the extinction per particle of the continental_clean preset
@@ -178,6 +179,7 @@ def test_table_against_direct_engine():
     assert np.max(np.abs(f.dop[far] - np.hypot(ref[far, 1], ref[far, 2]) / ref[far, 0])) < 3e-3
 
 
+@pytest.mark.slow
 def test_sun_step_interpolation_error_and_engine_calls(monkeypatch):
     """``sun_step_deg = 1``: many suns within 29-31 deg cost one engine call per sun node (3),
     not per sun; linear interpolation in sun elevation errs by <= 4e-3 in I/I and 2e-3 in
@@ -203,6 +205,7 @@ def test_sun_step_interpolation_error_and_engine_calls(monkeypatch):
     assert np.max(np.abs(f.dop[:400][far] - exact.dop[far])) < 2e-3
 
 
+@pytest.mark.slow
 def test_prefetch_several_aods_in_one_call(monkeypatch):
     """prefetch_tables computes all AOD nodes at a sun in one engine call; the skies then
     evaluate from the cache, identical to tables computed one AOD at a time (each AOD is an
@@ -225,6 +228,7 @@ def test_prefetch_several_aods_in_one_call(monkeypatch):
 
 # ------------------------------------------------------------------ physics
 
+@pytest.mark.slow
 def test_max_dop_falls_with_aod_kreuter2010():
     """Kreuter, Emde & Blumthaler (2010), Atmos. Res. 98:363, measured the sky's maximum DoP
     at 450 nm fall from about 0.7 to 0.4 as the AOD rose from 0.05 to 0.5. The model

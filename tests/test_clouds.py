@@ -130,6 +130,7 @@ def test_zero_cloud_is_the_clear_multiple_scattering_sky():
     np.testing.assert_allclose(cloudy.dop, clear.dop, atol=3e-3)
 
 
+@pytest.mark.slow
 def test_thin_cloud_lowers_dop_and_keeps_the_aop_pattern():
     # Pomozi et al. (2001) and Hegedues et al. (2007): under clouds the DoP falls while the
     # AoP pattern continues. Checks: the DoP at 90 deg from the sun falls monotonically with
@@ -233,6 +234,7 @@ def test_engine_single_scatter_converges_to_the_closed_form_at_grazing_views():
 
 
 @pytest.mark.parametrize("tau_c", [0.25, 1.0, 2.0])
+@pytest.mark.slow
 def test_overcast_radiance_is_positive_on_a_dense_dome(tau_c):
     # The droplets' forward peak made the azimuth series ring into negative radiance (down
     # to -55 at 20 deg off the sun's azimuth under tau 0.25); with the single scatter in

@@ -160,6 +160,7 @@ def overcast_reference():
     return out
 
 
+@pytest.mark.slow
 def test_overcast_polarization_follows_the_radiative_transfer(overcast_reference):
     # Where the radiative transfer's DoP exceeds 0.02 the AoP of at least 90 % of the
     # directions agrees within 10 deg (measured 98-100 %; the rest lie where the droplets'

@@ -146,6 +146,7 @@ def test_yaw_scale_named_and_recovered(session):
     assert 0 < v["gap_before_se"] < v["gap_before"] and 0 < v["shrink_se"] < 1
 
 
+@pytest.mark.slow
 def test_clock_offset_hours_found(session):
     """A 2.5 h clock error (recorded times early) is found by the half-hour search and
     refined to within 10 min (the sun moves 0.25 deg/min; the fit is far finer)."""

@@ -27,6 +27,8 @@ README = ROOT / "README.md"
 
 SLOW = {("reproduce", "sky-gap"), ("sky-gap",)}
 """Command prefixes that need minutes (see the module docstring)."""
+SLOW_WITH_DATA = {("reproduce", "real-sky-compass")}
+"""Commands on the recordings not shipped that take about a minute (marked slow)."""
 
 
 def _needs_data() -> dict:
@@ -78,6 +80,7 @@ def test_readme_has_the_commands_it_promises():
         "README commands must not contain placeholders"
 
 
+@pytest.mark.slow
 def test_readme_commands_run_top_to_bottom(fresh_copy, monkeypatch, capsys):
     """One test, in README order (``sample`` before ``calibrate`` and ``diagnose``,
     ``generate`` before ``compare``)."""
@@ -103,7 +106,9 @@ def test_readme_commands_run_top_to_bottom(fresh_copy, monkeypatch, capsys):
     assert sorted(p.name for p in fresh_copy.iterdir()) == ["examples", "results"]
 
 
-@pytest.mark.parametrize("argv", [c for c in readme_commands() if _data_of(c) is not None],
+@pytest.mark.parametrize("argv", [pytest.param(c, marks=pytest.mark.slow)
+                                  if tuple(c[:2]) in SLOW_WITH_DATA else c
+                                  for c in readme_commands() if _data_of(c) is not None],
                          ids=_id)
 def test_readme_commands_that_need_data_not_shipped(argv, fresh_copy, monkeypatch, capsys):
     data = _data_of(argv)

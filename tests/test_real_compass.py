@@ -12,6 +12,7 @@ from experiments.cli.main import main
 SESSION = "tod_Thursday_12-05-22_09-08-12_CEST"
 
 
+@pytest.mark.slow
 def test_reproduce_one_real_session(reference_dir, tmp_path, capsys):
     data = tmp_path / "data"
     data.mkdir()

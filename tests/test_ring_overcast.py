@@ -73,6 +73,7 @@ def test_overcast_needs_the_sun_up():
 
 
 @pytest.mark.parametrize("tau", [0.6, 2.0])
+@pytest.mark.slow
 def test_overcast_named_and_thickness_recovered(tau):
     """Blind: an overcast of optical thickness 0.6 or 2 over the clear sky is named, against
     the sky candidates that also lower the DoP (multiple scattering by molecules, an

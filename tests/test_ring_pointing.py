@@ -59,6 +59,7 @@ def test_calibrated_pointing_reads_the_fitted_tilt(calibration_report):
     np.testing.assert_allclose(p[8:], 0.0, atol=0.5)
 
 
+@pytest.mark.slow
 def test_clock_error_found_with_the_pointing_held(calibration_report):
     """A +2 h clock error (recorded times 2 h early) on a morning session: named, and fitted
     within 10 min once the pointing is held at the calibration."""

@@ -90,6 +90,7 @@ def test_albedo_decomposition_matches_direct_engine_call():
 
 @pytest.mark.parametrize("tau, albedo, effect", [(0.3, 0.2, "ground_albedo"),
                                                  (0.3, 0.0, "multiple_scattering")])
+@pytest.mark.slow
 def test_multiple_scattering_data_right_effect_and_parameters(tau, albedo, effect):
     """Data from the multiple-scattering sky at known tau/albedo (+ noise): fitted on the
     25-deg sun, scored on the withheld 50-deg sun.
