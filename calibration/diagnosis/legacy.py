@@ -31,8 +31,13 @@ def from_legacy_dict(d: dict) -> DiagnosisReport:
     return from_three_pair_v1(d)
 
 
+_PAIRED_VERDICT_KEYS = ("group", "explained_share", "explained_share_se", "separated_by")
+"""Verdict keys of the paired rule, read where a dict carries them."""
+
+
 def _verdict(v: dict, params=None) -> Verdict:
     kw = {k: v.get(k) for k in _VERDICT_KEYS}
+    kw.update({k: v[k] for k in _PAIRED_VERDICT_KEYS if v.get(k) is not None})
     kw["params"] = params if params is not None else (v.get("params") or {})
     if kw["best_candidate"] == "base":
         kw["best_candidate"] = None
