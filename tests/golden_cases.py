@@ -56,7 +56,8 @@ def three_pair_tilt_named():
 
 
 def three_pair_tilt_withheld():
-    """The same data with the true effect withheld: the leave-one-out ``unexplained``."""
+    """The same data with the true effect withheld: no single effect named (another removes
+    part of the excess: ``partly_explained``)."""
     return _three_pair("tilt", 21, [1.2, -0.8], ("turntable_periodic", "sun_motion",
                                                    "dark_current"))
 
@@ -94,7 +95,8 @@ def sky_multiple_scattering_named():
 
 # ----------------------------------------------------------------------- photodiode rings
 def ring_yaw_scale_named():
-    """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected."""
+    """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected (the
+    candidate removes 46 % of the excess: ``partly_explained``)."""
     from test_photodiode_diagnosis import ring_session
 
     from calibration.diagnosis import diagnose

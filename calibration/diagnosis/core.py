@@ -40,7 +40,8 @@ candidate effect on held-out data; everything that turns them into a verdict is 
    from a fit that did not see it). The share of the base model's excess held-out variance
    a candidate removes, ``explained_share = (MS_0 - MS_c) / (MS_0 - f^2)``, carries the
    same jackknife SE (floor held fixed). A single effect is named only when it (a) beats
-   every other candidate and the base model by more than ``paired_se`` (2) paired SE,
+   the base model, and every other candidate that itself beats the base model within the
+   range of its parameters, by more than ``paired_se`` (2) paired SE,
    (b) converged with no parameter at a bound of its range (:func:`at_bound`: a bound hit
    means its form is wrong or its range too narrow), and (c) removes at least
    ``min_share`` (0.5) of the excess. Otherwise the verdict is ``group`` (the candidates
@@ -78,7 +79,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -344,8 +345,9 @@ def decide(candidates, gap_before: float, floor: float,
     Returns
     -------
     Decision
-        ``effect`` is a candidate's name only when it (a) beats every other candidate and
-        the base model by more than ``thresholds.paired_se`` paired standard errors, (b)
+        ``effect`` is a candidate's name only when it (a) beats the base model and every
+        other candidate that improves on it by more than ``thresholds.paired_se`` paired
+        standard errors, (b)
         converged with no parameter at a bound, (c) removes at least
         ``thresholds.min_share`` of the excess held-out variance (and meets the instrument's
         options: ``block_consistency``, a null excluded); otherwise ``none``, ``group``,
@@ -361,16 +363,18 @@ def decide(candidates, gap_before: float, floor: float,
     share, share_se = best.explained_share, best.explained_share_se
     share_txt = _share_text(share, share_se)
     k = t.paired_se
-    beaten_base = (best.details.get("base_difference") is not None
-                   and best.details["base_difference"]
-                   > k * best.details.get("base_difference_se", np.inf))
-    if not beaten_base or share is None or share <= 0:
+    if not _beats_base(best, k) or share is None or share <= 0:
         return Decision("unexplained", (
             f"no candidate lowers the held-out gap by more than {k:g} paired standard errors "
             f"(best: {best.effect}, {best.gap_after:.3g} vs {gap_before:.3g} before, floor "
             f"{floor:.3g}; {share_txt} of the excess removed)"), share=share,
             share_se=share_se)
-    group = [best.effect] + [c.effect for c in rows[1:] if not _beaten(c, k)]
+    # the group: candidates that also improve on the base model, fitted within their
+    # ranges, and that the best does not beat by k paired SE (a candidate no better than the
+    # base explains nothing, however noisy its comparison with the best; one at a bound of
+    # its range has the wrong form for these data, as a ground albedo pressed to 0)
+    group = [best.effect] + [c.effect for c in rows[1:]
+                             if not _beaten(c, k) and _beats_base(c, k) and not c.at_bound]
     separate = {c.effect: c.details["separated_by"] for c in rows
                 if c.effect in group and c.details.get("separated_by")}
     if share < t.min_share:
@@ -409,10 +413,17 @@ def decide(candidates, gap_before: float, floor: float,
             f"gap in fewer than {100 * t.block_consistency:.0f} % of the held-out "
             f"{t.block_name}"), share=share, share_se=share_se)
     return Decision(best.effect, (
-        f"{best.effect} beats every other candidate and the base model by more than {k:g} "
-        f"paired standard errors on the same held-out {t.block_name} and removes "
+        f"{best.effect} beats the base model and every other candidate that improves on it "
+        f"by more than {k:g} paired standard errors on the same held-out {t.block_name} and "
+        "removes "
         f"{share_txt} of the excess held-out variance over the noise floor (at least "
         f"{100 * t.min_share:.0f} % needed)"), [], share, share_se)
+
+
+def _beats_base(c, k: float) -> bool:
+    """True when candidate row ``c`` beats the base model by more than ``k`` paired SE."""
+    d = c.details.get("base_difference")
+    return d is not None and d > k * c.details.get("base_difference_se", np.inf)
 
 
 def _beaten(c, k: float) -> bool:
@@ -494,15 +505,18 @@ def jackknife_ratio(num, den) -> tuple[float, float]:
 
 
 def _paired_sums(held: dict, names, block):
-    """Per block (in block-id order): each name's residual sum of squares over the readings
-    every name holds (finite for all), and the count of those readings."""
+    """Per block (in block-id order, blocks without a common reading left out): each name's
+    residual sum of squares over the readings every name holds (finite for all), and the
+    count of those readings."""
     block = np.asarray(block)
     ids, idx = np.unique(block, return_inverse=True)
     arrs = {n: np.asarray(held[n], float).reshape(len(idx), -1) for n in names}
     common = np.logical_and.reduce([np.isfinite(a) for a in arrs.values()])
-    ss = {n: np.bincount(idx, np.sum(np.where(common, a, 0.0) ** 2, axis=1), ids.size)
+    count = np.bincount(idx, common.sum(axis=1), ids.size)
+    keep = count > 0                 # a block with no common reading carries no comparison
+    ss = {n: np.bincount(idx, np.sum(np.where(common, a, 0.0) ** 2, axis=1), ids.size)[keep]
           for n, a in arrs.items()}
-    return ss, np.bincount(idx, common.sum(axis=1), ids.size)
+    return ss, count[keep]
 
 
 def paired_difference(held: dict, name: str, reference: str, block) -> tuple[float, float]:
@@ -554,6 +568,14 @@ def judge(rows, held: dict, block, floor: float, thresholds: Thresholds | None =
     t = thresholds or Thresholds()
     rows = rank(list(rows))
     scaled = {k: scale * np.asarray(v, float) for k, v in held.items()}
+    block = np.asarray(block)
+    used = np.isfinite(scaled[base].reshape(block.size, -1)).any(axis=1)
+    single = np.unique(block[used]).size < 2
+    if single:
+        # one held-out block (a sky field scored on one withheld case): no spread between
+        # blocks to read, so the comparison is paired over single readings, assumed
+        # independent (white measurement noise about a common systematic misfit)
+        block = np.arange(block.size)
     avail = [c for c in rows if c.available]
     gap_before = rms(scaled[base])
     for c in avail:
@@ -570,7 +592,12 @@ def judge(rows, held: dict, block, floor: float, thresholds: Thresholds | None =
     for c in avail:
         alone = decide([c], gap_before, floor, t)
         c.explained = alone.effect == c.effect
-    return rows, decide(rows, gap_before, floor, t)
+    decision = decide(rows, gap_before, floor, t)
+    if single and decision.effect != "none":
+        decision = replace(decision, reason=decision.reason + (
+            " (one held-out block: paired standard errors over single readings, assumed "
+            "independent)"))
+    return rows, decision
 
 
 # ------------------------------------------------------------------------------ failures
@@ -607,9 +634,10 @@ def non_finite_reason(residual, reference) -> str | None:
     return None
 
 
-def at_bound(values, lower, upper, names, rel: float = 1e-3) -> list[str]:
+def at_bound(values, lower, upper, names, rel: float = 1e-3, null=None) -> list[str]:
     """Names of the parameters within ``rel`` of the width of their range from a finite
-    bound (``rel`` of ``max(1, |bound|)`` for a one-sided range).
+    bound (``rel`` of ``max(1, |bound|)`` for a one-sided range); a bound that is the
+    parameter's null (no effect: an extinction ratio of 0) does not count.
 
     Parameters
     ----------
@@ -618,12 +646,18 @@ def at_bound(values, lower, upper, names, rel: float = 1e-3) -> list[str]:
     lower, upper : array (m,)
         Bounds (``-inf``/``inf`` where open).
     names : sequence of str
+    null : array (m,), optional
+        Null value of each parameter.
     """
     v = np.atleast_2d(np.asarray(values, float))
     lo, hi = np.asarray(lower, float), np.asarray(upper, float)
     width = np.where(np.isfinite(lo) & np.isfinite(hi), hi - lo, np.nan)
     tol_lo = rel * np.where(np.isfinite(width), width, np.maximum(1.0, np.abs(lo)))
     tol_hi = rel * np.where(np.isfinite(width), width, np.maximum(1.0, np.abs(hi)))
+    if null is not None:
+        nul = np.asarray(null, float)
+        tol_lo = np.where(np.isclose(lo, nul), -np.inf, tol_lo)
+        tol_hi = np.where(np.isclose(hi, nul), -np.inf, tol_hi)
     hit = ((np.isfinite(lo) & (v <= lo + tol_lo)) | (np.isfinite(hi) & (v >= hi - tol_hi)))
     return [str(n) for n, h in zip(names, hit.any(axis=0)) if h]
 
