@@ -247,6 +247,25 @@ def test_reads_the_earlier_report_dicts(family, instrument, unit):
     assert r.to_markdown().startswith("# Sim-to-real gap diagnosis")
 
 
+def test_reads_reports_written_before_the_paired_verdict():
+    """A ``skysim.diagnosis/2`` report (no group, shares, paired differences, at_bound or
+    not_applicable) reads with those fields empty, and writes back as the current schema."""
+    d = json.loads((GOLDEN / "legacy_three_pair_v1.json").read_text())
+    v2 = DiagnosisReport.from_dict(d).to_dict()
+    v2["schema"] = "skysim.diagnosis/2"
+    for key in ("group", "explained_share", "explained_share_se", "separated_by"):
+        v2["verdict"].pop(key)
+    for c in v2["candidates"]:
+        for key in ("paired_difference", "paired_difference_se", "explained_share",
+                    "explained_share_se", "at_bound", "not_applicable"):
+            c.pop(key, None)
+    r = DiagnosisReport.from_dict(v2)
+    assert r.verdict.group == [] and r.verdict.explained_share is None
+    assert all(c.at_bound == [] and c.paired_difference is None for c in r.candidates)
+    assert r.verdict.effect == d["verdict"]["effect"]
+    assert r.to_dict()["schema"] == DIAGNOSIS_SCHEMA == "skysim.diagnosis/3"
+
+
 def test_ring_where_keeps_its_angular_bounds():
     d = json.loads((GOLDEN / "legacy_rings_v1.json").read_text())
     r = DiagnosisReport.from_dict(d)
