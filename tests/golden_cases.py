@@ -95,8 +95,7 @@ def sky_multiple_scattering_named():
 
 # ----------------------------------------------------------------------- photodiode rings
 def ring_yaw_scale_named():
-    """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected (the
-    candidate removes 46 % of the excess: ``partly_explained``)."""
+    """tests/test_photodiode_diagnosis.py: the simulated ring with a gyro scale injected."""
     from test_photodiode_diagnosis import ring_session
 
     from calibration.diagnosis import diagnose

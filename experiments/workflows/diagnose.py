@@ -244,7 +244,8 @@ def score_benchmark(cases: pd.DataFrame, ratio_min: float = 2.0,
     detected = eff[eff.verdict != "none"]  # effect data whose gap exceeds the floor
     ok = strong[strong.verdict == strong.truth]
     err = ok.shrink_est - ok.shrink_true
-    labels = list(dict.fromkeys(list(BENCHMARK_LABELS) + ["unexplained"]))
+    labels = list(dict.fromkeys(list(BENCHMARK_LABELS)
+                                + ["group", "partly_explained", "unexplained"]))
     confusion = pd.crosstab(cases.truth, cases.verdict).reindex(
         index=[x for x in labels if x in set(cases.truth)], columns=labels, fill_value=0)
 
