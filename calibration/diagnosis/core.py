@@ -95,11 +95,16 @@ __all__ = ["Decision", "Thresholds", "assign_folds", "at_bound", "blocks_improve
 
 @dataclass(frozen=True)
 class Thresholds:
-    """Decision margins on held-out RMS relative to the noise floor.
+    """Decision margins of the verdict (:func:`decide`) and of the gap-only test
+    (:func:`explains`).
 
     none_margin : the base gap is "within the noise floor" when ``G_0 <= floor (1 + m)``;
         also the margin of the slice limit.
-    explained_margin : a candidate explains the gap when ``G_c <= floor (1 + m)``, or when it
+    min_share, paired_se : the paired rule's minimum share of the excess a named effect
+        removes, and the paired standard errors by which it beats the others (attributes
+        below).
+    explained_margin : (:func:`explains`) a candidate brings the gap to the floor when
+        ``G_c <= floor (1 + m)``, or when it
         removes all but ``residual_excess`` of the excess variance ``G_0^2 - floor^2``.
         0.07 was chosen on a calibration run of the three-pair benchmark (seed 99, 96 data
         sets, not the benchmark seed): 0.10 let a wrong candidate absorb 8 % of weak gaps
@@ -114,8 +119,10 @@ class Thresholds:
         part may come from a few blocks alone (one sweep the fit happens to suit); a
         candidate that removes nearly all the excess lowers every block's gap anyway.
 
-    The ring (photodiode) instruments use ``residual_excess=0.95, block_consistency=0.75``
-    (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there).
+    The ring (photodiode) instruments use ``block_consistency=0.75``
+    (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there);
+    the three-pair sensor ``min_share=0.9``
+    (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`).
 
     Raises
     ------
