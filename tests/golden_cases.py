@@ -105,7 +105,8 @@ def ring_yaw_scale_named():
 
 
 def ring_no_candidates():
-    """The same simulated ring, noise-free counts, no candidate: its gap is left unexplained."""
+    """The same simulated ring, no candidate: its held-out gap is within the floor of its
+    noise-only replicas (`none`)."""
     from test_photodiode_diagnosis import ring_session
 
     from calibration.diagnosis import diagnose

@@ -159,6 +159,9 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
     data = _with_split(d.get("data", {}), d.get("split"))
     # everything else the ring diagnosis reports (heading error, base fit, ...) is kept
     extra = {k: v for k, v in d.items() if k not in _RING_KEYS and v is not None}
+    parts = {k: nf[k] for k in ("white_noise_rms", "replica_held_out_gap") if k in nf}
+    if parts:
+        extra["noise_floor_parts"] = parts
     return DiagnosisReport(
         "photodiodes", str(v.get("metric", "")), "1",
         _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,
