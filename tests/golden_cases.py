@@ -56,7 +56,8 @@ def three_pair_tilt_named():
 
 
 def three_pair_tilt_withheld():
-    """The same data with the true effect withheld: the leave-one-out ``unexplained``."""
+    """The same data with the true effect withheld: no single effect named (another removes
+    part of the excess: ``partly_explained``)."""
     return _three_pair("tilt", 21, [1.2, -0.8], ("turntable_periodic", "sun_motion",
                                                    "dark_current"))
 
@@ -104,7 +105,8 @@ def ring_yaw_scale_named():
 
 
 def ring_no_candidates():
-    """The same simulated ring, noise-free counts, no candidate: its gap is left unexplained."""
+    """The same simulated ring, no candidate: its held-out gap is within the floor of its
+    noise-only replicas (`none`)."""
     from test_photodiode_diagnosis import ring_session
 
     from calibration.diagnosis import diagnose

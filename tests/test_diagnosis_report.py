@@ -78,57 +78,79 @@ def test_held_out_score_is_the_bic_difference():
     assert core.held_out_score(0.4, 0.45, 0.5, n, 2, n_cal) == pytest.approx(2 * np.log(n_cal))
 
 
-def _cand(effect, gap, score, explained=True, available=True):
+def _cand(effect, gap, score, *, share=0.9, share_se=0.05, d=None, d_se=1.0, base_d=5.0,
+          base_se=1.0, at_bound=(), converged=True, available=True, **details):
+    """A scored candidate row carrying the paired comparison :func:`core.judge` fills:
+    ``d`` (paired difference against the best, ± ``d_se``), ``base_d`` (base minus it)."""
     if not available:
         return Candidate.unavailable(effect, "missing engine")
-    return Candidate(effect, gap_after=gap, shrink=0.0, score=score, explained=explained)
+    return Candidate(effect, gap_after=gap, shrink=0.0, score=score, converged=converged,
+                     paired_difference=d, paired_difference_se=None if d is None else d_se,
+                     explained_share=share, explained_share_se=share_se,
+                     at_bound=list(at_bound),
+                     details={"base_difference": base_d, "base_difference_se": base_se,
+                              **details})
 
 
 def test_verdict_rule_branches():
+    """Each branch of the paired rule: a single effect only when it (a) beats every other
+    candidate and the base by more than 2 paired SE, (b) converged away from its bounds,
+    (c) removes at least half the excess; else group, partly explained, unexplained, none."""
     t = Thresholds()
     floor = 1.0
-    rows = [_cand("a", 1.05, -50.0), _cand("b", 1.02, -40.0), _cand("c", 0.9, 0.0,
-                                                                       available=False)]
-    assert decide(rows, 1.09, floor, t)[0] == "none"                 # within 1.1 x floor
-    assert decide(rows, 3.0, floor, t)[0] == "a"                     # best score, explains
-    assert decide(rows[1:], 3.0, floor, t)[0] == "b"                 # a withheld
-    assert decide([_cand("a", 2.5, -50.0, explained=False)], 3.0, floor, t)[0] == \
-        "unexplained"
-    assert decide([_cand("a", 1.0, 5.0)], 3.0, floor, t)[0] == "unexplained"   # score >= 0
-    assert decide(rows[2:], 3.0, floor, t) == ("unexplained",
-                                               "no candidate effects were available")
-    # explains: at the floor, or all but 2 % of the excess variance removed
-    assert core.explains(1.07, 3.0, floor, t) and not core.explains(1.08, 1.2, floor, t)
-    assert core.explains(np.sqrt(1 + 0.02 * 8.0), 3.0, floor, t)
+    a = _cand("a", 1.05, -50.0, d=0.0, d_se=0.0)
+    b = _cand("b", 1.5, -40.0, share=0.6, d=3.0, d_se=1.0)           # beaten by 3 SE
+    c = _cand("c", 0.9, 0.0, available=False)
+    assert decide([a, b, c], 1.09, floor, t).effect == "none"        # within 1.1 x floor
+    named = decide([a, b, c], 3.0, floor, t)
+    assert (named.effect, named.group, named.share) == ("a", [], 0.9)
+    # b within 2 paired SE of a: the data cannot tell them apart
+    close = _cand("b", 1.1, -45.0, d=1.5, d_se=1.0, separated_by="a clear-sky sweep at noon")
+    g = decide([a, close], 3.0, floor, t)
+    assert g.effect == "group" and g.group == ["a", "b"]
+    assert "to separate them: b: a clear-sky sweep at noon" in g.reason
+    # a significant share below one half: partly explained, with the share
+    p = decide([_cand("a", 2.5, -50.0, share=0.3, share_se=0.05, d=0.0)], 3.0, floor, t)
+    assert p.effect == "partly_explained" and p.share == 0.3 and "30 +- 5 %" in p.reason
+    # not better than the base model by 2 paired SE: unexplained
+    assert decide([_cand("a", 2.9, -5.0, base_d=1.0, base_se=1.0, d=0.0)], 3.0, floor,
+                  t).effect == "unexplained"
+    # a parameter at its bound, or no convergence: not named, the reason says why
+    bound = decide([_cand("a", 1.0, -50.0, d=0.0, at_bound=["tau"])], 3.0, floor, t)
+    assert bound.effect == "unexplained" and "tau sits at a bound" in bound.reason
+    assert "form is wrong" in bound.reason and "range is too narrow" in bound.reason
+    assert decide([_cand("a", 1.0, -50.0, d=0.0, converged=False)], 3.0, floor,
+                  t).effect == "unexplained"
+    assert tuple(decide([c], 3.0, floor, t)) == ("unexplained",
+                                                "no candidate effect was applicable")
     # ties in score go to the smaller held-out gap; unavailable rows last
-    ranked = core.rank([_cand("x", 1.2, -3.0), _cand("y", 1.1, -3.0), rows[2]])
-    assert [c.effect for c in ranked] == ["y", "x", "c"]
+    ranked = core.rank([_cand("x", 1.2, -3.0), _cand("y", 1.1, -3.0), c])
+    assert [r.effect for r in ranked] == ["y", "x", "c"]
 
 
-def test_partial_explanation_option_with_block_consistency():
-    """The rule's options for instruments no single effect takes to the floor (the ring's
-    thresholds): a candidate explains when it removes at least ``1 - residual_excess`` of
-    the excess variance and lowers the gap in at least ``block_consistency`` of the held-out
-    blocks; a fitted effect indistinguishable from its null never explains."""
-    t = Thresholds(residual_excess=0.95, block_consistency=0.75)
-    floor, g0 = 1.0, 3.0                                   # excess variance 8
+def test_verdict_options_block_consistency_and_null():
+    """The rule's options: ``block_consistency`` also asks the named effect to lower the gap
+    in that fraction of the held-out blocks; a fitted effect indistinguishable from its null
+    is never named; ``explains`` keeps its gap-only test."""
+    t = Thresholds(block_consistency=0.75, block_name="sweeps")
+    floor, g0 = 1.0, 3.0
+    ok = decide([_cand("a", 1.2, -50.0, d=0.0, blocks_improved=0.8)], g0, floor, t)
+    assert ok.effect == "a" and "held-out sweeps" in ok.reason
+    few = decide([_cand("a", 1.2, -50.0, d=0.0, blocks_improved=0.7)], g0, floor, t)
+    assert few.effect == "unexplained" and "75 %" in few.reason
+    assert decide([_cand("a", 1.2, -50.0, d=0.0, blocks_improved=1.0, null_excluded=False)],
+                  g0, floor, t).effect == "unexplained"
     g_5 = np.sqrt(9.0 - 0.05 * 8.0)                        # removes exactly 5 %
     assert core.excess_removed(g_5, g0, floor) == pytest.approx(0.05, rel=1e-12)
-    assert core.explains(g_5 - 1e-9, g0, floor, t, blocks_improved=0.75)
-    assert not core.explains(g_5 + 1e-6, g0, floor, t, blocks_improved=1.0)
-    assert not core.explains(g_5 - 1e-9, g0, floor, t, blocks_improved=0.7)
-    assert not core.explains(1.0, g0, floor, t, blocks_improved=1.0, null_excluded=False)
+    t5 = Thresholds(residual_excess=0.95, block_consistency=0.75)
+    assert core.explains(g_5 - 1e-9, g0, floor, t5, blocks_improved=0.75)
+    assert not core.explains(g_5 - 1e-9, g0, floor, t5, blocks_improved=0.7)
     with pytest.raises(ThresholdsError, match="blocks_improved"):
-        core.explains(2.0, g0, floor, t)
+        core.explains(2.0, g0, floor, t5)
     with pytest.raises(ThresholdsError, match="residual_excess=1.5"):
         Thresholds(residual_excess=1.5)
-    # the default rule needs no block count, and is unchanged by a consistency of 0
-    assert core.explains(np.sqrt(1 + 0.02 * 8.0), g0, floor, Thresholds())
-    # the reason states the rule that was met
-    effect, reason = decide([_cand("a", 2.5, -50.0)], g0, floor, t)
-    assert effect == "a" and "removes 34 % of the excess" in reason and "75 %" in reason
-    effect, reason = decide([_cand("a", 2.9, -5.0, explained=False)], g0, floor, t)
-    assert effect == "unexplained" and "7 % removed" in reason
+    with pytest.raises(ThresholdsError, match="min_share=2"):
+        Thresholds(min_share=2)
 
 
 def test_blocks_improved_counts_blocks_whose_sum_of_squares_falls():
@@ -223,6 +245,25 @@ def test_reads_the_earlier_report_dicts(family, instrument, unit):
     assert doc["schema"] == DIAGNOSIS_SCHEMA
     assert DiagnosisReport.from_dict(doc).to_dict() == doc
     assert r.to_markdown().startswith("# Sim-to-real gap diagnosis")
+
+
+def test_reads_reports_written_before_the_paired_verdict():
+    """A ``skysim.diagnosis/2`` report (no group, shares, paired differences, at_bound or
+    not_applicable) reads with those fields empty, and writes back as the current schema."""
+    d = json.loads((GOLDEN / "legacy_three_pair_v1.json").read_text())
+    v2 = DiagnosisReport.from_dict(d).to_dict()
+    v2["schema"] = "skysim.diagnosis/2"
+    for key in ("group", "explained_share", "explained_share_se", "separated_by"):
+        v2["verdict"].pop(key)
+    for c in v2["candidates"]:
+        for key in ("paired_difference", "paired_difference_se", "explained_share",
+                    "explained_share_se", "at_bound", "not_applicable"):
+            c.pop(key, None)
+    r = DiagnosisReport.from_dict(v2)
+    assert r.verdict.group == [] and r.verdict.explained_share is None
+    assert all(c.at_bound == [] and c.paired_difference is None for c in r.candidates)
+    assert r.verdict.effect == d["verdict"]["effect"]
+    assert r.to_dict()["schema"] == DIAGNOSIS_SCHEMA == "skysim.diagnosis/3"
 
 
 def test_ring_where_keeps_its_angular_bounds():

@@ -39,7 +39,7 @@ def test_reproduce_one_real_session(reference_dir, tmp_path, capsys):
     doc = json.loads((out / SESSION / "diagnosis.json").read_text())
     excluded = {f["channel"] for f in doc["faults"] if f["kind"] == "too_few"}
     assert excluded, "the reference ring has units the screen leaves with too few photodiodes"
-    assert doc["schema"] == "skysim.diagnosis/2" and doc["instrument"] == "photodiodes"
+    assert doc["schema"] == "skysim.diagnosis/3" and doc["instrument"] == "photodiodes"
     base_fit = doc["extra"]["base_fit"]
     el = base_fit["elevation_offset_deg"]
     for unit, value in el.items():

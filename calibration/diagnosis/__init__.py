@@ -7,7 +7,7 @@ far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
 - adapters: :mod:`.three_pair` (three-pair sensor tables, with :mod:`.three_pair_data` and
   :mod:`.three_pair_fit`), :mod:`.sky` (sky fields), :mod:`.rings` (multi-unit photodiode
   instruments, through :mod:`calibration.photodiode_diagnosis`);
-- :mod:`.report`: :class:`DiagnosisReport` (schema ``skysim.diagnosis/2``) and its readers
+- :mod:`.report`: :class:`DiagnosisReport` (schema ``skysim.diagnosis/3``) and its readers
   of the earlier report dicts (:mod:`.legacy`), markdown (:mod:`.markdown`);
 - :func:`diagnose` (:mod:`.api`): the one entry point.
 """

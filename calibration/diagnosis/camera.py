@@ -565,21 +565,24 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
     y_data = np.concatenate([p.y for p in prepared])
 
     def cross_validate(effect):
-        """Held-out model y (n, 4) over every fold; parameters fitted on all usable data."""
+        """Held-out model y (n, 4) over every fold; parameters fitted on all usable data;
+        the parameters of every fold's fit and of the full fit (rows)."""
         pred = np.full(y_data.shape, np.nan)
         converged = True
+        fold_params = []
         for k in range(folds):
             cal = [(p, (fo >= 0) & (fo != k)) for p, fo in zip(prepared, fold_of)]
             fit, d = _fit(cal, effect, dmax_known)
             converged &= fit.converged
+            fold_params.append(fit.params)
             for p, fo, a in zip(prepared, fold_of, offsets):
                 held = fo == k
                 if held.any():
                     pred[a:a + p.usable.size][held] = _predict(p, effect, fit.params, d)[held]
         fit, d = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
-        return pred, fit, d, converged and fit.converged
+        return pred, fit, d, converged and fit.converged, np.array(fold_params + [fit.params])
 
-    pred0, fit0, d0, ok0 = cross_validate(None)
+    pred0, fit0, d0, ok0, _ = cross_validate(None)
     d0_se = _parameters(fit0, None, True)["d_max"]["se"] if dmax_known is None else None
     res0 = np.where(use[:, None], pred0 - y_data, np.nan)
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
@@ -597,29 +600,39 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                 "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
                 "sidecar) to tell them apart", _degeneracy(name, d0, d0_se)))
             continue
-        pred, fit, d, ok = cross_validate(name)
-        res = np.where(use[:, None], pred - y_data, np.nan)
+        out, why = core.run_candidate(cross_validate, name)
+        if why is None:
+            pred, fit, d, ok, P = out
+            res = np.where(use[:, None], pred - y_data, np.nan)
+            why = core.non_finite_reason(res, res0)
+        if why is None:
+            params, why = core.run_candidate(_parameters, fit, eff, dmax_known is None)
+        if why is not None:
+            rows.append(Candidate.unavailable(name, why))
+            continue
         residuals[name] = res
         Gc = core.rms(res, use[:, None] & np.ones((1, 4), bool))
-        params = _parameters(fit, eff, dmax_known is None)
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,
-            score=core.held_out_score(Gc, G0, floor, N, eff.k, n_cal),
-            explained=core.explains(Gc, G0, floor, thresholds), converged=ok, params=params,
+            score=core.held_out_score(Gc, G0, floor, N, eff.k, n_cal), converged=ok,
+            params=params,
+            at_bound=core.at_bound(P[:, :eff.k], eff.bounds[0], eff.bounds[1],
+                                   eff.parameter_names, null=eff.null),
             details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
-    rows = core.rank(rows)
-    effect, reason = core.decide(rows, G0, floor, thresholds)
+    rows, dec = core.judge(rows, {"base": res0, **residuals}, block, floor, thresholds)
+    effect = dec.effect
     best = next((r.effect for r in rows if r.available), None)
+    named = best is not None and effect == best
     after = residuals.get(best, res0) if effect != "none" else res0
     G1 = core.rms(after, use[:, None] & np.ones((1, 4), bool))
     se = core.shrink_uncertainty(np.sqrt(np.nansum(res0 ** 2, 1))[use],
                                  np.sqrt(np.nansum(after ** 2, 1))[use], block[use],
                                  np.random.default_rng(seed)) or {}
-    named = effect not in ("none", "unexplained")
-    verdict = Verdict(effect, reason, best, G0, G1, 1 - G1 / G0, se.get("gap_before_se"),
-                      se.get("gap_after_se") if named else se.get("gap_before_se"),
-                      (se.get("shrink_se") if named else 0.0) if se else None,
-                      next(r.params for r in rows if r.effect == effect) if named else {})
+    verdict = Verdict(effect, dec.reason, best, G0, G1, 1 - G1 / G0, se.get("gap_before_se"),
+                      se.get("gap_after_se") if effect != "none" else se.get("gap_before_se"),
+                      (se.get("shrink_se") if effect != "none" else 0.0) if se else None,
+                      next(r.params for r in rows if r.effect == effect) if named else {},
+                      dec.group, dec.share, dec.share_se, dec.separated_by)
     geom = {k: np.concatenate([p.geometry[k] for p in prepared])[use]
             for k in ("sun_distance_deg", "elevation_deg", "azimuth_deg", "radius",
                       "quadrant")}

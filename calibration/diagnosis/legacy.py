@@ -31,8 +31,13 @@ def from_legacy_dict(d: dict) -> DiagnosisReport:
     return from_three_pair_v1(d)
 
 
+_PAIRED_VERDICT_KEYS = ("group", "explained_share", "explained_share_se", "separated_by")
+"""Verdict keys of the paired rule, read where a dict carries them."""
+
+
 def _verdict(v: dict, params=None) -> Verdict:
     kw = {k: v.get(k) for k in _VERDICT_KEYS}
+    kw.update({k: v[k] for k in _PAIRED_VERDICT_KEYS if v.get(k) is not None})
     kw["params"] = params if params is not None else (v.get("params") or {})
     if kw["best_candidate"] == "base":
         kw["best_candidate"] = None
@@ -154,6 +159,9 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
     data = _with_split(d.get("data", {}), d.get("split"))
     # everything else the ring diagnosis reports (heading error, base fit, ...) is kept
     extra = {k: v for k, v in d.items() if k not in _RING_KEYS and v is not None}
+    parts = {k: nf[k] for k in ("white_noise_rms", "replica_held_out_gap") if k in nf}
+    if parts:
+        extra["noise_floor_parts"] = parts
     return DiagnosisReport(
         "photodiodes", str(v.get("metric", "")), "1",
         _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,

@@ -48,6 +48,14 @@ def report_markdown(r) -> str:
         lines.append(f"- gap before: {_gap(v.gap_before, v.gap_before_se)} {u}; after "
                      f"(`{v.best_candidate or 'base'}`): {_gap(v.gap_after, v.gap_after_se)} "
                      f"{u}; shrink {shrink} %")
+    if v.explained_share is not None:
+        se = "" if v.explained_share_se is None else f" ± {100 * v.explained_share_se:.0f}"
+        lines.append(f"- share of the excess held-out variance removed by "
+                     f"`{v.best_candidate}`: {100 * v.explained_share:.0f}{se} %")
+    if v.group:
+        lines.append("- indistinguishable candidates: " + ", ".join(f"`{g}`" for g in v.group)
+                     + "".join(f"; to separate `{e}`: {m}"
+                               for e, m in (v.separated_by or {}).items()))
     he = r.extra.get("heading_error") or {}
     if he.get("base_deg") is not None:
         lines.append(f"- heading error (RMS): base {he['base_deg']:.2f} deg"
@@ -56,15 +64,23 @@ def report_markdown(r) -> str:
     if v.params:
         lines += _params_table(v.params)
     lines += ["## Candidates (ranked by held-out score)", "",
-              f"| rank | effect | k | held-out gap [{u}] | shrink | score | explains |",
-              "|---|---|---|---|---|---|---|"]
+              ("Paired difference: held-out mean square minus the best-ranked candidate's on "
+               f"the same readings [{u}^2], ± its jackknife SE over held-out blocks."), "",
+              f"| rank | effect | k | held-out gap [{u}] | shrink | score | paired difference "
+              "| share of excess | at bound | explains |",
+              "|---|---|---|---|---|---|---|---|---|---|"]
     for i, c in enumerate(r.candidates, 1):
         if not c.available:
-            lines.append(f"| — | {c.effect} | — | unavailable | — | — | {c.error} |")
+            lines.append(f"| — | {c.effect} | — | unavailable | — | — | — | — | — | "
+                         f"{c.error} |")
             continue
+        paired = ("—" if c.paired_difference is None else
+                  f"{_fmt(c.paired_difference, 3)} ± {_fmt(c.paired_difference_se, 2)}")
+        share = ("—" if c.explained_share is None else
+                 f"{100 * c.explained_share:.0f} ± {100 * (c.explained_share_se or 0):.0f} %")
         lines.append(f"| {i} | {c.effect} | {c.k} | {_fmt(c.gap_after, 4)} | "
-                     f"{100 * c.shrink:.1f} % | {c.score:.1f} | "
-                     f"{'yes' if c.explained else 'no'} |")
+                     f"{100 * c.shrink:.1f} % | {c.score:.1f} | {paired} | {share} | "
+                     f"{', '.join(c.at_bound) or '—'} | {'yes' if c.explained else 'no'} |")
     lines += ["", "## Where the gap lies (held-out residuals of the base model)", "",
               ("Share: of the excess squared gap over the noise floor within each dimension; "
                "a slice carries the gap when its RMS exceeds what white noise at the floor "

@@ -24,10 +24,13 @@ from skysim.io import _json_default
 
 from .errors import ReportFormatError
 
-__all__ = ["DIAGNOSIS_SCHEMA", "LEGACY_SCHEMA", "Candidate", "DiagnosisReport", "Slice",
+__all__ = ["DIAGNOSIS_SCHEMA", "LEGACY_SCHEMA", "PREVIOUS_SCHEMA", "Candidate", "DiagnosisReport", "Slice",
            "Verdict"]
 
-DIAGNOSIS_SCHEMA = "skysim.diagnosis/2"
+DIAGNOSIS_SCHEMA = "skysim.diagnosis/3"
+PREVIOUS_SCHEMA = "skysim.diagnosis/2"
+"""Schema of the reports written before the paired verdict (no ``group``, shares or paired
+differences; read by :meth:`DiagnosisReport.from_dict` with those fields empty)."""
 LEGACY_SCHEMA = "skysim.diagnosis/1"
 """Schema of the report dicts written before the diagnoses shared one report (read by
 :meth:`DiagnosisReport.from_dict`)."""
@@ -125,6 +128,17 @@ class Candidate:
     details : dict
         What an instrument adds (e.g. the clock offset's sensitivity; for an unavailable
         candidate, e.g. ``degenerate_with``: the parameter it cannot be told from here).
+    paired_difference, paired_difference_se : float or None
+        Held-out mean square of this candidate minus that of the best-ranked one on the same
+        held-out readings [report unit^2] (0 for the best), with its jackknife SE over the
+        held-out blocks (:func:`calibration.diagnosis.core.paired_difference`).
+    explained_share, explained_share_se : float or None
+        Share of the base model's excess held-out variance over the noise floor it removes,
+        with its jackknife SE.
+    at_bound : list of str
+        Its parameters fitted at a bound of their range (in any fold).
+    not_applicable : str or None
+        ``not applicable: <reason>`` when its fit or scoring failed on these data.
     """
 
     effect: str
@@ -138,16 +152,23 @@ class Candidate:
     params: dict = field(default_factory=dict)
     error: str | None = None
     details: dict = field(default_factory=dict)
+    paired_difference: float | None = None
+    paired_difference_se: float | None = None
+    explained_share: float | None = None
+    explained_share_se: float | None = None
+    at_bound: list = field(default_factory=list)
+    not_applicable: str | None = None
 
     @classmethod
     def unavailable(cls, effect: str, error: str, details: dict | None = None) -> Candidate:
         return cls(effect, available=False, explained=False, error=error,
-                   details=dict(details or {}))
+                   details=dict(details or {}),
+                   not_applicable=error if error.startswith("not applicable") else None)
 
     def to_dict(self) -> dict:
         if not self.available:
             return _jsonable({"effect": self.effect, "available": False, "error": self.error,
-                              **self.details})
+                              "not_applicable": self.not_applicable, **self.details})
         d = {f.name: getattr(self, f.name) for f in fields(self) if f.name != "details"}
         d.pop("error")
         return _jsonable({**d, **self.details})
@@ -170,8 +191,11 @@ class Verdict:
     Attributes
     ----------
     effect : str
-        An effect name, ``none`` (the base model is within the noise floor) or
-        ``unexplained``.
+        An effect name (it meets every condition of the verdict rule,
+        :func:`calibration.diagnosis.core.decide`), ``none`` (the base model is within the
+        noise floor), ``group`` (candidates the held-out data cannot tell apart, listed in
+        ``group``), ``partly_explained`` (the best candidate removes a share of the excess
+        below the rule's minimum) or ``unexplained``.
     reason : str
     best_candidate : str or None
         The best-ranked available candidate (None without one).
@@ -184,7 +208,16 @@ class Verdict:
     gap_before_se, gap_after_se, shrink_se : float or None
         Bootstrap standard errors over held-out blocks (None where the split has one block).
     params : dict
-        The named effect's parameters (empty for ``none`` and ``unexplained``).
+        The named effect's parameters (empty unless an effect is named).
+    group : list of str
+        The indistinguishable candidates, best first (``group``; ``partly_explained`` when
+        several share the best's place).
+    explained_share, explained_share_se : float or None
+        Share of the base model's excess held-out variance over the noise floor that the
+        best-ranked candidate removes, with its jackknife SE over held-out blocks.
+    separated_by : dict
+        ``effect -> measurement`` that would tell the group's members apart, where the
+        candidates state it.
     """
 
     effect: str
@@ -197,6 +230,10 @@ class Verdict:
     gap_after_se: float | None = None
     shrink_se: float | None = None
     params: dict = field(default_factory=dict)
+    group: list = field(default_factory=list)
+    explained_share: float | None = None
+    explained_share_se: float | None = None
+    separated_by: dict = field(default_factory=dict)
 
 
 @dataclass
@@ -289,16 +326,17 @@ class DiagnosisReport:
             raise ReportFormatError(f"a diagnosis report is a dict; got {type(d).__name__}")
         schema = d.get("schema")
         try:
-            if schema == DIAGNOSIS_SCHEMA and "unit" in d:
+            if schema in (DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA) and "unit" in d:
                 return cls._from_v2(d)
-            if schema in (LEGACY_SCHEMA, DIAGNOSIS_SCHEMA):   # no "unit": a v1-shaped dict
+            if schema in (LEGACY_SCHEMA, DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA):
+                # no "unit": a v1-shaped dict
                 from .legacy import from_legacy_dict
                 return from_legacy_dict(d)
         except KeyError as exc:
             raise ReportFormatError(f"diagnosis report ({schema}) without the key "
                                     f"{exc.args[0]!r}") from None
-        raise ReportFormatError(f"schema {schema!r} is neither {DIAGNOSIS_SCHEMA!r} nor "
-                                f"{LEGACY_SCHEMA!r}")
+        raise ReportFormatError(f"schema {schema!r} is none of {DIAGNOSIS_SCHEMA!r}, "
+                                f"{PREVIOUS_SCHEMA!r}, {LEGACY_SCHEMA!r}")
 
     @classmethod
     def _from_v2(cls, d: dict) -> DiagnosisReport:

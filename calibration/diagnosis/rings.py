@@ -5,10 +5,9 @@ shared :class:`.report.DiagnosisReport`.
 The ring diagnosis keeps its own physics (forward model, fits, fault screen, clock
 refinement, pointing) and scores and decides through :mod:`.core` like every instrument: the
 one verdict rule with the ring's thresholds
-(:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`: a candidate is named when it
-removes part of the excess variance consistently over the held-out sweeps, since a real sky
-is never reproduced to the noise floor by one effect). This adapter adds the notes on what
-pins a clock offset.
+(:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`: the paired rule of every
+instrument, with the named effect also lowering the gap in most held-out sweeps). This
+adapter adds the notes on what pins a clock offset.
 """
 
 from __future__ import annotations
@@ -76,7 +75,7 @@ def pointing_from_reports(reports, n_units: int | None = None):
     from pathlib import Path
 
     from ..photodiode_diagnosis import calibrated_pointing
-    from .report import DIAGNOSIS_SCHEMA
+    from .report import DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA
 
     def base_fit_of(item):
         if isinstance(item, DiagnosisReport):
@@ -87,7 +86,8 @@ def pointing_from_reports(reports, n_units: int | None = None):
                 doc = json.loads(Path(item).read_text())
             except (OSError, ValueError):
                 return item
-        if isinstance(doc, dict) and doc.get("schema") == DIAGNOSIS_SCHEMA and "unit" in doc:
+        if isinstance(doc, dict) and doc.get("schema") in (DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA) \
+                and "unit" in doc:
             return {"base_fit": (doc.get("extra") or {}).get("base_fit")}
         return doc
 

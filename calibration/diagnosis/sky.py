@@ -93,6 +93,9 @@ TAU_GRID_NODES = 6
 NEUTRAL_ZONE_DEG = 30.0
 HORIZON_ELEVATION_DEG = 15.0
 _ALBEDO_NODES = (0.0, 0.5, 1.0)
+PARAMETER_BOUNDS = {"d_max": (0.0, 1.0), "tau": TAU_BOUNDS, "albedo": (0.0, 1.0)}
+"""Range searched for each sky parameter (a fit at a bound: the candidate's form is wrong
+for these data or the range too narrow)."""
 DEFAULT_THRESHOLDS = Thresholds()
 
 
@@ -286,6 +289,14 @@ def _tau_loss(c, effect, tau, settings, memo):
     return memo[key]
 
 
+def _fit_and_predict(c_cal: SkyCases, c_held: SkyCases, effect: str, settings, n_grid,
+                     xatol):
+    """:func:`fit_tau` on the calibration cases and the fitted sky's ``(q, u)`` on the
+    withheld ones."""
+    f = fit_tau(c_cal, effect, settings, n_grid, xatol)
+    return f, predict_qu(c_held, effect, f["params"], settings)
+
+
 def fit_tau(c: SkyCases, effect: str, settings: EngineSettings = DEFAULT_SETTINGS,
             n_grid: int = TAU_GRID_NODES, xatol: float = 0.01) -> dict:
     """Fit ``tau`` (and the albedo for ``ground_albedo``) on calibration cases ``c``.
@@ -408,33 +419,45 @@ def diagnose_sky(cases: SkyCases, calibration_cases, *, candidates=SKY_CANDIDATE
             params, fit_gap, evals, secs = base, _rms_gap(*[a - b for a, b in zip(
                 predict_qu(c_cal, "d_max", base), (c_cal.q, c_cal.u))]), 0, 0.0
         else:
-            f = fit_tau(c_cal, name, settings, n_grid, xatol)
+            out, why = core.run_candidate(_fit_and_predict, c_cal, c_held, name, settings,
+                                          n_grid, xatol)
+            if why is None:
+                f, (q, u) = out
+                why = core.non_finite_reason(np.hypot(q - c_held.q, u - c_held.u),
+                                             np.hypot(dq0, du0))
+            if why is not None:
+                rows.append(Candidate.unavailable(name, why))
+                continue
             params, fit_gap, evals, secs = f["params"], f["gap"], f["engine_evaluations"], \
                 f["seconds"]
-            q, u = predict_qu(c_held, name, params, settings)
             residuals[name] = (q - c_held.q, u - c_held.u)
         Gc = _rms_gap(*residuals[name])
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,
             score=core.held_out_score(Gc, G0, noise_floor, N, eff.k, n_cal),
-            explained=core.explains(Gc, G0, noise_floor, thresholds),
             params={n: {"value": float(params[n]), "unit": u}
                     for n, u in zip(eff.parameter_names, eff.units)},
+            at_bound=core.at_bound([params[n] for n in eff.parameter_names],
+                                   *zip(*[PARAMETER_BOUNDS[n] for n in eff.parameter_names]),
+                                   eff.parameter_names),
             details={"calibration_gap": fit_gap, "engine_evaluations": evals,
                      "fit_seconds": secs}))
-    rows = core.rank(rows)
-    effect, reason = core.decide([r for r in rows if r.effect != "d_max"], G0, noise_floor,
-                                 thresholds)
+    # |(dq, du)| per point: its mean square is the gap's, paired per withheld case
+    held_res = {k: np.hypot(*v) for k, v in residuals.items()}
+    judged, dec = core.judge([r for r in rows if r.effect != "d_max"], held_res, c_held.case,
+                             noise_floor, thresholds, base="d_max")
+    rows = core.rank([r for r in rows if r.effect == "d_max"] + judged)
+    effect = dec.effect
     best = rows[0].effect if effect != "none" else "d_max"
     G1 = _rms_gap(*residuals[best])
-    # |(dq, du)| per point: the bootstrap's RMS over points is then the gap itself
-    se = core.shrink_uncertainty(np.hypot(dq0, du0), np.hypot(*residuals[best]), c_held.case,
+    se = core.shrink_uncertainty(held_res["d_max"], held_res[best], c_held.case,
                                  np.random.default_rng(seed)) or {}
-    named = effect not in ("none", "unexplained")
-    verdict = Verdict(effect, reason, best, G0, G1, 1 - G1 / G0, se.get("gap_before_se"),
+    named = effect == best and effect != "d_max"
+    verdict = Verdict(effect, dec.reason, best, G0, G1, 1 - G1 / G0, se.get("gap_before_se"),
                       se.get("gap_after_se") if named else se.get("gap_before_se"),
                       (se.get("shrink_se") if named else 0.0) if se else None,
-                      next(r.params for r in rows if r.effect == best))
+                      next(r.params for r in rows if r.effect == best),
+                      dec.group, dec.share, dec.share_se, dec.separated_by)
     margin = thresholds.none_margin
     return DiagnosisReport(
         instrument="sky", metric=METRIC, unit="DoLP", verdict=verdict, candidates=rows,

@@ -44,7 +44,12 @@ table is missing)."""
 METRIC = "held-out RMS of U1..U3 residuals"
 NOISE_METHOD = ("second differences of the base-fit residuals along each sweep "
                 "(von Neumann 1941)")
-DEFAULT_THRESHOLDS = Thresholds()
+DEFAULT_THRESHOLDS = Thresholds(min_share=0.9, block_name="sweeps")
+"""The one verdict rule (:func:`.core.decide`) with a named effect removing at least 90 % of
+the excess held-out variance: a sensor table reaches its noise floor once the right effect is
+modelled (the true effect removes 97-100 % on the blind benchmark's strong cases), while with
+the true effect withheld a look-alike removes up to 80 % (tilt standing in for the sun's
+motion over a sweep), which the issue's minimum of one half would name."""
 MIN_READINGS_PER_CHANNEL = 20
 MIN_HEADING_SPAN_DEG = 10.0
 
@@ -55,14 +60,26 @@ def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
     Returns
     -------
     residuals : dict
-        ``name -> ndarray (n, 3)`` (``base`` and each effect; NaN where not valid).
+        ``name -> ndarray (n, 3)`` (``base`` and each effect that could be fitted and scored
+        in every fold; NaN where not valid).
     fits : dict
         ``name -> list of FitResult``, one per fold; every candidate of a fold starts from
         that fold's base fit.
+    failed : dict
+        ``name -> "not applicable: <reason>"`` of each candidate whose fit or prediction
+        failed in a fold, or left non-finite held-out residuals
+        (:func:`.core.run_candidate`); it is not tried in the later folds.
     """
     res = {"base": np.full(data.U.shape, np.nan)}
     res.update({e.name: np.full(data.U.shape, np.nan) for e in effects})
     fits = {name: [] for name in res}
+    failed = {}
+
+    def fit_and_predict(e, cctx, hctx, cal, ho, base):
+        fit = fit_model(cctx, data.U[cal], data.valid[cal], e, base0=base.base,
+                        sigma_V=sigma_V)
+        return fit, predict(hctx, fit, e) - data.U[ho]
+
     for f in np.unique(folds):
         cal, ho = folds != f, folds == f
         cctx, hctx = data.ctx.subset(cal), data.ctx.subset(ho)
@@ -70,13 +87,24 @@ def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
         fits["base"].append(base)
         res["base"][ho] = predict(hctx, base, None) - data.U[ho]
         for e in effects:
-            fit = fit_model(cctx, data.U[cal], data.valid[cal], e, base0=base.base,
-                            sigma_V=sigma_V)
+            if e.name in failed:
+                continue
+            out, why = core.run_candidate(fit_and_predict, e, cctx, hctx, cal, ho, base)
+            if why is None:
+                fit, r = out
+                why = core.non_finite_reason(np.where(data.valid[ho], r, np.nan),
+                                             np.where(data.valid[ho], res["base"][ho], np.nan))
+            if why is not None:
+                failed[e.name] = why
+                continue
             fits[e.name].append(fit)
-            res[e.name][ho] = predict(hctx, fit, e) - data.U[ho]
+            res[e.name][ho] = r
+    for name in failed:
+        res.pop(name)
+        fits.pop(name)
     for r in res.values():
         r[~data.valid] = np.nan
-    return res, fits
+    return res, fits, failed
 
 
 def _terciles(x):
@@ -206,41 +234,52 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
     r_full = predict(ctx, full_base, None) - data.U
     floor, floor_c = core.noise_floor(r_full, data.valid, ctx.block)
     sigma = max(floor, 1e-5)
-    res, fold_fits = cross_validate(data, fold_of, cands, sigma)
+    res, fold_fits, failed = cross_validate(data, fold_of, cands, sigma)
+    unavailable.update(failed)
+    tried = [e for e in cands if e.name not in failed]
     N = int(np.isfinite(res["base"]).sum())
     n_cal = int(data.valid.sum() * (1 - 1 / np.unique(fold_of).size))
     G0 = core.rms(res["base"])
     rows = []
-    for e in cands:
+    for e in tried:
         Gc = core.rms(res[e.name])
+        P = np.array([f.params for f in fold_fits[e.name]])
         rows.append(Candidate(
             e.name, k=e.k, gap_after=1e3 * Gc, shrink=1 - Gc / G0,
             score=core.held_out_score(Gc, G0, floor, N, e.k, n_cal),
-            explained=core.explains(Gc, G0, floor, thresholds),
             converged=bool(all(f.converged for f in fold_fits[e.name])),
             params=_fold_params(fold_fits[e.name], e),
+            at_bound=core.at_bound(P, e.bounds[:, 0], e.bounds[:, 1], e.parameter_names),
             details={"params_from": "mean over calibration folds (se: fold spread)"}))
     rows = core.rank(rows)
     if rows:  # the best candidate's parameters from one fit on all data, with covariance
-        e = next(c for c in cands if c.name == rows[0].effect)
-        full = fit_model(ctx, data.U, data.valid, e, base0=full_base.base,
-                         effect0=np.mean([f.params for f in fold_fits[e.name]], axis=0),
-                         sigma_V=sigma)
-        rows[0].params = effect_parameters(full, e)
-        rows[0].converged = bool(full.converged and rows[0].converged)
-        rows[0].details["params_from"] = "all data (se: Gauss-Newton covariance)"
+        e = next(c for c in tried if c.name == rows[0].effect)
+        full, why = core.run_candidate(
+            fit_model, ctx, data.U, data.valid, e, base0=full_base.base,
+            effect0=np.mean([f.params for f in fold_fits[e.name]], axis=0), sigma_V=sigma)
+        if why is None:
+            rows[0].params = effect_parameters(full, e)
+            rows[0].converged = bool(full.converged and rows[0].converged)
+            rows[0].at_bound = sorted(set(rows[0].at_bound) | set(core.at_bound(
+                full.params, e.bounds[:, 0], e.bounds[:, 1], e.parameter_names)))
+            rows[0].details["params_from"] = "all data (se: Gauss-Newton covariance)"
+        else:
+            rows[0].details["all_data_fit"] = why
     rows += [Candidate.unavailable(name, msg) for name, msg in unavailable.items()]
-    effect, reason = core.decide(rows, 1e3 * G0, 1e3 * floor, thresholds)
+    rows, dec = core.judge(rows, res, ctx.block, 1e3 * floor, thresholds, scale=1e3)
+    effect = dec.effect
     best = rows[0] if rows and rows[0].available else None
     after = best.effect if best is not None else "base"
     se = core.shrink_uncertainty(res["base"], res[after], ctx.block,
                                  np.random.default_rng(seed))
     G1 = core.rms(res[after]) if effect != "none" else G0
-    verdict = Verdict(effect, reason, best.effect if best else None, 1e3 * G0, 1e3 * G1,
+    named = best is not None and effect == best.effect
+    verdict = Verdict(effect, dec.reason, best.effect if best else None, 1e3 * G0, 1e3 * G1,
                       1 - G1 / G0, 1e3 * se["gap_before_se"],
                       1e3 * (se["gap_after_se"] if effect != "none" else se["gap_before_se"]),
                       se["shrink_se"] if effect != "none" else 0.0,
-                      best.params if effect not in ("none", "unexplained") else {})
+                      best.params if named else {}, dec.group, dec.share, dec.share_se,
+                      dec.separated_by)
     phi, _ = geometry(ctx)
     sun_el, _ = ctx.sun.elevation_azimuth(ctx.t_s)
     from ..effects.dark_current import scene_illuminance_lx

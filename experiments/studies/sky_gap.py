@@ -9,7 +9,7 @@ it, and how far the withheld gap shrinks. The tables are exact; the noise floor 
 reproducibility of the tables by the engine (``NOISE_FLOOR``).
 
 Writes to ``results/sky-gap/`` (or ``--out``): ``diagnosis_tau<t>_A<a>.json`` (schema
-"skysim.diagnosis/2", ``instrument: sky``) per atmosphere, ``summary.csv``, ``summary.json``,
+"skysim.diagnosis/3", ``instrument: sky``) per atmosphere, ``summary.csv``, ``summary.json``,
 ``report.md``, ``gap_by_slice.png`` (withheld gap per slice before/after) and
 ``residual_maps.png`` (withheld residual |(dq, du)| over the sky, before/after, mu0 = 0.4).
 """
