@@ -73,10 +73,35 @@ def _cycle(graph):
     return None
 
 
-@pytest.mark.parametrize("package", PACKAGES)
+KNOWN = {
+    # the reader of a report dict hands the old skysim.diagnosis/1 shape to the legacy
+    # converter, which the ring diagnosis still writes through; goes when the ring builds
+    # its report directly
+    ("calibration.diagnosis.report", "calibration.diagnosis.legacy"),
+    # the dark-clock search diagnoses the session again at each clock start; goes when the
+    # clock search becomes an outer step (fit, shift the times, diagnose once)
+    ("calibration.photodiode_diagnosis.dark_clock", "calibration.photodiode_diagnosis.run"),
+}
+"""Import edges that still close a cycle, each with what removes it; no other may."""
+
+
+@pytest.mark.parametrize("package", PACKAGES + ["calibration"])
 def test_no_import_cycle(package):
-    cycle = _cycle(_graph(package))
+    graph = _graph(package)
+    for a, b in KNOWN:
+        graph.get(a, set()).discard(b)
+    cycle = _cycle(graph)
     assert cycle is None, " -> ".join(cycle)
+
+
+def test_known_cycles_still_exist():
+    """Each listed edge still closes a cycle: one that no longer does leaves the list."""
+    graph = _graph("calibration")
+    for a, b in KNOWN:
+        assert b in graph[a], (a, b)
+        g = {m: set(e) for m, e in graph.items()}
+        g[a] = {b}
+        assert _cycle(g) is not None, (a, b)
 
 
 def test_a_planted_cycle_is_found():

@@ -12,77 +12,37 @@ far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
 - :func:`diagnose` (:mod:`.api`): the one entry point.
 """
 
-from .api import diagnose
-from .camera import CameraFrame, CameraFrames, CameraInputError, diagnose_camera
-from .core import Thresholds, assign_folds, decide, noise_floor
-from .errors import (
-    AllNaNChannelError,
-    DiagnosisError,
-    EffectUnavailableError,
-    InsufficientDataError,
-    MissingSiteError,
-    ReportFormatError,
-    SingleHeadingError,
-    ThresholdsError,
-    UnsupportedInstrumentError,
-)
-from .fit_result import FitResult
-from .report import (
-    DIAGNOSIS_SCHEMA,
-    LEGACY_SCHEMA,
-    Candidate,
-    DiagnosisReport,
-    Slice,
-    Verdict,
-)
-from .three_pair import DEFAULT_CANDIDATES, cross_validate, diagnose_three_pair
-from .three_pair_data import (
-    DiagnosisData,
-    data_from_photodiodes,
-    data_from_table,
-    load_diagnosis_data,
-)
-from .three_pair_data import (
-    _daq_saturation_V as _daq_saturation_V,  # the DAQ rails, tested on their own
-)
-from .three_pair_fit import fit_model
+from skysim._lazy import lazy_namespace
 
-noise_floor_V = noise_floor
-"""The noise floor of three-pair residuals in volts: :func:`.core.noise_floor`."""
+_EXPORTS = {
+    "diagnose": ".api",
+    **dict.fromkeys(("CameraFrame", "CameraFrames", "CameraInputError", "diagnose_camera"),
+                    ".camera"),
+    **dict.fromkeys(("Thresholds", "assign_folds", "decide", "noise_floor"), ".core"),
+    **dict.fromkeys(("AllNaNChannelError", "DiagnosisError", "EffectUnavailableError",
+                     "InsufficientDataError", "MissingSiteError", "ReportFormatError",
+                     "SingleHeadingError", "ThresholdsError", "UnsupportedInstrumentError"),
+                    ".errors"),
+    "FitResult": ".fit_result",
+    **dict.fromkeys(("DIAGNOSIS_SCHEMA", "LEGACY_SCHEMA", "Candidate", "DiagnosisReport",
+                     "Slice", "Verdict"), ".report"),
+    **dict.fromkeys(("DEFAULT_CANDIDATES", "cross_validate", "diagnose_three_pair"),
+                    ".three_pair"),
+    **dict.fromkeys(("DiagnosisData", "data_from_photodiodes", "data_from_table",
+                     "load_diagnosis_data", "_daq_saturation_V"), ".three_pair_data"),
+    "fit_model": ".three_pair_fit",
+}
+"""Each public name and the submodule that defines it, imported on first use (PEP 562), so
+that importing one submodule (a ring module importing :mod:`.core`) does not import every
+adapter, and no import cycle runs through this package."""
 
-__all__ = [
-    "DEFAULT_CANDIDATES",
-    "DIAGNOSIS_SCHEMA",
-    "LEGACY_SCHEMA",
-    "AllNaNChannelError",
-    "CameraFrame",
-    "CameraFrames",
-    "CameraInputError",
-    "Candidate",
-    "DiagnosisData",
-    "DiagnosisError",
-    "DiagnosisReport",
-    "EffectUnavailableError",
-    "FitResult",
-    "InsufficientDataError",
-    "MissingSiteError",
-    "ReportFormatError",
-    "SingleHeadingError",
-    "Slice",
-    "Thresholds",
-    "ThresholdsError",
-    "UnsupportedInstrumentError",
-    "Verdict",
-    "assign_folds",
-    "cross_validate",
-    "data_from_photodiodes",
-    "data_from_table",
-    "decide",
-    "diagnose",
-    "diagnose_camera",
-    "diagnose_three_pair",
-    "fit_model",
-    "load_diagnosis_data",
-    "noise_floor",
-    "noise_floor_V",
-]
+_getattr, __dir__ = lazy_namespace(__name__, _EXPORTS)
+
+
+def __getattr__(name: str):
+    if name == "noise_floor_V":   # the noise floor of three-pair residuals in volts
+        return _getattr("noise_floor")
+    return _getattr(name)
+
+
+__all__ = sorted(n for n in _EXPORTS if not n.startswith("_")) + ["noise_floor_V"]

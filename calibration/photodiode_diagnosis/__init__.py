@@ -9,13 +9,22 @@ scale, clock offset, tilt) and :mod:`.run` (held-out gap, where, which, how far,
 error). Method and report: ``docs/diagnosis.md``.
 """
 
-from .effects import RING_EFFECT_NAMES, EffectUnavailableError, get_ring_effect
-from .errors import (InstrumentDataError, NoUsableChannelsError, PointingCalibrationError,
-                     SunTooLowError, YawInRadiansWarning)
-from .faults import screen
-from .instrument import Instrument, instrument_from_photodiodes
-from .pointing import calibrated_pointing
-from .run import diagnose_instrument, diagnose_photodiodes
+from skysim._lazy import lazy_namespace
+
+_EXPORTS = {
+    **dict.fromkeys(("RING_EFFECT_NAMES", "EffectUnavailableError", "get_ring_effect"),
+                    ".effects"),
+    **dict.fromkeys(("InstrumentDataError", "NoUsableChannelsError", "PointingCalibrationError",
+                     "SunTooLowError", "YawInRadiansWarning"), ".errors"),
+    "screen": ".faults",
+    **dict.fromkeys(("Instrument", "instrument_from_photodiodes"), ".instrument"),
+    "calibrated_pointing": ".pointing",
+    **dict.fromkeys(("diagnose_instrument", "diagnose_photodiodes"), ".run"),
+}
+"""Each public name and the submodule that defines it, imported on first use (PEP 562): a
+module importing one submodule does not import the whole diagnosis."""
+
+__getattr__, __dir__ = lazy_namespace(__name__, _EXPORTS)
 
 __all__ = ["RING_EFFECT_NAMES", "EffectUnavailableError", "Instrument", "InstrumentDataError",
            "NoUsableChannelsError", "PointingCalibrationError", "SunTooLowError",

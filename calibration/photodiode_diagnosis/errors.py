@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from skysim.exceptions import SkysimWarning
 
-from ..diagnosis import DiagnosisError, InsufficientDataError
+from ..diagnosis.errors import DiagnosisError, InsufficientDataError
 
 __all__ = ["InstrumentDataError", "InsufficientDataError", "NoUsableChannelsError",
            "PointingCalibrationError",
