@@ -178,3 +178,15 @@ def test_given_gains_serve_units_whose_readings_do_not_define_them(ring):
     bare = check_instrument(few, 0.0, sun[:12])
     assert bare.gain_source == ["none"] * 8
     assert bare.sum_rule.rms.max() > 10 * given.sum_rule.rms.max()
+
+
+def test_ring_diagnosis_carries_the_checks():
+    """Every ring diagnosis reports the checks, placed by its base fit: a clean simulated
+    session (Rayleigh sky, read noise) raises no alarm and corrects every unit."""
+    from calibration.photodiode_diagnosis.run import diagnose_photodiodes
+    from ring_sessions import ring_session
+    doc = diagnose_photodiodes(ring_session(seed=2), ("yaw_scale",), n_folds=3)
+    checks = doc["instrument_checks"]
+    assert checks["units_failing_in_motion"] == [] and checks["units_with_side_glare"] == []
+    assert set(checks["gain_source"]) <= {"sum rule", "given"}
+    assert max(row["rms"] for row in checks["sum_rule"]) < 2e-3

@@ -327,13 +327,18 @@ class InstrumentChecks:
         return [int(u) for u in self.glare.unit[self.glare.side_dependent]]
 
     def to_dict(self) -> dict:
+        """Plain JSON types, NaN as None."""
+        def records(df):
+            return [{k: (None if isinstance(v, float) and not np.isfinite(v) else v)
+                     for k, v in row.items()} for row in df.to_dict(orient="records")]
+        ratio = self.turning_ratio
         return {"gains": [None if not np.isfinite(g) else float(g) for g in self.gains],
                 "gain_source": list(self.gain_source),
-                "sum_rule": self.sum_rule.to_dict(orient="records"),
-                "motion": self.motion.to_dict(orient="records"),
-                "glare": self.glare.to_dict(orient="records"),
+                "sum_rule": records(self.sum_rule),
+                "motion": records(self.motion),
+                "glare": records(self.glare),
                 "units_failing_in_motion": self.units_failing_in_motion,
-                "turning_ratio": self.turning_ratio,
+                "turning_ratio": ratio if np.isfinite(ratio) else None,
                 "motion_breaks_rule": self.motion_breaks_rule,
                 "units_with_side_glare": self.units_with_side_glare}
 

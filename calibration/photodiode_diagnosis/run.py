@@ -863,6 +863,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                           "base_deg": herr.get("base"),
                           "best_deg": herr.get(best) if best in herr else None},
         "base_fit": _base_fit_report(first.theta, L, base, work, sign),
+        "instrument_checks": _instrument_checks(work, first.theta, L, base, sun),
         "data": dict(inst.source, readings_excluded=scr.counts, glare=scr.glare,
                      sun_elevation_deg=[float(sun_el.min()), float(sun_el.max())]),
         "split": {"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
@@ -1066,6 +1067,21 @@ def _assemble_headings(heads, inst):
         m = inst.sweep == s
         off[s] = float(np.median(heads[m] - inst.yaw_deg[m]))
     return off
+
+
+def _instrument_checks(inst: Instrument, theta, L, fwd, sun) -> dict:
+    """The model-free checks of :mod:`.checks` on the screened readings: the sum rule by sun
+    distance, side and motion, side-dependent glare, units failing in motion. The base fit
+    places the sun (its heading offsets) and lends its gains and dark offsets to the units
+    whose readings do not define their own."""
+    from .checks import check_instrument
+    heading = np.asarray(theta[L.heading], float)
+    offset = heading[inst.sweep] if heading.size == inst.n_sweeps else heading[0]
+    fitted = fwd.usable.any(axis=0)
+    gains = np.where(fitted, np.exp(theta[L.lam]), np.nan)
+    dark = np.where(fitted, theta[L.off] * fwd.level, np.nan)
+    return check_instrument(inst, offset, sun(inst.t_s), gains=gains,
+                            dark_offsets=dark).to_dict()
 
 
 def _base_fit_report(theta, L, fwd, inst, sign):
