@@ -433,6 +433,23 @@ def write_diagnosis(report: DiagnosisReport, out: Path) -> list[Path]:
     return [out / "diagnosis.json", out / "report.md", *plot_diagnosis(report, out)]
 
 
+DEFAULT_CANDIDATE_COUNT = 10
+"""Candidates a diagnosis tries when none are named (the ring's defaults; the three-pair
+sensor's are fewer), for the expected duration."""
+
+
+def _expected_seconds(data, names) -> float:
+    """Expected wall time of ``skysim diagnose`` [s] (:data:`.progress.COMMAND_SECONDS`): a
+    camera frame as the README's 512 x 512 image, a table as the README's ring session per
+    candidate (half its two-candidate cost each), which a real ring session of 5,000 samples
+    with every default candidate (about 60 s) matches within 2x."""
+    from .progress import COMMAND_SECONDS
+    if Path(data).suffix.lower() in (".tif", ".tiff", ".png"):
+        return COMMAND_SECONDS["diagnose camera image 512x512"]
+    n = len(names) if names else DEFAULT_CANDIDATE_COUNT
+    return COMMAND_SECONDS["diagnose ring, two effects"] / 2.0 * max(n, 1)
+
+
 def _diagnose_cmd(args) -> int:
     from calibration import diagnose as run_diagnosis
     names = args.effects or None
@@ -448,7 +465,9 @@ def _diagnose_cmd(args) -> int:
         [("--out", out / "diagnosis.json"), ("--out", out / "report.md")],
         [("data", p) for p in data_file_and_sidecars(args.data)]
         + [("--pointing-from", p) for p in options.get("pointing_from", ())])
-    report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
+    from .progress import working
+    with working("skysim diagnose", _expected_seconds(args.data, names)):
+        report = run_diagnosis(args.data, names, folds=args.folds, seed=args.seed, **options)
     written = write_diagnosis(report, out)
     v = report.verdict
     # a dimensionless gap (a fraction of the mean reading or signal) is printed bare
