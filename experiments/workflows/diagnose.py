@@ -440,14 +440,15 @@ sensor's are fewer), for the expected duration."""
 
 def _expected_seconds(data, names) -> float:
     """Expected wall time of ``skysim diagnose`` [s] (:data:`.progress.COMMAND_SECONDS`): a
-    camera frame as the README's 512 x 512 image, a table as the README's ring session per
-    candidate (half its two-candidate cost each), which a real ring session of 5,000 samples
-    with every default candidate (about 60 s) matches within 2x."""
+    camera frame as the README's 512 x 512 image; a table 0.75 times the README's
+    two-candidate ring session per candidate, between that session (6 s, estimated 9 s) and
+    a real ring session of 5,000 samples with the ten default candidates (about 65 s on a
+    shared 2-core machine, estimated 45 s): within 2x of both."""
     from .progress import COMMAND_SECONDS
     if Path(data).suffix.lower() in (".tif", ".tiff", ".png"):
         return COMMAND_SECONDS["diagnose camera image 512x512"]
     n = len(names) if names else DEFAULT_CANDIDATE_COUNT
-    return COMMAND_SECONDS["diagnose ring, two effects"] / 2.0 * max(n, 1)
+    return 0.75 * COMMAND_SECONDS["diagnose ring, two effects"] * max(n, 1)
 
 
 def _diagnose_cmd(args) -> int:
