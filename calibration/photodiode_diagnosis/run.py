@@ -174,7 +174,9 @@ def _fit_and_hold_out(fe: Forward, theta_base, ftr: Forward, effect, sigma, iho,
     it, for :func:`_continue_and_hold_out` to take on) and its residuals on the held-out
     sweeps ``iho``; returns ``(fit, aop_fit, held-out Forward, held-out theta, residuals)``."""
     start = _start_effect(fe, theta_base, ftr, effect, sigma)
-    fr, fr_aop = _fit_effect(fe, start, sigma, continued=continued)
+    fr, fr_aop = _fit_effect(fe, start, sigma)
+    if continued:
+        fr, fr_aop = _continued(fe, (fr, fr_aop), sigma, fe.aop_sky)
     feho = Forward(iho, effect, sun=sun, polarizer_sign=sign)
     teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
     return fr, fr_aop, feho, teho, re
@@ -188,7 +190,7 @@ def _continue_and_hold_out(fe: Forward, pair, sigma, feho: Forward):
     return fr, fr_aop, teho, re
 
 
-def _fit_effect(fe: Forward, starts, sigma, continued: bool = True):
+def _fit_effect(fe: Forward, starts, sigma):
     """Fit from each start (:func:`fit_pinned`: a geometric effect on the angle of
     polarization first); the lowest cost wins, judged on the stage that fixes the effect (the
     AoP fit for a geometric one). For the clock offset, ties (:data:`CLOCK_TIE`) go to the
@@ -231,7 +233,7 @@ def _fit_effect(fe: Forward, starts, sigma, continued: bool = True):
         close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
         chosen = min(close, key=lambda f: float(np.sum(np.abs(
             f[0].theta[L.effect] - np.asarray(fe.effect.null)))))
-    return _continued(fe, chosen, sigma, aop_sky) if continued else chosen
+    return chosen
 
 
 EFFECT_CONTINUE_ITER = 150
@@ -239,7 +241,8 @@ EFFECT_CONTINUE_ITER = 150
 verdict names only a candidate whose fit converged, and the short descent that suffices to
 rank the starts stops some fits on their way (an overcast's thickness along its shallow
 valley with the gains: a simulated overcast of thickness 0.6 needed over 40 more; only fits
-that did not converge pay for them)."""
+that did not converge pay for them, and outside the sky candidates only those of candidates
+that can matter to the verdict, :func:`_continue_pending`)."""
 
 
 def _continued(fe: Forward, pair, sigma, aop_sky):
