@@ -768,7 +768,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                 p = fr.theta[fe.layout.effect]
                 best_sky = (fr.cost, e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s)),
                             {"effect": e.name, **dict(zip(e.names, map(float, p)))})
-            if not fr.converged:
+            if not fr.converged and not _has_sky(e):    # a sky's fit was continued above
                 pending.setdefault(e.name, []).append(dict(
                     fe=fe, pair=(fr, fr_aop), feho=feho, fho=fho, r=r, ho=ho,
                     i=len(fold_params[e.name]), i_sd=len(fold_sd[e.name]),
