@@ -345,17 +345,15 @@ class InstrumentChecks:
 
 def _jackknife_means(df: pd.DataFrame, keys: list) -> pd.DataFrame:
     """Mean, RMS and count of ``s`` per group, with the delete-one-sweep jackknife SE of the
-    mean: ``var = (m - 1) / m * sum_i (mean_(i) - mean_(.))^2`` over the group's ``m``
-    sweeps ([2]_, eq. 11.5); NaN for a group seen in one sweep."""
+    mean (:func:`calibration.diagnosis.core.jackknife_ratio` of the per-sweep sums and
+    counts, [2]_ eq. 11.5; NaN for a group seen in one sweep) and the number of ``sweeps``."""
+    from ..diagnosis.core import jackknife_ratio
     per = df.groupby(keys + ["sweep"], observed=True).s.agg(["sum", "count"]).reset_index()
-    tot = per.groupby(keys, observed=True)[["sum", "count"]].transform("sum")
-    rest = (tot["count"] - per["count"]).where(lambda c: c > 0)
-    per["loo"] = (tot["sum"] - per["sum"]) / rest
-    g = per.groupby(keys, observed=True).loo
-    m = g.count()
-    se = np.sqrt((m - 1) * g.var(ddof=0)).where(m > 1).rename("mean_se").to_frame()
-    se["sweeps"] = m
-    se = se.reset_index()
+    se = per.groupby(keys, observed=True).apply(
+        lambda g: pd.Series({"mean_se": jackknife_ratio(g["sum"], g["count"])[1],
+                             "sweeps": len(g)}), include_groups=False).reset_index()
+    se["mean_se"] = se.mean_se.replace(np.inf, np.nan)
+    se["sweeps"] = se.sweeps.astype(int)
     out = df.assign(s2=df.s ** 2).groupby(keys, observed=True).agg(
         n=("s", "count"), mean=("s", "mean"), ms=("s2", "mean")).reset_index()
     out["rms"] = np.sqrt(out.pop("ms"))
