@@ -349,11 +349,12 @@ def _jackknife_means(df: pd.DataFrame, keys: list) -> pd.DataFrame:
     counts, [2]_ eq. 11.5; NaN for a group seen in one sweep) and the number of ``sweeps``."""
     from ..diagnosis.core import jackknife_ratio
     per = df.groupby(keys + ["sweep"], observed=True).s.agg(["sum", "count"]).reset_index()
-    se = per.groupby(keys, observed=True).apply(
-        lambda g: pd.Series({"mean_se": jackknife_ratio(g["sum"], g["count"])[1],
-                             "sweeps": len(g)}), include_groups=False).reset_index()
-    se["mean_se"] = se.mean_se.replace(np.inf, np.nan)
-    se["sweeps"] = se.sweeps.astype(int)
+    rows = []
+    for key, g in per.groupby(keys, observed=True):
+        sd = jackknife_ratio(g["sum"].to_numpy(), g["count"].to_numpy())[1]
+        key = key if isinstance(key, tuple) else (key,)
+        rows.append((*key, sd if np.isfinite(sd) else np.nan, len(g)))
+    se = pd.DataFrame(rows, columns=keys + ["mean_se", "sweeps"]).astype({"sweeps": int})
     out = df.assign(s2=df.s ** 2).groupby(keys, observed=True).agg(
         n=("s", "count"), mean=("s", "mean"), ms=("s2", "mean")).reset_index()
     out["rms"] = np.sqrt(out.pop("ms"))
