@@ -40,6 +40,17 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
 - ``stray_light`` (``S_p`` per photodiode, ``scale_deg``): sunlight scattered inside the
   instrument onto each photodiode, unpolarized and of its own strength, falling off with the
   sun's distance from the unit's axis. Base at ``S = 0``.
+- ``side_glare`` (``S_p``, ``b_p`` per photodiode, ``scale_deg``): ``stray_light`` that is
+  stronger on the side of a unit the sun is on: ``S_p exp(-psi / psi_0) (1 + b_p s)``, ``s``
+  the sine of the sun's bearing about the unit's axis (+1 with the sun square to the unit's
+  left, -1 to its right; :func:`sun_side`), ``|b_p| <= 1`` keeping the light non-negative.
+  Light reaching a unit's photodiodes unequally through its casing breaks the unit's sum rule
+  ``r0 + r90 = r45 + r135`` with a sign that flips with the sun's side, which the model-free
+  checks test (:func:`.checks.check_instrument`). Base at ``S = 0``; ``stray_light`` at ``b = 0``.
+- ``read_lag`` (``lag_s``): the readings at recorded time ``t`` were taken at the yaw recorded
+  at ``t - lag`` (a delay between the attitude record and the converter); the recorded yaw is
+  interpolated within each sweep (:func:`lagged_yaw`). Acts only while the instrument turns,
+  so the residual of moving samples drops and that of standing ones does not. Base at 0.
 - ``tilt`` (``pitch_deg``, ``roll_deg``): a constant tilt of the instrument on the platform
   (added to the recorded attitude), so the units' views circle the zenith as it turns. Base
   at 0.
@@ -80,14 +91,14 @@ from ..effects import UnknownEffectError
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
-           "fit_engine_settings"]
+           "fit_engine_settings", "sun_side", "lagged_yaw"]
 
 RING_EFFECT_NAMES = ("multiple_scattering", "neutral_points", "fov", "occlusion", "yaw_scale",
                      "clock_offset", "tilt", "aureole", "stray_light")
 """The default candidates. ``aerosol`` is asked for by name (``--effects aerosol,...``): its
 engine runs (Mie phase matrices on a 25 x 37 table, per AOD and sun node) add minutes to a
 session, beyond the one-minute goal of a default diagnosis on this machine class."""
-OPTIONAL_EFFECT_NAMES = ("aerosol", "overcast")
+OPTIONAL_EFFECT_NAMES = ("aerosol", "overcast", "side_glare", "read_lag")
 
 
 class RingEffect:
@@ -106,7 +117,8 @@ class RingEffect:
     output_only: ClassVar[bool] = False
     """True when the parameters act on the readings only (no new sampling of the sky)."""
     per_photodiode: ClassVar[int] = 0
-    """Number of leading parameters that are one per photodiode (after :meth:`bind`)."""
+    """Number of leading parameters that are one per photodiode (after :meth:`bind`): a
+    multiple of the number of photodiodes, in blocks of one parameter each."""
     geometric: ClassVar[bool] = False
     """True when the effect moves where the units look or where the sun is (clock, tilt, yaw
     scale): its parameters are fitted, with the units' pointing, on the angle of polarization
@@ -662,8 +674,123 @@ class StrayLight(RingEffect):
         return np.asarray(p[:P]) * np.exp(-psi / p[P])
 
 
+
+def sun_side(obs: SkySample, sun_enu) -> np.ndarray:
+    """Sine of the sun's bearing about each unit's axis (n, U): ``+1`` with the sun square
+    to the unit's left (looking along its axis, the horizontal direction ``z x view``),
+    ``-1`` to its right, 0 with the sun in the vertical plane of the axis or on it.
+
+    Parameters
+    ----------
+    obs : SkySample
+        Views of every unit, elevation and azimuth (n, U) [deg, azimuth clockwise from north].
+    sun_enu : array (n, 3)
+        Unit vectors to the sun in east-north-up.
+    """
+    el = np.radians(obs.view_elevation_deg)
+    az = np.radians(obs.view_azimuth_deg)
+    sun = np.asarray(sun_enu, float)
+    # z x view for view = (sin az cos el, cos az cos el, sin el) is cos el (-cos az, sin az, 0)
+    left = sun[:, None, 0] * -np.cos(az) + sun[:, None, 1] * np.sin(az)
+    view = np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=-1)
+    cos_psi = np.clip(np.einsum("nuk,nk->nu", view, sun), -1.0, 1.0)
+    sin_psi = np.sqrt(1.0 - cos_psi ** 2)
+    return np.where(sin_psi > 1e-9, np.clip(left / np.maximum(sin_psi, 1e-9), -1.0, 1.0), 0.0)
+
+
+class SideGlare(RingEffect):
+    """Unpolarized glare per photodiode, falling off with the sun's distance from the unit's
+    axis and stronger on one side of the unit (module docstring)."""
+
+    name = "side_glare"
+    output_only = True
+
+    def __init__(self):
+        self.names, self.units = ("scale_deg",), ("deg",)
+        self.null, self.lower, self.upper = (15.0,), (2.0,), (90.0,)
+        self.prior_sd, self.fd_step = (np.inf,), (0.05,)
+
+    def bind(self, inst) -> None:
+        P = len(inst.columns)
+        self.per_photodiode = 2 * P
+        self.names = (tuple(f"S_{c}" for c in inst.columns)
+                      + tuple(f"b_{c}" for c in inst.columns) + ("scale_deg",))
+        self.units = ("1",) * (2 * P) + ("deg",)
+        self.null = (0.0,) * (2 * P) + (15.0,)
+        self.lower = (0.0,) * P + (-1.0,) * P + (2.0,)
+        self.upper = (20.0,) * P + (1.0,) * P + (90.0,)
+        # the side fraction is weakly bound by the prior (1 sd at the bounds' half-width):
+        # it is only defined where S > 0
+        self.prior_sd = (5.0,) * P + (0.5,) * P + (np.inf,)
+        self.fd_step = (1e-4,) * P + (1e-3,) * P + (0.05,)
+
+    def starts(self, ctx) -> list:
+        P = self.per_photodiode // 2
+        return [np.r_[np.full(P, 0.05), np.zeros(P), s] for s in (5.0, 15.0, 30.0)]
+
+    def additive(self, p, obs, sun_enu, pd_unit):
+        P = self.per_photodiode // 2
+        p = np.asarray(p, float)
+        psi = sun_distance_deg(obs, sun_enu)[:, pd_unit]
+        side = sun_side(obs, sun_enu)[:, pd_unit]
+        return p[:P] * np.exp(-psi / p[2 * P]) * (1.0 + p[P:2 * P] * side)
+
+
+def lagged_yaw(t_s, yaw_deg, sweep, lag_s: float) -> np.ndarray:
+    """The recorded yaw at ``t - lag`` [deg], interpolated linearly within each sweep and
+    held at its first and last samples.
+
+    Parameters
+    ----------
+    t_s : array (n,)
+        Sample times [s], increasing within each sweep.
+    yaw_deg : array (n,)
+        Recorded yaw [deg], unwrapped within each sweep.
+    sweep : array (n,) of int
+        Sweep of each sample; sweeps are contiguous runs of samples.
+    lag_s : float
+        Delay of the readings behind the attitude record [s].
+    """
+    t = np.asarray(t_s, float)
+    yaw = np.asarray(yaw_deg, float)
+    sweep = np.asarray(sweep)
+    if lag_s == 0.0 or t.size == 0:
+        return yaw
+    start = np.r_[True, sweep[1:] != sweep[:-1]]
+    run = np.cumsum(start) - 1
+    first = np.flatnonzero(start)
+    last = np.r_[first[1:] - 1, t.size - 1]
+    # each sweep on its own stretch of one time axis, far apart, so that one interpolation
+    # never reaches into the neighbouring sweep
+    span = float(np.max(t) - np.min(t)) + abs(lag_s) + 1.0
+    shift = run * 2.0 * span
+    query = np.clip(t - lag_s, t[first][run], t[last][run]) + shift
+    return np.interp(query, t + shift, yaw)
+
+
+class ReadLag(RingEffect):
+    """Readings that lag the attitude record by ``lag_s`` seconds (module docstring)."""
+
+    name = "read_lag"
+    geometric = True
+    names = ("lag_s",)
+    units = ("s",)
+    null = (0.0,)
+    lower = (-2.0,)
+    upper = (2.0,)
+    prior_sd = (1.0,)
+    fd_step = (2e-3,)
+
+    def starts(self, ctx) -> list:
+        return [np.array([v]) for v in (-0.3, 0.0, 0.3)]
+
+    def yaw(self, inst, p) -> np.ndarray:
+        return lagged_yaw(inst.t_s, inst.yaw_deg, inst.sweep, float(p[0]))
+
+
 _EFFECTS = {c.name: c for c in (MultipleScattering, Aerosol, NeutralPoints, Overcast, FieldOfView,
-                                Occlusion, YawScale, ClockOffset, Tilt, Aureole, StrayLight)}
+                                Occlusion, YawScale, ClockOffset, Tilt, Aureole, StrayLight,
+                                SideGlare, ReadLag)}
 
 
 def get_ring_effect(name: str) -> RingEffect:

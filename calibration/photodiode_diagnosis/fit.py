@@ -115,8 +115,8 @@ def _groups(fwd: Forward, free: np.ndarray):
     else:
         groups.append((h, "geometry", [("rows", inst.sweep == k) for k in range(len(h))]))
     n_pd_eff = 0 if e is None else e.per_photodiode
-    if n_pd_eff:
-        s0 = L.effect.start
+    P = inst.pd_unit.size
+    for s0 in range(L.effect.start, L.effect.start + n_pd_eff, P):  # blocks of P, one each
         for j in range(rank.max() + 1):
             idx = [s0 + p for p in np.flatnonzero(rank == j)]
             groups.append((idx, "output", [("cols", cols_of_unit[inst.pd_unit[i - s0]])

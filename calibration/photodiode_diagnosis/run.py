@@ -803,7 +803,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                      "excess_removed": core.excess_removed(gc, g0, floor),
                      "sweeps_improved": improved, "blocks_improved": improved,
                      "converged": all(fold_converged[e.name]),
-                     "at_bound": core.at_bound(P, e.lower, e.upper, e.names),
+                     "at_bound": core.at_bound(P, e.lower, e.upper, e.names, null=e.null),
                      "params": _fold_params(e, P, fold_sd[e.name])})
         if e.geometric:
             rows[-1]["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
