@@ -574,8 +574,10 @@ def register(sub) -> None:
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
                    "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
                    "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
-                   "engine runs take minutes) and overcast (asked for by name: a cloud layer "
-                   "over the whole sky); for camera frames: lens,polarizer_angles,"
+                   "engine runs take minutes), overcast (asked for by name: a cloud layer "
+                   "over the whole sky), side_glare (glare stronger on the side of a unit "
+                   "the sun is on) and read_lag (readings lagging the yaw record); for "
+                   "camera frames: lens,polarizer_angles,"
                    "extinction_ratio,sky_dop,overcast (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
