@@ -1,0 +1,170 @@
+"""Parameters a day's sessions should share: their common value, and whether the sessions agree.
+
+A candidate fitted on each session of one instrument gives one estimate per session. Some
+parameters belong to the instrument (a field of view, a gyro scale factor, a tilt on the
+platform, a read lag, a glare fall-off) and are the same in every session; some belong to
+the sky (an optical thickness, an albedo, an aerosol load), which changes slowly over a day;
+some belong to one session's scene or log (an occlusion, a clock). For each parameter
+fitted in two or more sessions this module gives the inverse-variance weighted mean, the
+chi-square of the sessions about it (Cochran's Q) and its p-value, and the between-session
+standard deviation beyond the sessions' own uncertainties (the DerSimonian-Laird moment
+estimate [1]_): an instrument parameter whose sessions disagree (p < 0.01) is not what its
+candidate says, or the sessions' uncertainties are too small.
+
+References
+----------
+.. [1] R. DerSimonian, N. Laird, "Meta-analysis in clinical trials", Controlled Clinical
+   Trials 7(3):177-188 (1986), doi:10.1016/0197-2456(86)90046-2 (Q, tau^2 moment estimate).
+.. [2] W. G. Cochran, "The combination of estimates from different experiments",
+   Biometrics 10(1):101-129 (1954), doi:10.2307/3001666.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+import pandas as pd
+from scipy import stats
+
+from .errors import InsufficientDataError
+
+__all__ = ["SharedEstimate", "combine_sessions", "shared_parameters", "PARAMETER_SCOPE",
+           "AGREEMENT_P"]
+
+AGREEMENT_P = 0.01
+"""Sessions agree on a parameter when Cochran's Q has a p-value at or above this."""
+
+PARAMETER_SCOPE = {
+    "fov": "instrument", "yaw_scale": "instrument", "tilt": "instrument",
+    "read_lag": "instrument", "side_glare": "instrument", "stray_light": "instrument",
+    "multiple_scattering": "sky", "aerosol": "sky", "neutral_points": "sky",
+    "overcast": "sky", "aureole": "sky",
+    "occlusion": "session", "clock_offset": "session",
+}
+"""What each ring candidate's parameters belong to: ``instrument`` (shared by every session
+of the instrument), ``sky`` (changes slowly over a day: its spread is reported),
+``session`` (one scene or one log: not combined)."""
+
+
+@dataclass(frozen=True)
+class SharedEstimate:
+    """One parameter over sessions.
+
+    Attributes
+    ----------
+    n : int
+        Sessions combined.
+    mean, se : float
+        Inverse-variance weighted mean and its standard error (fixed effect).
+    q : float
+        Cochran's Q, ``sum w_i (x_i - mean)^2`` with ``w_i = 1 / se_i^2`` [2]_.
+    p : float
+        Upper tail of chi-square with ``n - 1`` degrees of freedom at ``q``.
+    between_sd : float
+        Between-session SD beyond the sessions' uncertainties,
+        ``sqrt(max(0, (Q - (n - 1)) / (S1 - S2 / S1)))``, ``S1 = sum w``, ``S2 = sum w^2`` [1]_.
+    spread : float
+        Plain SD of the session values (``ddof = 1``).
+    """
+
+    n: int
+    mean: float
+    se: float
+    q: float
+    p: float
+    between_sd: float
+    spread: float
+
+    @property
+    def agree(self) -> bool:
+        return self.p >= AGREEMENT_P
+
+
+def combine_sessions(values, se) -> SharedEstimate:
+    """Weighted mean, Cochran's Q and the between-session SD of per-session estimates.
+
+    Parameters
+    ----------
+    values, se : array (n,)
+        Estimates and their standard errors, ``n >= 2``, standard errors finite and > 0.
+
+    Raises
+    ------
+    InsufficientDataError
+        Fewer than two estimates, a non-finite value, or a standard error not > 0, naming it.
+    """
+    x, s = np.asarray(values, float), np.asarray(se, float)
+    if x.shape != s.shape or x.ndim != 1 or x.size < 2:
+        raise InsufficientDataError(f"need two or more estimates with one SE each; got values of "
+                             f"shape {x.shape} and SEs of shape {s.shape}")
+    bad = ~np.isfinite(x) | ~np.isfinite(s) | (s <= 0)
+    if bad.any():
+        i = int(np.flatnonzero(bad)[0])
+        raise InsufficientDataError(f"estimate {i} is {x[i]!r} with SE {s[i]!r}: values must be "
+                             "finite and SEs finite and > 0")
+    w = 1.0 / s ** 2
+    s1, s2 = float(w.sum()), float((w ** 2).sum())
+    mean = float(np.sum(w * x) / s1)
+    q = float(np.sum(w * (x - mean) ** 2))
+    dof = x.size - 1
+    tau2 = max(0.0, (q - dof) / (s1 - s2 / s1))
+    return SharedEstimate(n=int(x.size), mean=mean, se=float(np.sqrt(1.0 / s1)), q=q,
+                          p=float(stats.chi2.sf(q, dof)), between_sd=float(np.sqrt(tau2)),
+                          spread=float(np.std(x, ddof=1)))
+
+
+def _se(p: dict):
+    for key in ("se", "uncertainty"):
+        v = p.get(key)
+        if v is not None and np.isfinite(v) and v > 0:
+            return float(v)
+    return None
+
+
+def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
+    """Per parameter of every candidate fitted with an uncertainty in two or more sessions:
+    its combination over the sessions (:func:`combine_sessions`).
+
+    Parameters
+    ----------
+    reports : dict
+        Session name -> :class:`calibration.diagnosis.report.DiagnosisReport`.
+    scope : dict, optional
+        Candidate -> ``instrument``, ``sky`` or ``session`` (default
+        :data:`PARAMETER_SCOPE`); ``session`` candidates and candidates it does not list are
+        left out, and so are per-photodiode parameters (one photodiode's glare).
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns ``candidate, parameter, scope, unit, sessions, mean, se, between_sd,
+        spread, q, p, agree`` (empty when nothing is fitted twice).
+    """
+    scope = PARAMETER_SCOPE if scope is None else scope
+    found: dict = {}
+    for name, report in reports.items():
+        for c in report.candidates:
+            kind = scope.get(c.effect)
+            if kind not in ("instrument", "sky") or not c.available or c.not_applicable:
+                continue
+            for pname, p in c.params.items():
+                if pname.startswith(("S_", "b_")):
+                    continue
+                se = _se(p)
+                if se is None or p.get("value") is None or not np.isfinite(p["value"]):
+                    continue
+                found.setdefault((c.effect, pname, kind, p.get("unit", "")), []).append(
+                    (name, float(p["value"]), se))
+    rows = []
+    for (effect, pname, kind, unit), got in sorted(found.items()):
+        if len(got) < 2:
+            continue
+        est = combine_sessions([g[1] for g in got], [g[2] for g in got])
+        rows.append({"candidate": effect, "parameter": pname, "scope": kind, "unit": unit,
+                     "sessions": est.n, "mean": est.mean, "se": est.se,
+                     "between_sd": est.between_sd, "spread": est.spread, "q": est.q,
+                     "p": est.p, "agree": est.agree})
+    columns = ["candidate", "parameter", "scope", "unit", "sessions", "mean", "se",
+               "between_sd", "spread", "q", "p", "agree"]
+    return pd.DataFrame(rows, columns=columns)
