@@ -20,12 +20,14 @@ condition:
   to alt/az with the field, and the AoP of that tangent direction is taken in the field's
   local basis;
 - evaluates the night-sky model of :mod:`skysim.night` there (Moon from :mod:`skysim.moon`,
-  the row's band, Paranal extinction and dark sky; the Sun is left out because the ``sun``
-  rows are in twilight, which the model does not cover) with the single-scattering Rayleigh
-  pattern and, when the ``rt`` extra is installed, the multiple-scattering one;
+  the row's band with its Paranal extinction, dark sky and aerosol-to-molecular scattering
+  weight; the Sun is left out because the ``sun`` rows are in twilight, which the model does
+  not cover) with the single-scattering Rayleigh pattern and, when the ``rt`` extra is
+  installed, the multiple-scattering one;
 - writes ``moonlit_sky.csv`` (one row per measurement), ``moonlit_sky.png`` (DoP and AoP
   residuals against the scattering angle from the Moon) and ``summary.json`` (residual
-  statistics per band, model and condition).
+  statistics per band, model and condition, for every band in the table, and the band
+  parameters used).
 
 Nothing is fitted to the measurements.
 """
@@ -191,8 +193,14 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
     Adds, per model M: ``dop_M``, ``aop_M_deg``, ``dop_resid_M`` (measured - model) and
     ``aop_resid_M_deg`` (measured - model, wrapped to [-90, 90)); and the geometry:
     ``moon_elevation_deg``, ``moon_azimuth_deg``, ``moon_phase_angle_deg``,
-    ``sun_elevation_deg``, ``scattering_angle_deg`` (from the Moon) [deg] and
-    ``background_fraction`` (share of the night-sky background in I).
+    ``sun_elevation_deg``, ``scattering_angle_deg`` (from the Moon) [deg],
+    ``background_fraction`` (share of the night-sky background in I) and ``aerosol_scale``
+    (the band's weight of the aerosol term, :func:`skysim.night.aerosol_weight`).
+
+    Raises
+    ------
+    InvalidParameterError
+        For a band that skysim does not know (naming it and the valid ones).
     """
     from skysim.geometry import wrap_axial_deg
     from skysim.night import night_sky
@@ -216,11 +224,30 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
                             "moon_phase_angle_deg": moon.phase_angle_deg.to_numpy(),
                             "sun_elevation_deg": ns.sources["sun_elevation_deg"],
                             "scattering_angle_deg": ns.components["moon_scattering_angle_deg"],
-                            "background_fraction": ns.components["background_I"] / ns.field.I}
+                            "background_fraction": ns.components["background_I"] / ns.field.I,
+                            "aerosol_scale": ns.sources["aerosol_scale"]}
                 for k, v in geometry.items():
                     out.loc[out.index[rows], k] = v
         out[f"dop_resid_{model}"] = out.dop - out[f"dop_{model}"]
         out[f"aop_resid_{model}_deg"] = wrap_axial_deg(out.aop_deg - out[f"aop_{model}_deg"])
+    return out
+
+
+def band_parameters(bands) -> dict:
+    """The model's parameters of each band: effective wavelength [nm], extinction and its
+    molecular and aerosol parts [mag per airmass] (:func:`skysim.night.extinction_components`),
+    the aerosol term's weight [1] and the dark-sky zenith brightness [mag arcsec^-2]."""
+    from skysim.bands import get_band
+    from skysim.night import aerosol_weight, extinction_components
+    out = {}
+    for band in bands:
+        c = extinction_components(band)
+        out[band] = {"wavelength_nm": c["wavelength_nm"],
+                     "extinction_mag_per_airmass": c["total"],
+                     "molecular_mag_per_airmass": round(c["rayleigh"], 5),
+                     "aerosol_mag_per_airmass": round(c["aerosol"], 5),
+                     "aerosol_scale": round(aerosol_weight(band), 4),
+                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2}
     return out
 
 
@@ -288,8 +315,9 @@ def run(data, out, with_multiple: bool = True) -> dict:
     atomic_write(out / "moonlit_sky.csv", lambda p: table.to_csv(p, index=False,
                                                                  float_format="%.6g"))
     plot(result, out / "moonlit_sky.png")
-    summary = {"data": str(path), "rows": int(len(result)),
-               "bands": sorted(result.band.unique()),
+    bands = sorted(result.band.unique())
+    summary = {"data": str(path), "rows": int(len(result)), "bands": bands,
+               "band_parameters": band_parameters(bands),
                "aop_frame_of_measurement": "equatorial, from celestial north through east",
                "models": sorted(c[len("dop_resid_"):] for c in result.columns
                                 if c.startswith("dop_resid_")),
@@ -306,6 +334,12 @@ def _reproduce(args) -> int:
                                 "FORS2 moonlit-sky table")
     out = Path(args.out or "results/moonlit-sky")
     summary = run(folder, out, with_multiple=not args.quick)
+    for band, b in summary["band_parameters"].items():
+        print(f"band {band}: {b['wavelength_nm']:g} nm, extinction "
+              f"{b['extinction_mag_per_airmass']:.2f} mag/airmass (molecules "
+              f"{b['molecular_mag_per_airmass']:.3f}, aerosol {b['aerosol_mag_per_airmass']:.3f}), "
+              f"aerosol term x{b['aerosol_scale']:.2f}, dark sky {b['dark_sky_mag_arcsec2']:g} "
+              "mag/arcsec2")
     for model, bands in summary["residuals"].items():
         for band, conds in bands.items():
             for cond, s in conds.items():
