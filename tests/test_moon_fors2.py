@@ -158,6 +158,15 @@ def test_red_rows_run_through_the_check_and_predict_a_lower_dop(tmp_path):
     red, vis = ok[ok.band == "R"].set_index("field"), ok[ok.band == "V"].set_index("field")
     ratio = (red.dop_rayleigh / vis.dop_rayleigh).median()
     assert ratio == pytest.approx(0.87, abs=0.01)
+    # the band-ratio report pairs each R row with the V row of its field (same time here):
+    # the measured ratio is 1 by construction, the modelled one that of the fields whose
+    # measured V DoP is >= 0.04 (all clear ones but ORIG-CT2, 0.038)
+    pair = s["band_ratio_to_V"]["rayleigh"]["R"]
+    usable = vis.dop >= 0.04
+    assert pair["measured_median"] == 1.0 and pair["n"] == usable.sum() == len(red) - 1
+    # tolerance 1e-5: the table is written to 6 significant digits
+    assert pair["model_median"] == pytest.approx(
+        (red.dop_rayleigh / vis.dop_rayleigh)[usable].median(), abs=1e-5)
     held = night_sky(red.elevation_deg.to_numpy(), red.azimuth_deg.to_numpy(),
                      pd.to_datetime(red.time, utc=True), paranal(), "R", include_sun=False,
                      aerosol_scale=1.0)

@@ -45,8 +45,8 @@ from skysim.io import atomic_write, write_json_atomic
 
 from experiments.plotting.figures import pyplot, save_png
 
-__all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "compare", "measured_polarization",
-           "paranal", "read_fors2", "register_reproduce", "run"]
+__all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "band_parameters", "band_ratios", "compare",
+           "measured_polarization", "paranal", "read_fors2", "register_reproduce", "run"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "moonskypol"
 """The FORS2 moonlit-sky rows beside the checkout (``../shared/reference/moonskypol``)."""
@@ -187,8 +187,12 @@ def pattern_skies(bands, with_multiple: bool = True) -> dict:
     return out
 
 
-def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
+def compare(table: pd.DataFrame, with_multiple: bool = True,
+            aerosol_scale: float | None = None) -> pd.DataFrame:
     """Measured and modelled DoP and AoP for every row of :func:`read_fors2`'s table.
+
+    ``aerosol_scale``: the weight of the aerosol term in every band; default each band's
+    own (:func:`skysim.night.aerosol_weight`); 1 holds K&S's V-band split in every band.
 
     Adds, per model M: ``dop_M``, ``aop_M_deg``, ``dop_resid_M`` (measured - model) and
     ``aop_resid_M_deg`` (measured - model, wrapped to [-90, 90)); and the geometry:
@@ -212,7 +216,8 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
         for band, sky in skies.items():
             rows = np.flatnonzero(table.band.to_numpy() == band)
             ns = night_sky(meas.elevation_deg.to_numpy()[rows], meas.azimuth_deg.to_numpy()[rows],
-                           table.time.iloc[rows], site, band, sky, include_sun=False)
+                           table.time.iloc[rows], site, band, sky, include_sun=False,
+                           aerosol_scale=aerosol_scale)
             out.loc[out.index[rows], f"dop_{model}"] = ns.field.dop
             # no moonlight (the Moon below the horizon): no modelled angle
             out.loc[out.index[rows], f"aop_{model}_deg"] = np.where(ns.field.dop > 0.0,
@@ -274,6 +279,45 @@ def summarize(result: pd.DataFrame) -> dict:
     return stats
 
 
+PAIR_WINDOW = pd.Timedelta("1h")
+"""Rows of one field in two bands taken within this time of each other are compared."""
+PAIR_MIN_DOP = 0.04
+"""Reference-band DoP below which a band ratio is not formed (the ratio of two small,
+noisy numbers)."""
+
+
+def band_ratios(result: pd.DataFrame, reference: str = "V") -> dict:
+    """DoP of each band relative to ``reference`` on the same fields, measured and modelled.
+
+    Clear (``ok``) rows of one field in a band and in ``reference`` taken within
+    :data:`PAIR_WINDOW` are paired (the nearest in time); per model and band: ``n``,
+    ``measured_median``, ``model_median`` (of the DoP ratios band / reference) and
+    ``diff_rms`` (RMS of measured minus modelled ratio). The band dependence of the model,
+    apart from what it shares with the reference band. Empty without the reference band.
+    """
+    models = [c[len("dop_resid_"):] for c in result.columns if c.startswith("dop_resid_")]
+    ok = result[result.condition == "ok"]
+    ref = ok[(ok.band == reference) & (ok.dop >= PAIR_MIN_DOP)]
+    stats = {}
+    for band in sorted(set(ok.band) - {reference}):
+        rows = ok[ok.band == band].assign(row_id=np.arange((ok.band == band).sum()))
+        pairs = rows.merge(ref, on="field", suffixes=("", "_ref"))
+        gap = (pairs.time - pairs.time_ref).abs()
+        pairs, gap = pairs[gap <= PAIR_WINDOW], gap[gap <= PAIR_WINDOW]
+        pairs = pairs.loc[gap.groupby(pairs.row_id).idxmin()]
+        if pairs.empty:
+            continue
+        measured = pairs.dop / pairs.dop_ref
+        for model in models:
+            modelled = pairs[f"dop_{model}"] / pairs[f"dop_{model}_ref"]
+            stats.setdefault(model, {})[band] = {
+                "reference": reference, "n": int(len(pairs)),
+                "measured_median": float(np.median(measured)),
+                "model_median": float(np.median(modelled)),
+                "diff_rms": float(np.sqrt(np.mean((measured - modelled) ** 2)))}
+    return stats
+
+
 def plot(result: pd.DataFrame, path) -> Path:
     """DoP (measured and modelled) and AoP residual against the scattering angle."""
     plt = pyplot()
@@ -321,7 +365,8 @@ def run(data, out, with_multiple: bool = True) -> dict:
                "aop_frame_of_measurement": "equatorial, from celestial north through east",
                "models": sorted(c[len("dop_resid_"):] for c in result.columns
                                 if c.startswith("dop_resid_")),
-               "residuals": summarize(result), "elapsed_s": time.perf_counter() - t0}
+               "residuals": summarize(result), "band_ratio_to_V": band_ratios(result),
+               "elapsed_s": time.perf_counter() - t0}
     write_json_atomic(out / "summary.json", summary)
     return summary
 
@@ -348,6 +393,11 @@ def _reproduce(args) -> int:
                 print(f"{model:9s} {band} {cond:7s} n={s['n']:2d}  DoP resid RMS "
                       f"{s['dop_resid_rms']:.3f} (measured/model median {ratio})  "
                       f"AoP resid RMS {aop} deg")
+    for model, bands in summary["band_ratio_to_V"].items():
+        for band, r in bands.items():
+            print(f"{model:9s} {band}/V DoP on {r['n']} clear field(s): measured median "
+                  f"{r['measured_median']:.2f}, model {r['model_median']:.2f}, RMS difference "
+                  f"{r['diff_rms']:.3f}")
     print(f"wrote {out}/moonlit_sky.csv, moonlit_sky.png and summary.json")
     return 0
 
