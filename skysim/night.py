@@ -26,7 +26,7 @@ different ratio: the molecular optical thickness goes as ``lambda^-4.08`` (Bodha
 keeps K&S's scaling with the band's extinction ``k``. Both at the band's effective
 wavelength (:mod:`skysim.bands`). The alternative of scaling the molecular term too, by
 ``tau_mol(b) / tau_mol(V) * k_V / k_b``, makes the blue sky brighter relative to the dark
-sky than the FORS2 B and V polarimetry allow at large angles from the Moon (where the
+sky than the FORS2 B and V polarimetry shows at large angles from the Moon (where the
 aerosol term is negligible), see ``docs/moonlit_sky.md``.
 
 Polarization: the dipole part carries the degree and angle of polarization of a skysim sky
@@ -196,7 +196,7 @@ def dark_sky_radiance(view_elevation_deg, band: str = "V", zenith_mag_arcsec2=No
 
 def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_deg,
                        source_azimuth_deg, irradiance, extinction,
-                       aerosol_weight: float = 1.0) -> dict:
+                       aerosol_scale: float = 1.0) -> dict:
     """Radiance of a point source's light scattered in the air ([1]_, eqs. 15-21).
 
     Parameters
@@ -210,7 +210,7 @@ def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_de
         e.g. [W m^-2 nm^-1]).
     extinction : float
         Extinction coefficient [mag per airmass].
-    aerosol_weight : float
+    aerosol_scale : float
         Factor on the aerosol term (1: K&S's V-band fit; :func:`aerosol_weight` for a band).
 
     Returns
@@ -230,7 +230,7 @@ def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_de
     cos2 = np.cos(np.radians(rho)) ** 2
     return {"dipole": scale * _RAYLEIGH * (1.0 + cos2),
             "depolarized": scale * _RAYLEIGH * _DEPOLARIZED * np.ones_like(cos2),
-            "mie": scale * aerosol_weight * 10.0 ** (6.15 - rho / 40.0),
+            "mie": scale * aerosol_scale * 10.0 ** (6.15 - rho / 40.0),
             "scattering_angle_deg": rho}
 
 
