@@ -17,6 +17,18 @@ irradiance [sr^-1]: ``K = 10^(-0.4 * 16.57) / (34.08 e^20.7233 arcsec^2)``. The 
 scattered as by an ideal dipole and ``10^5.36 * 0.06`` unpolarized; the second is the
 aerosol (Mie) scattering, taken as unpolarized.
 
+Per band: K&S fitted ``f`` in V. In another band the molecules and the aerosol scatter in a
+different ratio: the molecular optical thickness goes as ``lambda^-4.08`` (Bodhaine et al.
+[4]_, :mod:`skysim.molecular`), the aerosol's at Paranal as ``lambda^-1.38`` (Patat et al.
+[5]_: ``k_aer = 0.013 (lambda / 1 um)^-1.38`` mag per airmass). The aerosol term of band
+``b`` is weighted by ``w_b = [tau_aer(b) / tau_aer(V)] / [tau_mol(b) / tau_mol(V)]``
+(:func:`aerosol_weight`; 1 in V, about 0.55 in B, 1.55 in R, 2.8 in I), the molecular term
+keeps K&S's scaling with the band's extinction ``k``. Both at the band's effective
+wavelength (:mod:`skysim.bands`). The alternative of scaling the molecular term too, by
+``tau_mol(b) / tau_mol(V) * k_V / k_b``, makes the blue sky brighter relative to the dark
+sky than the FORS2 B and V polarimetry shows at large angles from the Moon (where the
+aerosol term is negligible), see ``docs/moonlit_sky.md``.
+
 Polarization: the dipole part carries the degree and angle of polarization of a skysim sky
 model (:mod:`skysim.sky`) with the source in place of the Sun: the single-scattering
 Rayleigh sky (DoP ``sin^2 rho / (1 + cos^2 rho)``, so that the Rayleigh term as a whole has
@@ -27,8 +39,11 @@ background adds to ``I`` only:
     DoP = |polarized radiance| / (moonlit + sunlit + background radiance).
 
 Background: airglow, zodiacal light and integrated starlight, with the dark-sky zenith
-brightness of the band [mag arcsec^-2] (:mod:`skysim.bands`, Paranal) brightened towards the
-horizon as airglow ([1]_, eq. 2: ``B_zen 10^(-0.4 k (X - 1)) X``). The split into its three
+brightness of the band [mag arcsec^-2] (:mod:`skysim.bands`, Paranal: measured through each
+broadband filter, so the airglow lines and continuum in the band, OH and O2 in R and I, are
+included) brightened towards the horizon as airglow ([1]_, eq. 2:
+``B_zen 10^(-0.4 k (X - 1)) X``; ``X`` is the van Rhijn factor of a thin emitting layer at
+the height where ``(R_E / (R_E + h))^2 = 0.96``, about 130 km). The split into its three
 parts (Leinert et al. 1998 [2]_ give each; Noll et al. 2012 [3]_ model them at Paranal) is
 not made: their sum is measured at the zenith, and the zodiacal light's and the Milky Way's
 patterns across the sky are left out.
@@ -48,6 +63,12 @@ References
    127:1-99 (1998), doi:10.1051/aas:1998105.
 .. [3] S. Noll et al., "An atmospheric radiation model for Cerro Paranal", A&A 543:A92
    (2012), doi:10.1051/0004-6361/201219040.
+.. [4] B. A. Bodhaine et al., "On Rayleigh optical depth calculations", J. Atmos. Oceanic
+   Technol. 16:1854-1861 (1999).
+.. [5] F. Patat et al., "Optical atmospheric extinction over Cerro Paranal", A&A 527:A91
+   (2011), doi:10.1051/0004-6361/201015537: aerosol extinction ``k0 lambda^alpha`` with
+   ``k0 = 0.013 +- 0.002`` mag per airmass (``lambda`` in um) and ``alpha = -1.38 +- 0.06``;
+   mean surface pressure 744 hPa.
 """
 
 from __future__ import annotations
@@ -69,7 +90,9 @@ __all__ = [
     "MoonlitSky",
     "NightSky",
     "TwilightError",
+    "aerosol_weight",
     "dark_sky_radiance",
+    "extinction_components",
     "ks_airmass",
     "moon_band_irradiance",
     "night_sky",
@@ -85,6 +108,20 @@ K&S's ``f(rho) 10^(-0.4 k X) (1 - 10^(-0.4 k X))``."""
 
 _RAYLEIGH = 10.0 ** 5.36   # K&S eq. 17
 _DEPOLARIZED = 0.06        # K&S eq. 17: the 1.06 of (1.06 + cos^2 rho)
+
+KS_BAND = "V"
+"""The band in which Krisciunas & Schaefer fitted their scattering function ``f``."""
+
+PARANAL_PRESSURE_HPA = 744.0
+"""Mean surface pressure at Paranal [hPa] (Patat et al. 2011 [5]_), for the molecular optical
+thickness of the per-band split."""
+PARANAL_LATITUDE_DEG, PARANAL_ALTITUDE_M = -24.6272, 2635.0
+"""Paranal's latitude [deg] and altitude [m] (gravity in the molecular optical thickness)."""
+AEROSOL_K0_MAG = 0.013
+"""Paranal aerosol extinction at 1 um [mag per airmass] (Patat et al. 2011 [5]_)."""
+AEROSOL_ANGSTROM_EXPONENT = 1.38
+"""Paranal aerosol extinction goes as ``lambda^-1.38`` (Patat et al. 2011 [5]_)."""
+_MAG_PER_TAU = 2.5 / np.log(10.0)   # extinction [mag] of an optical thickness of 1
 
 
 class TwilightError(InvalidParameterError):
@@ -102,6 +139,35 @@ def ks_airmass(zenith_deg) -> np.ndarray:
     """Airmass of a scattering layer, ``X = (1 - 0.96 sin^2 Z)^(-1/2)`` ([1]_, eq. 3)."""
     z = np.radians(np.asarray(zenith_deg, float))
     return 1.0 / np.sqrt(1.0 - 0.96 * np.sin(z) ** 2)
+
+
+def extinction_components(band: str) -> dict:
+    """The band's extinction at Paranal split into its scattering parts [mag per airmass].
+
+    ``rayleigh``: the molecules (Bodhaine et al. [4]_ at the band's effective wavelength,
+    Paranal's pressure :data:`PARANAL_PRESSURE_HPA`); ``aerosol``: Patat et al.'s [5]_ power
+    law ``0.013 (lambda / 1 um)^-1.38``; ``total``: the band's measured broadband coefficient
+    (:mod:`skysim.bands`; the rest, ozone absorption and night-to-night changes, scatters
+    nothing modelled here); ``wavelength_nm`` [nm].
+    """
+    from .molecular import bodhaine_optical_thickness
+    b = get_band(band)
+    tau = bodhaine_optical_thickness(b.wavelength_nm, PARANAL_PRESSURE_HPA,
+                                     PARANAL_LATITUDE_DEG, PARANAL_ALTITUDE_M)
+    return {"wavelength_nm": b.wavelength_nm, "rayleigh": float(_MAG_PER_TAU * tau),
+            "aerosol": AEROSOL_K0_MAG * (b.wavelength_nm / 1000.0) ** -AEROSOL_ANGSTROM_EXPONENT,
+            "total": b.extinction_mag_per_airmass}
+
+
+def aerosol_weight(band: str) -> float:
+    """Weight of K&S's aerosol term in ``band`` relative to its molecular term [1].
+
+    ``[k_aer(b) / k_aer(V)] / [k_mol(b) / k_mol(V)]`` from :func:`extinction_components`:
+    the ratio of aerosol to molecular scattering in the band over that ratio in V, where
+    K&S fitted it. 1 in V.
+    """
+    b, v = extinction_components(band), extinction_components(KS_BAND)
+    return float((b["aerosol"] / v["aerosol"]) / (b["rayleigh"] / v["rayleigh"]))
 
 
 def dark_sky_radiance(view_elevation_deg, band: str = "V", zenith_mag_arcsec2=None,
@@ -129,7 +195,8 @@ def dark_sky_radiance(view_elevation_deg, band: str = "V", zenith_mag_arcsec2=No
 
 
 def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_deg,
-                       source_azimuth_deg, irradiance, extinction) -> dict:
+                       source_azimuth_deg, irradiance, extinction,
+                       aerosol_scale: float = 1.0) -> dict:
     """Radiance of a point source's light scattered in the air ([1]_, eqs. 15-21).
 
     Parameters
@@ -143,6 +210,8 @@ def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_de
         e.g. [W m^-2 nm^-1]).
     extinction : float
         Extinction coefficient [mag per airmass].
+    aerosol_scale : float
+        Factor on the aerosol term (1: K&S's V-band fit; :func:`aerosol_weight` for a band).
 
     Returns
     -------
@@ -161,7 +230,7 @@ def scattered_radiance(view_elevation_deg, view_azimuth_deg, source_elevation_de
     cos2 = np.cos(np.radians(rho)) ** 2
     return {"dipole": scale * _RAYLEIGH * (1.0 + cos2),
             "depolarized": scale * _RAYLEIGH * _DEPOLARIZED * np.ones_like(cos2),
-            "mie": scale * 10.0 ** (6.15 - rho / 40.0),
+            "mie": scale * aerosol_scale * 10.0 ** (6.15 - rho / 40.0),
             "scattering_angle_deg": rho}
 
 
@@ -194,9 +263,17 @@ def moon_band_irradiance(moon, band: str = "V"):
     return e_moon, reflectance
 
 
-def _source_stokes(sky: Sky, vel, vaz, src_el, src_az, irradiance, extinction):
+def _aerosol_scale(band: str, aerosol_scale) -> float:
+    """The band's :func:`aerosol_weight`, or ``aerosol_scale`` checked (finite, >= 0)."""
+    if aerosol_scale is None:
+        return aerosol_weight(band)
+    return float(check_in_range("aerosol_scale", aerosol_scale, 0.0, 100.0,
+                                hint="factor on the aerosol term; 1 is K&S's V-band fit"))
+
+
+def _source_stokes(sky: Sky, vel, vaz, src_el, src_az, irradiance, extinction, w_aer):
     """(I, Q, U) of one source: K&S radiance, the dipole part polarized as ``sky``."""
-    parts = scattered_radiance(vel, vaz, src_el, src_az, irradiance, extinction)
+    parts = scattered_radiance(vel, vaz, src_el, src_az, irradiance, extinction, w_aer)
     intensity = parts["dipole"] + parts["depolarized"] + parts["mie"]
     q = np.zeros_like(intensity)
     u = np.zeros_like(intensity)
@@ -235,7 +312,7 @@ class NightSky:
 
 def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V",
               sky: Sky | None = None, *, include_sun: bool = True, extinction=None,
-              dark_sky_mag_arcsec2=None) -> NightSky:
+              dark_sky_mag_arcsec2=None, aerosol_scale=None) -> NightSky:
     """Stokes field of the night sky lit by the Moon (and the Sun when it is up).
 
     Parameters
@@ -257,6 +334,9 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
         [mag per airmass]; default the band's Paranal value (:mod:`skysim.bands`).
     dark_sky_mag_arcsec2 : float, optional
         Dark-sky zenith brightness [mag arcsec^-2]; default the band's Paranal value.
+    aerosol_scale : float, optional
+        Factor on K&S's aerosol term [1], >= 0; default the band's :func:`aerosol_weight`
+        (0: molecules only).
 
     Returns
     -------
@@ -281,6 +361,7 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
     vaz = check_finite("view_azimuth_deg", view_azimuth_deg)
     k = b.extinction_mag_per_airmass if extinction is None else float(
         check_in_range("extinction", extinction, 0.0, 5.0))
+    w_aer = _aerosol_scale(band, aerosol_scale)
     moon = moon_position(times, site.latitude_deg, site.longitude_deg, site.altitude_m)
     e_moon, reflectance = moon_band_irradiance(moon, band)
     m_el, m_az = moon.elevation_deg.to_numpy(), moon.azimuth_deg.to_numpy()
@@ -288,7 +369,7 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
         vel, vaz = np.broadcast_to(vel, m_el.shape), np.broadcast_to(vaz, m_el.shape)
     if len(moon) == 1:
         m_el, m_az, e_moon = m_el[0], m_az[0], e_moon[0]
-    I, Q, U = _source_stokes(sky, vel, vaz, m_el, m_az, e_moon, k)
+    I, Q, U = _source_stokes(sky, vel, vaz, m_el, m_az, e_moon, k, w_aer)
     moon_I = I.copy()
     sun = sun_position(moon.index, site.latitude_deg, site.longitude_deg, site.altitude_m)
     s_el, s_az = sun.elevation_deg.to_numpy(), sun.azimuth_deg.to_numpy()
@@ -305,15 +386,15 @@ def night_sky(view_elevation_deg, view_azimuth_deg, times, site, band: str = "V"
         if np.any(s_el > 0.0):
             e_sun = solar_irradiance(band) / moon.sun_distance_au.to_numpy() ** 2
             se, sa, es = (a[0] if len(moon) == 1 else a for a in (s_el, s_az, e_sun))
-            sun_I, sun_Q, sun_U = _source_stokes(sky, vel, vaz, se, sa, es, k)
+            sun_I, sun_Q, sun_U = _source_stokes(sky, vel, vaz, se, sa, es, k, w_aer)
             I, Q, U = I + sun_I, Q + sun_Q, U + sun_U
     background = np.broadcast_to(dark_sky_radiance(vel, band, dark_sky_mag_arcsec2, k), I.shape)
     I = I + background
     vel_b, vaz_b = (np.broadcast_to(a, I.shape) for a in (vel, vaz))
     rho = angle_between_deg(direction_vector(vel_b, vaz_b),
                             direction_vector(m_el, m_az))
-    sources = {"band": band, "moon": moon.assign(irradiance_W_m2_nm=e_moon,
-                                                  disk_reflectance=reflectance),
+    sources = {"band": band, "aerosol_scale": w_aer,
+               "moon": moon.assign(irradiance_W_m2_nm=e_moon, disk_reflectance=reflectance),
                "sun_elevation_deg": s_el, "sun_azimuth_deg": s_az}
     return NightSky(SkyField(vel_b, vaz_b, I, Q, U),
                     {"moon_I": moon_I, "sun_I": sun_I, "background_I": background.copy(),
@@ -341,13 +422,15 @@ class MoonlitSky(Sky):
         [mag per airmass]; default the band's Paranal value.
     dark_sky_mag_arcsec2 : float, optional
         Dark-sky zenith brightness [mag arcsec^-2]; default the band's Paranal value.
+    aerosol_scale : float, optional
+        Factor on K&S's aerosol term [1]; default the band's :func:`aerosol_weight`.
     """
 
     name = "moonlit"
     min_sun_elevation_deg = 0.0
 
     def __init__(self, moon_irradiance: float, band: str = "V", pattern: Sky | None = None,
-                 extinction=None, dark_sky_mag_arcsec2=None):
+                 extinction=None, dark_sky_mag_arcsec2=None, aerosol_scale=None):
         from .sky import RayleighSky
         b = get_band(band)
         e = float(check_finite("moon_irradiance", moon_irradiance))
@@ -360,6 +443,7 @@ class MoonlitSky(Sky):
         self.dark_sky_mag_arcsec2 = (b.dark_sky_mag_arcsec2 if dark_sky_mag_arcsec2 is None
                                      else float(check_finite("dark_sky_mag_arcsec2",
                                                              dark_sky_mag_arcsec2)))
+        self.aerosol_scale = _aerosol_scale(band, aerosol_scale)
 
     @classmethod
     def at(cls, time, site, band: str = "V", pattern: Sky | None = None, **kwargs):
@@ -404,7 +488,7 @@ class MoonlitSky(Sky):
 
     def _stokes(self, vel, vaz, mel, maz):
         I, Q, U = _source_stokes(self.pattern, vel, vaz, mel, maz, self.moon_irradiance,
-                                 self.extinction)
+                                 self.extinction, self.aerosol_scale)
         I = I + dark_sky_radiance(vel, self.band, self.dark_sky_mag_arcsec2, self.extinction)
         return I, Q, U
 
@@ -420,4 +504,5 @@ class MoonlitSky(Sky):
                 "moon_irradiance_W_m2_nm": self.moon_irradiance,
                 "pattern": self.pattern.describe(), "extinction_mag_per_airmass": self.extinction,
                 "dark_sky_mag_arcsec2": self.dark_sky_mag_arcsec2,
+                "aerosol_scale": self.aerosol_scale,
                 "radiance_unit": "W m-2 nm-1 sr-1"}

@@ -20,12 +20,14 @@ condition:
   to alt/az with the field, and the AoP of that tangent direction is taken in the field's
   local basis;
 - evaluates the night-sky model of :mod:`skysim.night` there (Moon from :mod:`skysim.moon`,
-  the row's band, Paranal extinction and dark sky; the Sun is left out because the ``sun``
-  rows are in twilight, which the model does not cover) with the single-scattering Rayleigh
-  pattern and, when the ``rt`` extra is installed, the multiple-scattering one;
+  the row's band with its Paranal extinction, dark sky and aerosol-to-molecular scattering
+  weight; the Sun is left out because the ``sun`` rows are in twilight, which the model does
+  not cover) with the single-scattering Rayleigh pattern and, when the ``rt`` extra is
+  installed, the multiple-scattering one;
 - writes ``moonlit_sky.csv`` (one row per measurement), ``moonlit_sky.png`` (DoP and AoP
   residuals against the scattering angle from the Moon) and ``summary.json`` (residual
-  statistics per band, model and condition).
+  statistics per band, model and condition, for every band in the table, and the band
+  parameters used).
 
 Nothing is fitted to the measurements.
 """
@@ -43,8 +45,8 @@ from skysim.io import atomic_write, write_json_atomic
 
 from experiments.plotting.figures import pyplot, save_png
 
-__all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "compare", "measured_polarization",
-           "paranal", "read_fors2", "register_reproduce", "run"]
+__all__ = ["DEFAULT_DATA", "REQUIRED_COLUMNS", "band_parameters", "band_ratios", "compare",
+           "measured_polarization", "paranal", "read_fors2", "register_reproduce", "run"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "moonskypol"
 """The FORS2 moonlit-sky rows beside the checkout (``../shared/reference/moonskypol``)."""
@@ -185,14 +187,24 @@ def pattern_skies(bands, with_multiple: bool = True) -> dict:
     return out
 
 
-def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
+def compare(table: pd.DataFrame, with_multiple: bool = True,
+            aerosol_scale: float | None = None) -> pd.DataFrame:
     """Measured and modelled DoP and AoP for every row of :func:`read_fors2`'s table.
+
+    ``aerosol_scale``: the weight of the aerosol term in every band; default each band's
+    own (:func:`skysim.night.aerosol_weight`); 1 holds K&S's V-band split in every band.
 
     Adds, per model M: ``dop_M``, ``aop_M_deg``, ``dop_resid_M`` (measured - model) and
     ``aop_resid_M_deg`` (measured - model, wrapped to [-90, 90)); and the geometry:
     ``moon_elevation_deg``, ``moon_azimuth_deg``, ``moon_phase_angle_deg``,
-    ``sun_elevation_deg``, ``scattering_angle_deg`` (from the Moon) [deg] and
-    ``background_fraction`` (share of the night-sky background in I).
+    ``sun_elevation_deg``, ``scattering_angle_deg`` (from the Moon) [deg],
+    ``background_fraction`` (share of the night-sky background in I) and ``aerosol_scale``
+    (the band's weight of the aerosol term, :func:`skysim.night.aerosol_weight`).
+
+    Raises
+    ------
+    InvalidParameterError
+        For a band that skysim does not know (naming it and the valid ones).
     """
     from skysim.geometry import wrap_axial_deg
     from skysim.night import night_sky
@@ -204,7 +216,8 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
         for band, sky in skies.items():
             rows = np.flatnonzero(table.band.to_numpy() == band)
             ns = night_sky(meas.elevation_deg.to_numpy()[rows], meas.azimuth_deg.to_numpy()[rows],
-                           table.time.iloc[rows], site, band, sky, include_sun=False)
+                           table.time.iloc[rows], site, band, sky, include_sun=False,
+                           aerosol_scale=aerosol_scale)
             out.loc[out.index[rows], f"dop_{model}"] = ns.field.dop
             # no moonlight (the Moon below the horizon): no modelled angle
             out.loc[out.index[rows], f"aop_{model}_deg"] = np.where(ns.field.dop > 0.0,
@@ -216,11 +229,30 @@ def compare(table: pd.DataFrame, with_multiple: bool = True) -> pd.DataFrame:
                             "moon_phase_angle_deg": moon.phase_angle_deg.to_numpy(),
                             "sun_elevation_deg": ns.sources["sun_elevation_deg"],
                             "scattering_angle_deg": ns.components["moon_scattering_angle_deg"],
-                            "background_fraction": ns.components["background_I"] / ns.field.I}
+                            "background_fraction": ns.components["background_I"] / ns.field.I,
+                            "aerosol_scale": ns.sources["aerosol_scale"]}
                 for k, v in geometry.items():
                     out.loc[out.index[rows], k] = v
         out[f"dop_resid_{model}"] = out.dop - out[f"dop_{model}"]
         out[f"aop_resid_{model}_deg"] = wrap_axial_deg(out.aop_deg - out[f"aop_{model}_deg"])
+    return out
+
+
+def band_parameters(bands) -> dict:
+    """The model's parameters of each band: effective wavelength [nm], extinction and its
+    molecular and aerosol parts [mag per airmass] (:func:`skysim.night.extinction_components`),
+    the aerosol term's weight [1] and the dark-sky zenith brightness [mag arcsec^-2]."""
+    from skysim.bands import get_band
+    from skysim.night import aerosol_weight, extinction_components
+    out = {}
+    for band in bands:
+        c = extinction_components(band)
+        out[band] = {"wavelength_nm": c["wavelength_nm"],
+                     "extinction_mag_per_airmass": c["total"],
+                     "molecular_mag_per_airmass": round(c["rayleigh"], 5),
+                     "aerosol_mag_per_airmass": round(c["aerosol"], 5),
+                     "aerosol_scale": round(aerosol_weight(band), 4),
+                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2}
     return out
 
 
@@ -244,6 +276,45 @@ def summarize(result: pd.DataFrame) -> dict:
                 "n_aop": int(len(a)),
                 "aop_resid_rms_deg": float(np.sqrt(np.mean(a ** 2))) if len(a) else None,
                 "aop_resid_max_abs_deg": float(np.max(np.abs(a))) if len(a) else None}
+    return stats
+
+
+PAIR_WINDOW = pd.Timedelta("1h")
+"""Rows of one field in two bands taken within this time of each other are compared."""
+PAIR_MIN_DOP = 0.04
+"""Reference-band DoP below which a band ratio is not formed (the ratio of two small,
+noisy numbers)."""
+
+
+def band_ratios(result: pd.DataFrame, reference: str = "V") -> dict:
+    """DoP of each band relative to ``reference`` on the same fields, measured and modelled.
+
+    Clear (``ok``) rows of one field in a band and in ``reference`` taken within
+    :data:`PAIR_WINDOW` are paired (the nearest in time); per model and band: ``n``,
+    ``measured_median``, ``model_median`` (of the DoP ratios band / reference) and
+    ``diff_rms`` (RMS of measured minus modelled ratio). The band dependence of the model,
+    apart from what it shares with the reference band. Empty without the reference band.
+    """
+    models = [c[len("dop_resid_"):] for c in result.columns if c.startswith("dop_resid_")]
+    ok = result[result.condition == "ok"]
+    ref = ok[(ok.band == reference) & (ok.dop >= PAIR_MIN_DOP)]
+    stats = {}
+    for band in sorted(set(ok.band) - {reference}):
+        rows = ok[ok.band == band].assign(row_id=np.arange((ok.band == band).sum()))
+        pairs = rows.merge(ref, on="field", suffixes=("", "_ref"))
+        gap = (pairs.time - pairs.time_ref).abs()
+        pairs, gap = pairs[gap <= PAIR_WINDOW], gap[gap <= PAIR_WINDOW]
+        pairs = pairs.loc[gap.groupby(pairs.row_id).idxmin()]
+        if pairs.empty:
+            continue
+        measured = pairs.dop / pairs.dop_ref
+        for model in models:
+            modelled = pairs[f"dop_{model}"] / pairs[f"dop_{model}_ref"]
+            stats.setdefault(model, {})[band] = {
+                "reference": reference, "n": int(len(pairs)),
+                "measured_median": float(np.median(measured)),
+                "model_median": float(np.median(modelled)),
+                "diff_rms": float(np.sqrt(np.mean((measured - modelled) ** 2)))}
     return stats
 
 
@@ -288,12 +359,14 @@ def run(data, out, with_multiple: bool = True) -> dict:
     atomic_write(out / "moonlit_sky.csv", lambda p: table.to_csv(p, index=False,
                                                                  float_format="%.6g"))
     plot(result, out / "moonlit_sky.png")
-    summary = {"data": str(path), "rows": int(len(result)),
-               "bands": sorted(result.band.unique()),
+    bands = sorted(result.band.unique())
+    summary = {"data": str(path), "rows": int(len(result)), "bands": bands,
+               "band_parameters": band_parameters(bands),
                "aop_frame_of_measurement": "equatorial, from celestial north through east",
                "models": sorted(c[len("dop_resid_"):] for c in result.columns
                                 if c.startswith("dop_resid_")),
-               "residuals": summarize(result), "elapsed_s": time.perf_counter() - t0}
+               "residuals": summarize(result), "band_ratio_to_V": band_ratios(result),
+               "elapsed_s": time.perf_counter() - t0}
     write_json_atomic(out / "summary.json", summary)
     return summary
 
@@ -306,6 +379,12 @@ def _reproduce(args) -> int:
                                 "FORS2 moonlit-sky table")
     out = Path(args.out or "results/moonlit-sky")
     summary = run(folder, out, with_multiple=not args.quick)
+    for band, b in summary["band_parameters"].items():
+        print(f"band {band}: {b['wavelength_nm']:g} nm, extinction "
+              f"{b['extinction_mag_per_airmass']:.2f} mag/airmass (molecules "
+              f"{b['molecular_mag_per_airmass']:.3f}, aerosol {b['aerosol_mag_per_airmass']:.3f}), "
+              f"aerosol term x{b['aerosol_scale']:.2f}, dark sky {b['dark_sky_mag_arcsec2']:g} "
+              "mag/arcsec2")
     for model, bands in summary["residuals"].items():
         for band, conds in bands.items():
             for cond, s in conds.items():
@@ -314,6 +393,11 @@ def _reproduce(args) -> int:
                 print(f"{model:9s} {band} {cond:7s} n={s['n']:2d}  DoP resid RMS "
                       f"{s['dop_resid_rms']:.3f} (measured/model median {ratio})  "
                       f"AoP resid RMS {aop} deg")
+    for model, bands in summary["band_ratio_to_V"].items():
+        for band, r in bands.items():
+            print(f"{model:9s} {band}/V DoP on {r['n']} clear field(s): measured median "
+                  f"{r['measured_median']:.2f}, model {r['model_median']:.2f}, RMS difference "
+                  f"{r['diff_rms']:.3f}")
     print(f"wrote {out}/moonlit_sky.csv, moonlit_sky.png and summary.json")
     return 0
 
