@@ -49,3 +49,22 @@ def test_reproduce_one_real_session(reference_dir, tmp_path, capsys):
     assert base_fit["elevation_offset_mean_deg"] == pytest.approx(np.mean(fitted), rel=1e-12)
     gains = base_fit["gain"]
     assert all(gains[c] is None for c in gains if c.split("_")[0] in excluded)
+
+
+@pytest.mark.slow
+def test_two_real_sessions_combine_the_instrument_parameters(reference_dir, tmp_path):
+    """Two afternoon sessions of the reference ring, diagnosed with the quick candidates:
+    the gyro's scale factor, an instrument parameter, is combined over them with a weighted
+    mean between the two sessions' values and an SE below either's."""
+    from calibration.diagnosis.shared_parameters import shared_parameters
+    from experiments.studies.real_compass import QUICK_EFFECTS, run_sessions
+    files = [reference_dir / "gkanias2023" / f"tod_Thursday_12-05-22_{s}_CEST.csv"
+             for s in ("16-01-54", "17-01-44")]
+    _, reports = run_sessions(files, QUICK_EFFECTS, tmp_path, folds=3)
+    shared = shared_parameters({f.name: r for f, r in reports.items()}).set_index("parameter")
+    row = shared.loc["factor"]
+    values = [r.candidate("yaw_scale").params["factor"] for r in reports.values()]
+    assert row["sessions"] == 2 and row["scope"] == "instrument"
+    lo, hi = sorted(v["value"] for v in values)
+    assert lo <= row["mean"] <= hi
+    assert row["se"] < min(v["uncertainty"] for v in values)

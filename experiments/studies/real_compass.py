@@ -258,6 +258,7 @@ def plot_residual_over_azimuth(report, path: Path) -> None:
 
 # --------------------------------------------------------------------------- command line
 def _reproduce(args) -> int:
+    from calibration.diagnosis.shared_parameters import AGREEMENT_P, shared_parameters
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
     from calibration.photodiode_diagnosis.effects import OPTIONAL_EFFECT_NAMES
     folder = Path(getattr(args, "data", None) or DEFAULT_DATA)
@@ -271,20 +272,29 @@ def _reproduce(args) -> int:
     t0 = time.perf_counter()
     table, reports = run_sessions(files, effects, out, seed=args.seed)
     elapsed = time.perf_counter() - t0
+    shared = shared_parameters({Path(f).name: r for f, r in reports.items()})
+    atomic_write(out / "shared_parameters.csv", lambda p: shared.to_csv(p, index=False))
     clocks = clock_check(files, reports, out, RING_EFFECT_NAMES, seed=args.seed)
     write_json_atomic(out / "summary.json", {
         "sessions": len(table), "effects": list(effects), "data": str(folder),
         "seed": args.seed, "elapsed_s": elapsed, "rows": table.to_dict(orient="records"),
         "clock_check": clocks.to_dict(orient="records"),
+        "shared_parameters": shared.to_dict(orient="records"),
         "clock_check_s": time.perf_counter() - t0 - elapsed})
     print(_table_md(table))
     print(f"wall time {elapsed:.0f} s for {len(table)} sessions")
+    if len(shared):
+        print("parameters fitted on two or more sessions, combined over the day (weighted "
+              "mean, its SE, the between-session SD beyond the sessions' own SEs, and "
+              f"whether the sessions agree: Cochran's Q, p >= {AGREEMENT_P}):")
+        print(_table_md(shared, tuple(shared.columns)))
     if len(clocks):
         print("clock errors injected into the first and last open-sky session, unit pointing "
               "held at the other sessions' (median):")
         print(_table_md(clocks, tuple(clocks.columns)))
         print(f"wall time of the clock check {time.perf_counter() - t0 - elapsed:.0f} s")
-    print(f"wrote {out}/sessions.csv, sessions.md, summary.json, gap_and_heading_over_day.png"
+    print(f"wrote {out}/sessions.csv, sessions.md, summary.json, shared_parameters.csv, "
+          f"gap_and_heading_over_day.png"
           f"{', clock_check.csv' if len(clocks) else ''} and one diagnosis.json per session")
     return 0
 
