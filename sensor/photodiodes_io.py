@@ -707,12 +707,14 @@ def _validate_sidecar(sidecar: dict, where: str) -> None:
                  f"unit {i} columns must be a list of {len(pds)} column names, one per "
                  f"photodiode; got {cols!r}")
         ana = u["analyser"].get("angle_column")
-        for c in cols + ([ana] if ana else []):
+        named = [(c, "photodiode") for c in cols] + ([(ana, "analyser")] if ana else [])
+        for c, role in named:
             _require(c not in _SCHEMA_COLUMNS, where,
                      f"unit {i} column {c!r} is a column the schema reserves")
-            owner = f"unit {i} " + ("analyser" if c == ana else "photodiode")
-            _require(c not in seen or (c == ana and seen[c].endswith("analyser")), where,
-                     f"column {c!r} is named by both {seen.get(c)} and {owner}")
+            owner = f"unit {i} {role}"
+            # one angle column may drive several units' analysers (one wheel)
+            _require(c not in seen or (role == "analyser" and seen[c].endswith("analyser")),
+                     where, f"column {c!r} is named by both {seen.get(c)} and {owner}")
             seen.setdefault(c, owner)
 
 

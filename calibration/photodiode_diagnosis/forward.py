@@ -9,7 +9,9 @@ without input checks in the fit's inner loop):
 ``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - beta_p - delta_u)) + o_p``
 
 with ``d_iu``, ``chi_iu`` the degree and angle of linear polarization of the light reaching
-unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle, ``beta_p`` the
+unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle (``a_ip`` at
+sample ``i`` when the unit's analyser turns: the photodiode's angle on the analyser plus the
+analyser's angle at that sample), ``beta_p`` the
 photodiode's own deviation from it (a hand-cut polarizer film is placed within a few degrees),
 ``delta_u`` the unit's polarizer-angle (installation) offset, ``s`` the DoP scale (the sky's ``d_max``),
 ``g_p = exp(lambda_p)`` the photodiode's gain and ``o_p`` its dark offset. The radiance
@@ -18,6 +20,11 @@ unit's photodiodes at each sample, variable projection, Golub & Pereyra 1973 [1]
 polarization compass does not use it, and the single-scattering radiance misses the real
 sky's aerosol brightening near the sun and horizon by factors of several, which would bury
 every polarization effect. Residuals are relative: ``(r - r_hat) / mean_u(r)``.
+
+What the readings are fixes part of the model: dark-subtracted and normalised readings carry
+no dark offset (``o_p`` held at 0, :meth:`Forward.held_by_readings`); normalised readings also
+carry no degree-of-polarization scale, so ``s`` is then a nuisance modulation scale, not a
+property of the sky (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`).
 
 Which parameters are shared and which are per sweep: gains, offsets, polarizer angles, the
 pointing of every unit's axis (elevation and azimuth offsets from nominal) and the DoP scale
@@ -49,6 +56,12 @@ from skysim.sun import SunTrack
 from .instrument import Instrument
 
 __all__ = ["Layout", "SunTrack", "Forward", "RELATIVE_FLOOR"]
+
+MIN_PHOTODIODES_USED = 3
+"""Usable photodiodes a unit needs at a sample for its relative residuals to be formed (fewer
+in a unit that has fewer: both of a crossed pair): with the radiance profiled out, three
+readings leave two degrees of freedom for the polarization, so one faulty photodiode of a
+four-polarizer unit does not silence the unit."""
 
 RELATIVE_FLOOR = 1e-3
 """Floor of a unit's mean reading, as a fraction of the session's median reading, below which
@@ -155,7 +168,11 @@ class Forward:
         cnt = good.astype(float) @ self.member.T        # (n, U)
         mean = (self.y @ self.member.T) / np.maximum(cnt, 1.0)
         self.unit_mean = mean
-        self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= 3))[:, units]
+        need = np.minimum(self.member.sum(axis=1), MIN_PHOTODIODES_USED)    # (U,)
+        self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= need))[:, units]
+        self.pd_angle_deg = (inst.pd_angle_deg if inst.pd_angle_row_deg is None
+                             else np.asarray(inst.pd_angle_row_deg, float))
+        """Nominal polarizer angles, (P,) with fixed analysers or (n, P) per sample [deg]."""
         self._scale = np.where(self.usable, mean[:, units], 1.0)
         self._sky = RayleighSky(1.0)
         self._dop_in_sky = bool(effect is not None and effect.dop_scale_in_sky)
@@ -165,6 +182,14 @@ class Forward:
         self.aop_sky = None
         """A sky (:class:`skysim.sky.Sky`) whose angle of polarization the DoP-free stage
         uses instead of single scattering's (None: the base sky)."""
+
+    def held_by_readings(self) -> np.ndarray:
+        """Parameters (size,) bool that the readings fix, held at 0 in every fit: the dark
+        offsets of dark-subtracted and normalised readings (no dark level survives them)."""
+        held = np.zeros(self.layout.size, bool)
+        if getattr(self.inst, "readings_kind", "raw") != "raw":
+            held[self.layout.off] = True
+        return held
 
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
@@ -232,7 +257,7 @@ class Forward:
         u = inst.pd_unit
         s = 1.0 if self._dop_in_sky else theta[L.scale]
         d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
-        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         return malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
                             responsivity=np.exp(theta[L.lam]))
 
@@ -273,7 +298,7 @@ class Forward:
         L, inst = self.layout, self.inst
         u = inst.pd_unit
         g = np.exp(theta[L.lam])
-        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         b0 = np.broadcast_to(g, self.y.shape)
         b1 = g * np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
         off = self._offsets(theta, obs)

@@ -1,7 +1,8 @@
-"""Adapter from raw photodiode data (``skysim.photodiodes/1``) to the arrays the diagnosis fits.
+"""Adapter from photodiode data (``skysim.photodiodes/2``) to the arrays the diagnosis fits.
 
-Any multi-unit instrument: N units x M photodiodes, any unit azimuth/elevation, any polarizer
-angles, counts or volts, absolute or relative yaw in either sense. The adapter converts the
+Any instrument: N units of two or more photodiodes, any unit azimuth/elevation, any polarizer
+angles, fixed or rotating analysers, raw, dark-subtracted or normalised readings, absolute or
+relative yaw in either sense. The adapter converts the
 yaw to the project's heading convention (clockwise from north, unwrapped along each sweep so
 that a turn stays one continuous angle), finds the sweeps and whether the platform is turning,
 and keeps the reader's per-reading flags. It never drops a sample; rows written out of time
@@ -17,7 +18,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from sensor.compound_eye import CompoundEyeSensor, PhotodiodeModel
-from sensor.photodiodes_io import PhotodiodeData
+from sensor.photodiodes_io import PhotodiodeData, heading_ambiguity_deg
 from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError, YawInRadiansWarning
@@ -90,7 +91,16 @@ class Instrument:
         logger without a clock whose times were reconstructed afterwards (a session's start
         from a photograph, then a nominal cadence) has one; the clock candidate adds it in
         quadrature to its own uncertainty, since a clock fitted to within its statistics
-        is no better than the times it corrects.
+        is no better than the times it corrects. Read from the sidecar.
+    pd_angle_row_deg : ndarray (n, P), optional
+        Polarizer angle of every photodiode at every sample [deg] when an analyser turns
+        (:attr:`sensor.photodiodes_io.PhotodiodeData.polarizer_angles_deg`); None: every
+        analyser is fixed and ``pd_angle_deg`` holds for every sample.
+    readings_kind : {"raw", "dark-subtracted", "normalised"}
+        What the readings are (:data:`sensor.photodiodes_io.READINGS_KINDS`).
+    unrecoverable : list of dict
+        What the data cannot tell, ``{"quantity", "reason"}``
+        (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`), for the report.
     """
 
     sensor: CompoundEyeSensor
@@ -112,10 +122,19 @@ class Instrument:
     pointing_deg: np.ndarray | None = None
     light: str = "sun"
     time_uncertainty_s: float = 0.0
+    pd_angle_row_deg: np.ndarray | None = None
+    readings_kind: str = "raw"
+    unrecoverable: list = field(default_factory=list)
 
     @property
     def n(self) -> int:
         return self.t_s.size
+
+    @property
+    def heading_ambiguity_deg(self) -> float:
+        """180 when every unit looks within a few degrees of the zenith (its heading is known
+        modulo 180 deg, :func:`sensor.photodiodes_io.heading_ambiguity_deg`), else 360."""
+        return heading_ambiguity_deg([u.elevation_deg for u in self.sensor.units])
 
     @property
     def n_units(self) -> int:
@@ -133,7 +152,9 @@ class Instrument:
                        rotating=self.rotating[rows], pitch_deg=self.pitch_deg[rows],
                        roll_deg=self.roll_deg[rows], readings=self.readings[rows],
                        flagged=self.flagged[rows],
-                       held=None if self.held is None else self.held[rows])
+                       held=None if self.held is None else self.held[rows],
+                       pd_angle_row_deg=None if self.pd_angle_row_deg is None
+                       else self.pd_angle_row_deg[rows])
 
     def with_readings(self, readings) -> "Instrument":
         """The same instrument and samples with other readings (same shape)."""
@@ -253,11 +274,13 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                 f"from the session's median time; samples more than {MAX_SPAN_DAYS:g} days "
                 "apart are not one session (a clock glitch?): fix or drop that row")
     readings, flagged = data.readings, data.flags.bad.copy()
+    row_angles = data.polarizer_angles_deg if data.rotating_units else None
     rows = np.arange(len(table))
     if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
         rows = np.argsort(t_s, kind="stable")
         table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
         readings, flagged = readings[rows], flagged[rows]
+        row_angles = None if row_angles is None else row_angles[rows]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
     sweep = _sweeps(table, t_s, rows, where)
@@ -273,10 +296,10 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         att[c] = np.where(np.isfinite(v), v, 0.0)
     counts = PhotodiodeModel(counts_per_radiance=1.0, noise_counts=0.0)
     sensor = CompoundEyeSensor.from_sidecar(data.sidecar, counts)
-    pd_unit = np.array([i for i, u in enumerate(data.units) for _ in u["photodiodes"]])
+    pd_unit = data.pd_unit
     held = held_readings(readings, pd_unit)
     flagged = flagged | held
-    pd_angle = np.array([float(a) for u in data.units for a in u["photodiodes"]])
+    pd_angle = data.nominal_angles_deg
     for i in range(sensor.n_units):
         if not np.any(pd_unit == i):
             raise InstrumentDataError(f"{where}: unit {i} lists no photodiode columns")
@@ -286,11 +309,16 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         readings=readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
         columns=list(data.columns), flagged=flagged, held=held,
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
+        time_uncertainty_s=data.time_uncertainty_s, pd_angle_row_deg=row_angles,
+        readings_kind=data.readings_kind, unrecoverable=data.unrecoverable,
         source={"path": where, "schema": data.sidecar["schema"],
-                "readings": data.sidecar["readings"], "samples": int(len(table)),
+                "readings": data.reading_unit, "readings_kind": data.readings_kind,
+                "heading_ambiguity_deg": data.heading_ambiguity_deg,
+                "samples": int(len(table)),
                 "photodiodes": len(data.columns), "units": sensor.n_units,
                 "sweeps": int(np.unique(sweep).size),
                 "yaw_reference": data.sidecar["yaw_reference"],
                 "yaw_sense": data.sidecar["yaw_sense"],
-                "saturation_value": float(data.sidecar["saturation_value"]),
+                "saturation_value": None if data.sidecar.get("saturation_value") is None
+                else float(data.sidecar["saturation_value"]),
                 "held_readings": int(held.sum())})
