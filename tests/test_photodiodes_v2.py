@@ -74,7 +74,8 @@ def test_rotating_analyser_fixture_loads_with_every_new_field():
     np.testing.assert_array_equal(sub.pd_angle_row_deg, inst.pd_angle_row_deg[300:600])
     fwd = Forward(inst)
     held = fwd.held_by_readings()
-    assert held[fwd.layout.off].all() and held.sum() == 2
+    assert held[fwd.layout.off].all() and held[fwd.layout.scale] and held.sum() == 3
+    np.testing.assert_array_equal(sub.analyser_cycle, inst.analyser_cycle[300:600])
     assert fwd.usable.all()          # a crossed pair's two readings are enough per sample
 
 
@@ -161,6 +162,51 @@ def test_zenith_compass_cannot_tell_a_heading_from_its_opposite():
         rms[shift] = float(np.sqrt(np.mean(fwd.residual(t) ** 2)))
     assert rms[0.0] < 1e-9 and rms[180.0] < 1e-6      # the ambiguity: 180 deg off fits
     assert rms[90.0] > 0.05
+
+
+def test_normalised_rotating_analyser_fit_recovers_the_heading_modulo_180():
+    """The fixture's normalised readings (each photodiode scaled to [0, 1] per revolution,
+    which keeps no dark level and no modulation depth): with the radiance and polarized
+    radiance profiled per half-turn of the analyser and the offsets and DoP scale held, a fit
+    of the heading from 20 deg off (the diagnosis starts within 15 deg, a 30-deg grid) returns
+    the true heading 0 modulo 180 deg. Tolerance 0.1 deg: the heading's statistical SD here
+    is about 0.015 deg (3600 readings, relative noise 0.022 of a mean 0.5, modulation
+    amplitude 0.5: sigma / (2 A sqrt(N / 2)) rad)."""
+    from calibration.photodiode_diagnosis.fit import fit
+    d = read_photodiodes(FIXTURE / "rotating_analyser.csv")
+    fwd = Forward(instrument_from_photodiodes(d))
+    assert fwd.profile_rows.max() + 1 == 36      # 6 headings x 3 revolutions x 2 half-turns
+    theta = np.zeros(fwd.layout.size)
+    theta[fwd.layout.scale] = 0.6
+    at_truth = float(np.sqrt(np.mean(fwd.residual(theta) ** 2)))
+    for start in (20.0, 160.0):
+        t = theta.copy()
+        t[fwd.layout.heading] = start
+        free = ~fwd.held_by_readings()
+        free[fwd.layout.pointing] = False
+        res = fit(fwd, t, free, sigma=0.03, max_iter=60)
+        assert res.converged
+        err = heading_error_deg(res.theta[fwd.layout.heading], 0.0, d.heading_ambiguity_deg)
+        assert abs(err[0]) < 0.1, (start, res.theta[fwd.layout.heading])
+        rms = float(np.sqrt(np.mean(fwd.residual(res.theta) ** 2)))
+        assert rms <= at_truth * (1 + 1e-6)
+        np.testing.assert_array_equal(res.theta[fwd.layout.off], 0.0)     # held
+    # 90 deg off, the profiled polarized radiance would be negative: it is held at 0, so
+    # the wrong heading does not fit (the 90-deg twin of a signed profile)
+    t = theta.copy()
+    t[fwd.layout.heading] = 90.0
+    assert np.sqrt(np.mean(fwd.residual(t) ** 2)) > 10 * at_truth
+
+
+def test_analyser_cycles_count_half_turns_per_sweep():
+    from calibration.photodiode_diagnosis.instrument import analyser_cycles
+    angle = np.r_[np.arange(0, 720, 30.0), np.arange(350, 350 - 400, -40.0) % 360]
+    sweep = np.r_[np.zeros(24, int), np.ones(10, int)]
+    c = analyser_cycles(angle, sweep)
+    # sweep 0: 6 samples per half-turn (30 deg steps), 4 half-turns; sweep 1 turns backwards
+    # (40 deg steps from 350): half-turns below its start, 5 samples each
+    assert np.bincount(c[:24]).tolist() == [6, 6, 6, 6]
+    assert len(set(c[24:])) == 3 and not set(c[24:]) & set(c[:24])
 
 
 # ------------------------------------------------------------------ heading error

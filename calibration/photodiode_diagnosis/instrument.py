@@ -23,8 +23,8 @@ from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError, YawInRadiansWarning
 
-__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "held_readings",
-           "instrument_from_photodiodes"]
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "analyser_cycles",
+           "held_readings", "instrument_from_photodiodes"]
 
 MAX_SPAN_DAYS = 7.0
 """Samples farther than this from the file's median time are not of the same session [days]:
@@ -101,6 +101,9 @@ class Instrument:
     unrecoverable : list of dict
         What the data cannot tell, ``{"quantity", "reason"}``
         (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`), for the report.
+    analyser_cycle : ndarray (n,) of int, optional
+        Half-turn of the (first) rotating analyser each sample belongs to, counted within
+        its sweep (:func:`analyser_cycles`); None without a rotating analyser.
     """
 
     sensor: CompoundEyeSensor
@@ -125,6 +128,7 @@ class Instrument:
     pd_angle_row_deg: np.ndarray | None = None
     readings_kind: str = "raw"
     unrecoverable: list = field(default_factory=list)
+    analyser_cycle: np.ndarray | None = None
 
     @property
     def n(self) -> int:
@@ -154,7 +158,9 @@ class Instrument:
                        flagged=self.flagged[rows],
                        held=None if self.held is None else self.held[rows],
                        pd_angle_row_deg=None if self.pd_angle_row_deg is None
-                       else self.pd_angle_row_deg[rows])
+                       else self.pd_angle_row_deg[rows],
+                       analyser_cycle=None if self.analyser_cycle is None
+                       else self.analyser_cycle[rows])
 
     def with_readings(self, readings) -> "Instrument":
         """The same instrument and samples with other readings (same shape)."""
@@ -188,6 +194,20 @@ def _unwrap_per_sweep(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
         m = sweep == s
         out[m] = np.degrees(np.unwrap(np.radians(yaw[m])))
     return out
+
+
+def analyser_cycles(angle_deg: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    """Index (n,) of the half-turn of a rotating analyser each sample falls in, distinct per
+    sweep: its angle [deg] unwrapped along each sweep (successive samples less than 180 deg
+    apart), counted in steps of 180 deg from the sweep's first sample. Within a half-turn the
+    analyser passes every polarizer angle once."""
+    au = _unwrap_per_sweep(np.asarray(angle_deg, float), sweep)
+    first = np.zeros_like(au)
+    for s in np.unique(sweep):
+        m = sweep == s
+        first[m] = au[m][0]
+    half = np.floor((au - first) / 180.0).astype(int)
+    return np.unique(np.c_[sweep, half], axis=0, return_inverse=True)[1].ravel()
 
 
 def _rotating(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
@@ -275,12 +295,15 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                 "apart are not one session (a clock glitch?): fix or drop that row")
     readings, flagged = data.readings, data.flags.bad.copy()
     row_angles = data.polarizer_angles_deg if data.rotating_units else None
+    analyser = data.analyser_angles_deg()[:, data.rotating_units[0]] if data.rotating_units \
+        else None
     rows = np.arange(len(table))
     if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
         rows = np.argsort(t_s, kind="stable")
         table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
         readings, flagged = readings[rows], flagged[rows]
         row_angles = None if row_angles is None else row_angles[rows]
+        analyser = None if analyser is None else analyser[rows]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
     sweep = _sweeps(table, t_s, rows, where)
@@ -311,6 +334,7 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
         time_uncertainty_s=data.time_uncertainty_s, pd_angle_row_deg=row_angles,
         readings_kind=data.readings_kind, unrecoverable=data.unrecoverable,
+        analyser_cycle=None if analyser is None else analyser_cycles(analyser, sweep),
         source={"path": where, "schema": data.sidecar["schema"],
                 "readings": data.reading_unit, "readings_kind": data.readings_kind,
                 "heading_ambiguity_deg": data.heading_ambiguity_deg,
