@@ -213,14 +213,14 @@ def test_analyser_cycles_count_half_turns_per_sweep():
 def test_heading_error_modulo_the_ambiguity():
     est = np.array([10.0, 190.0, 359.0, np.nan, 95.0])
     true = np.array([9.5, 10.0, 1.0, 0.0, 0.0])
-    np.testing.assert_allclose(heading_error_deg(est, true), [0.5, 180 - 360, -2.0, np.nan,
-                                                              95.0][:3] + [np.nan, 95.0])
+    np.testing.assert_allclose(heading_error_deg(est, true), [0.5, -180.0, -2.0, np.nan, 95.0])
     np.testing.assert_allclose(heading_error_deg(est, true, 180), [0.5, 0.0, -2.0, np.nan,
                                                                    -85.0])
     for bad in (90, 0, "180", True, np.nan):
-        with pytest.raises(InvalidParameterError, match=f"ambiguity_deg must be 360 or 180.*"
-                                                         f"got {bad!r}"[:60].replace("(", ".")):
+        with pytest.raises(InvalidParameterError, match="ambiguity_deg must be 360 or 180") \
+                as exc:
             heading_error_deg(est, true, bad)
+        assert str(exc.value).endswith(f"got {bad!r}")
     with pytest.raises(InvalidParameterError, match=r"shape \(5,\).*shape \(2,\)"):
         heading_error_deg(est, [1.0, 2.0])
 
