@@ -296,7 +296,7 @@ class CompoundEyeSensor:
                accel_noise_mps2: float = 0.0, yaw_reference: str = "north",
                yaw_offset_deg: float = 0.0, include_truth: bool = True, seed=None,
                sweep=None, source: str = "sun") -> PhotodiodeData:
-        """Simulate raw photodiode data (schema "skysim.photodiodes/1").
+        """Simulate raw photodiode data (schema "skysim.photodiodes/2").
 
         Parameters
         ----------
@@ -359,7 +359,7 @@ class CompoundEyeSensor:
         sidecar = {
             "schema": PHOTODIODES_SCHEMA, "site": site.to_dict(), "yaw_reference": yaw_reference,
             "yaw_sense": "clockwise", "units": [u.describe() for u in self.units],
-            "readings": "counts", "adc_full_scale": pm.saturation_value,
+            "readings": "raw", "reading_unit": "counts", "adc_full_scale": pm.saturation_value,
             "saturation_value": pm.saturation_value,
             "frames": "body x right, y forward (heading axis), z up; unit azimuth clockwise "
                       "from forward",

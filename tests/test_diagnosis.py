@@ -185,7 +185,8 @@ def _photodiode_data(m, angles):
     table = pd.DataFrame({"time": t["time"], "yaw_deg": t["heading_deg"], "sweep": t["sweep"],
                           **{k: cols[k] for k in sorted(cols) if int(k[-3:]) in angles}})
     side = {"schema": PHOTODIODES_SCHEMA, "site": m.sidecar["site"], "yaw_reference": "north",
-            "yaw_sense": "clockwise", "readings": "counts", "adc_full_scale": 65535,
+            "yaw_sense": "clockwise", "readings": "raw", "reading_unit": "counts",
+            "adc_full_scale": 65535,
             "saturation_value": 65535,
             "units": [{"azimuth_deg": 0.0, "elevation_deg": 90.0,
                        "photodiodes": sorted(angles)}]}

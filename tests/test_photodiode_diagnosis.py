@@ -448,7 +448,7 @@ def test_diagnose_command_names_malformed_units(tmp_path, session, capsys, units
 
 @pytest.mark.parametrize("text,match", [
     ("{bad", "not valid JSON"), ("[1, 2]", "must be a JSON object; got list"),
-    (None, "schema 'skysim.photodiodes/2' is neither"),
+    (None, "schema 'skysim.photodiodes/3' is neither"),
 ])
 def test_diagnose_command_reports_a_broken_sidecar_before_the_effects(tmp_path, session,
                                                                      capsys, text, match):
@@ -458,7 +458,7 @@ def test_diagnose_command_reports_a_broken_sidecar_before_the_effects(tmp_path, 
     path = tmp_path / "ring.csv"
     session.write(path)
     if text is None:
-        text = json.dumps(dict(session.sidecar, schema="skysim.photodiodes/2"))
+        text = json.dumps(dict(session.sidecar, schema="skysim.photodiodes/3"))
     path.with_name("ring.csv.json").write_text(text)
     assert main(["diagnose", str(path), "--effects", "yaw_scale"]) == 2
     err = capsys.readouterr().err

@@ -1,4 +1,5 @@
-"""Schema "skysim.photodiodes/1": round trips, per-sample flags, specific errors."""
+"""Photodiode data files: round trips, per-sample flags, specific errors, on sidecars of the
+first version (converted on load; the second version's own fields: test_photodiodes_v2.py)."""
 
 import json
 
@@ -9,9 +10,9 @@ from hypothesis import given, settings
 from hypothesis import strategies as st
 
 from sensor.compound_eye import ring_configuration
-from sensor.photodiodes_io import (PHOTODIODES_SCHEMA, PhotodiodeData, PhotodiodeFormatError,
-                                   SidecarMismatchError, photodiode_column, read_photodiodes,
-                                   write_photodiodes)
+from sensor.photodiodes_io import (PHOTODIODES_SCHEMA, PHOTODIODES_SCHEMA_V1, PhotodiodeData,
+                                   PhotodiodeFormatError, SidecarMismatchError,
+                                   photodiode_column, read_photodiodes, write_photodiodes)
 from skysim.io import sidecar_path
 from skysim.sky import RayleighSky
 
@@ -19,7 +20,7 @@ SAT = 4095.0
 
 
 def _sidecar(n_units=2, angles=(0, 45, 90, 135), yaw_reference="north"):
-    return {"schema": PHOTODIODES_SCHEMA,
+    return {"schema": PHOTODIODES_SCHEMA_V1,
             "site": {"latitude_deg": 39.98, "longitude_deg": 116.35, "altitude_m": 50.0},
             "yaw_reference": yaw_reference, "yaw_sense": "clockwise",
             "units": [{"azimuth_deg": 90.0 * i, "elevation_deg": 45.0, "photodiodes": list(angles)}
@@ -40,8 +41,10 @@ def _table(n=12, n_units=2, angles=(0, 45, 90, 135), seed=0):
 def test_column_names():
     assert photodiode_column(0, 45) == "u0_p045"
     assert photodiode_column(12, 0) == "u12_p000"
-    with pytest.raises(PhotodiodeFormatError, match="whole number"):
-        photodiode_column(0, 22.5)
+    assert photodiode_column(1, 22.5) == "u1_p022.5"
+    assert photodiode_column(0, 0.125) == "u0_p000.125"
+    with pytest.raises(PhotodiodeFormatError, match=r"angle 180 of unit 0 .* \[0, 180\)"):
+        photodiode_column(0, 180)
 
 
 @pytest.mark.parametrize("ext", [".csv", ".parquet"])
@@ -53,6 +56,9 @@ def test_round_trip_keeps_values_times_and_extra_columns(tmp_path, ext):
     assert sidecar_path(path).exists()
     back = read_photodiodes(path)
     assert back.sidecar == data.sidecar
+    # a first-version sidecar is converted on load, and the writer writes the second version
+    assert data.migrated_from == PHOTODIODES_SCHEMA_V1 and back.migrated_from is None
+    assert json.loads(sidecar_path(path).read_text())["schema"] == PHOTODIODES_SCHEMA
     np.testing.assert_array_equal(back.readings, data.readings)   # integer counts: exact
     assert (back.table["time"] == table["time"]).all()
     np.testing.assert_allclose(back.table["yaw_deg"], table["yaw_deg"], rtol=0, atol=1e-12)
@@ -119,7 +125,7 @@ def test_photodiode_column_not_in_sidecar(tmp_path):
 
 
 @pytest.mark.parametrize("key,value,match", [
-    ("schema", "skysim.measurement/1", "expected 'skysim.photodiodes/1'"),
+    ("schema", "skysim.measurement/1", "expected 'skysim.photodiodes/2'"),
     ("yaw_reference", "magnetic", "yaw_reference"),
     ("yaw_sense", "cw", "yaw_sense"),
     ("readings", "amps", "readings"),

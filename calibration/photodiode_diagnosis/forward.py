@@ -9,7 +9,9 @@ without input checks in the fit's inner loop):
 ``r_ip = I_iu g_p (1 + s d_iu cos 2(chi_iu - a_p - beta_p - delta_u)) + o_p``
 
 with ``d_iu``, ``chi_iu`` the degree and angle of linear polarization of the light reaching
-unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle, ``beta_p`` the
+unit ``u`` at sample ``i`` (unit frame), ``a_p`` the nominal polarizer angle (``a_ip`` at
+sample ``i`` when the unit's analyser turns: the photodiode's angle on the analyser plus the
+analyser's angle at that sample), ``beta_p`` the
 photodiode's own deviation from it (a hand-cut polarizer film is placed within a few degrees),
 ``delta_u`` the unit's polarizer-angle (installation) offset, ``s`` the DoP scale (the sky's ``d_max``),
 ``g_p = exp(lambda_p)`` the photodiode's gain and ``o_p`` its dark offset. The radiance
@@ -18,6 +20,17 @@ unit's photodiodes at each sample, variable projection, Golub & Pereyra 1973 [1]
 polarization compass does not use it, and the single-scattering radiance misses the real
 sky's aerosol brightening near the sun and horizon by factors of several, which would bury
 every polarization effect. Residuals are relative: ``(r - r_hat) / mean_u(r)``.
+
+What the readings are fixes part of the model: dark-subtracted and normalised readings carry
+no dark offset (``o_p`` is 0 whatever its parameter, :meth:`Forward.held_by_readings`).
+Normalised readings (scaled by their authors, e.g. each photodiode to [0, 1] over each
+analyser revolution) carry no degree of polarization either: the polarized radiance
+``J = I d`` is then profiled out beside ``I`` (the DoP-free prediction below), and ``s`` has
+no effect (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`). With a rotating
+analyser a unit's photodiodes see one angle per sample, so ``I`` and ``J`` are shared by the
+samples of each half-turn of the analyser (:attr:`Instrument.analyser_cycle`): the sky does
+not change within a half-turn of a few seconds, and a crossed pair's two readings per sample
+could not determine both.
 
 Which parameters are shared and which are per sweep: gains, offsets, polarizer angles, the
 pointing of every unit's axis (elevation and azimuth offsets from nominal) and the DoP scale
@@ -49,6 +62,12 @@ from skysim.sun import SunTrack
 from .instrument import Instrument
 
 __all__ = ["Layout", "SunTrack", "Forward", "RELATIVE_FLOOR"]
+
+MIN_PHOTODIODES_USED = 3
+"""Usable photodiodes a unit needs at a sample for its relative residuals to be formed (fewer
+in a unit that has fewer: both of a crossed pair): with the radiance profiled out, three
+readings leave two degrees of freedom for the polarization, so one faulty photodiode of a
+four-polarizer unit does not silence the unit."""
 
 RELATIVE_FLOOR = 1e-3
 """Floor of a unit's mean reading, as a fraction of the session's median reading, below which
@@ -155,8 +174,24 @@ class Forward:
         cnt = good.astype(float) @ self.member.T        # (n, U)
         mean = (self.y @ self.member.T) / np.maximum(cnt, 1.0)
         self.unit_mean = mean
-        self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= 3))[:, units]
+        need = np.minimum(self.member.sum(axis=1), MIN_PHOTODIODES_USED)    # (U,)
+        self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= need))[:, units]
+        self.pd_angle_deg = (inst.pd_angle_deg if inst.pd_angle_row_deg is None
+                             else np.asarray(inst.pd_angle_row_deg, float))
+        """Nominal polarizer angles, (P,) with fixed analysers or (n, P) per sample [deg]."""
         self._scale = np.where(self.usable, mean[:, units], 1.0)
+        kind = getattr(inst, "readings_kind", "raw")
+        self.fit_offsets = kind == "raw"
+        """False for dark-subtracted and normalised readings: their dark offset is 0."""
+        self.normalised = kind == "normalised"
+        """Normalised readings: predictions always profile ``J = I d`` (DoP-free)."""
+        self.profile_rows = None
+        """Group label (n,) of the samples that share the profiled radiance (and polarized
+        radiance) of each unit; None: every sample its own. Normalised readings of a rotating
+        analyser share them over each half-turn of the analyser."""
+        cycle = getattr(inst, "analyser_cycle", None)
+        if self.normalised and cycle is not None:
+            self.profile_rows = np.unique(np.asarray(cycle), return_inverse=True)[1].ravel()
         self._sky = RayleighSky(1.0)
         self._dop_in_sky = bool(effect is not None and effect.dop_scale_in_sky)
         """The DoP scale is the base sky's ``d_max`` inside the effect's sky (see
@@ -165,6 +200,18 @@ class Forward:
         self.aop_sky = None
         """A sky (:class:`skysim.sky.Sky`) whose angle of polarization the DoP-free stage
         uses instead of single scattering's (None: the base sky)."""
+
+    def held_by_readings(self) -> np.ndarray:
+        """Parameters (size,) bool that the readings leave without effect, to be held in
+        every fit (and not reported as fitted): the dark offsets of dark-subtracted and
+        normalised readings (no dark level survives them), and the DoP scale of normalised
+        ones (no modulation depth survives them)."""
+        held = np.zeros(self.layout.size, bool)
+        if not self.fit_offsets:
+            held[self.layout.off] = True
+        if self.normalised:
+            held[self.layout.scale] = True
+        return held
 
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
@@ -232,28 +279,43 @@ class Forward:
         u = inst.pd_unit
         s = 1.0 if self._dop_in_sky else theta[L.scale]
         d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
-        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         return malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
                             responsivity=np.exp(theta[L.lam]))
 
+    def _unit_sums(self, x) -> np.ndarray:
+        """Sums of ``x`` (n, P) over each unit's photodiodes (n, U), and over the samples of
+        each group of :attr:`profile_rows` when it is set (G, U)."""
+        s = x @ self.member.T
+        if self.profile_rows is None:
+            return s
+        out = np.zeros((int(self.profile_rows.max()) + 1, s.shape[1]))
+        np.add.at(out, self.profile_rows, s)
+        return out
+
+    def _per_sample(self, v) -> np.ndarray:
+        """Per-group values (G, U) at every sample (n, U); per-sample values unchanged."""
+        return v if self.profile_rows is None else v[self.profile_rows]
+
     def predict(self, theta, obs: SkySample):
         """Predicted readings (n, P) in session-median units and the profiled radiance (n, U)."""
-        if self.dop_free:
+        if self.dop_free or self.normalised:
             return self._predict_dop_free(theta, obs)
         m = self.channel_model(theta, obs)
         off = self._offsets(theta, obs)
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)
         mw = np.where(w, m, 0.0)
-        num = (yo * mw) @ self.member.T
-        den = (mw * mw) @ self.member.T
-        radiance = num / np.maximum(den, 1e-300)
+        num = self._unit_sums(yo * mw)
+        den = self._unit_sums(mw * mw)
+        radiance = self._per_sample(num / np.maximum(den, 1e-300))
         return radiance[:, self.inst.pd_unit] * m + off, radiance
 
     def _offsets(self, theta, obs: SkySample):
-        """Dark offsets (P,) plus an effect's additive light (n, P), if any."""
+        """Dark offsets (P,) (0 unless the readings are raw) plus an effect's additive light
+        (n, P), if any."""
         L, e = self.layout, self.effect
-        off = theta[L.off]
+        off = theta[L.off] if self.fit_offsets else np.zeros(L.n_pd)
         if e is not None:
             add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
             if add is not None:
@@ -273,22 +335,30 @@ class Forward:
         L, inst = self.layout, self.inst
         u = inst.pd_unit
         g = np.exp(theta[L.lam])
-        angle = self.polarizer_sign * inst.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
+        angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         b0 = np.broadcast_to(g, self.y.shape)
         b1 = g * np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
         off = self._offsets(theta, obs)
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)
         b0w, b1w = np.where(w, b0, 0.0), np.where(w, b1, 0.0)
-        M = self.member.T
+        S = self._unit_sums
         # a trial step of a fit to gains of e^700 overflows here; its cost is then not finite
         # and the step is rejected (:func:`.fit.fit`), so the overflow is not reported
         with np.errstate(over="ignore", invalid="ignore"):
-            a00, a01, a11 = (b0w * b0w) @ M, (b0w * b1w) @ M, (b1w * b1w) @ M
-            c0, c1 = (yo * b0w) @ M, (yo * b1w) @ M
+            a00, a01, a11 = S(b0w * b0w), S(b0w * b1w), S(b1w * b1w)
+            c0, c1 = S(yo * b0w), S(yo * b1w)
             det = np.maximum(a00 * a11 - a01 * a01, 1e-300)
             radiance = (a11 * c0 - a01 * c1) / det
             polarized = (a00 * c1 - a01 * c0) / det
+            if self.normalised:
+                # the polarized radiance is not negative: J < 0 would pass an angle 90 deg
+                # from the sky's off as a fit (one zenith unit's angle follows the heading
+                # exactly); there the best fit has J = 0 and the radiance alone
+                neg = polarized < 0
+                polarized = np.where(neg, 0.0, polarized)
+                radiance = np.where(neg, c0 / np.maximum(a00, 1e-300), radiance)
+            radiance, polarized = self._per_sample(radiance), self._per_sample(polarized)
             return radiance[:, u] * b0 + polarized[:, u] * b1 + off, radiance
 
     def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:

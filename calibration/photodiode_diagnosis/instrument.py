@@ -1,7 +1,8 @@
-"""Adapter from raw photodiode data (``skysim.photodiodes/1``) to the arrays the diagnosis fits.
+"""Adapter from photodiode data (``skysim.photodiodes/2``) to the arrays the diagnosis fits.
 
-Any multi-unit instrument: N units x M photodiodes, any unit azimuth/elevation, any polarizer
-angles, counts or volts, absolute or relative yaw in either sense. The adapter converts the
+Any instrument: N units of two or more photodiodes, any unit azimuth/elevation, any polarizer
+angles, fixed or rotating analysers, raw, dark-subtracted or normalised readings, absolute or
+relative yaw in either sense. The adapter converts the
 yaw to the project's heading convention (clockwise from north, unwrapped along each sweep so
 that a turn stays one continuous angle), finds the sweeps and whether the platform is turning,
 and keeps the reader's per-reading flags. It never drops a sample; rows written out of time
@@ -17,13 +18,13 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from sensor.compound_eye import CompoundEyeSensor, PhotodiodeModel
-from sensor.photodiodes_io import PhotodiodeData
+from sensor.photodiodes_io import PhotodiodeData, heading_ambiguity_deg
 from skysim.sun import Site, as_utc_index
 
 from .errors import InsufficientDataError, InstrumentDataError, YawInRadiansWarning
 
-__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "held_readings",
-           "instrument_from_photodiodes"]
+__all__ = ["Instrument", "ROTATING_RATE_DEG_PER_SAMPLE", "MAX_SPAN_DAYS", "analyser_cycles",
+           "held_readings", "instrument_from_photodiodes"]
 
 MAX_SPAN_DAYS = 7.0
 """Samples farther than this from the file's median time are not of the same session [days]:
@@ -90,7 +91,19 @@ class Instrument:
         logger without a clock whose times were reconstructed afterwards (a session's start
         from a photograph, then a nominal cadence) has one; the clock candidate adds it in
         quadrature to its own uncertainty, since a clock fitted to within its statistics
-        is no better than the times it corrects.
+        is no better than the times it corrects. Read from the sidecar.
+    pd_angle_row_deg : ndarray (n, P), optional
+        Polarizer angle of every photodiode at every sample [deg] when an analyser turns
+        (:attr:`sensor.photodiodes_io.PhotodiodeData.polarizer_angles_deg`); None: every
+        analyser is fixed and ``pd_angle_deg`` holds for every sample.
+    readings_kind : {"raw", "dark-subtracted", "normalised"}
+        What the readings are (:data:`sensor.photodiodes_io.READINGS_KINDS`).
+    unrecoverable : list of dict
+        What the data cannot tell, ``{"quantity", "reason"}``
+        (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`), for the report.
+    analyser_cycle : ndarray (n,) of int, optional
+        Half-turn of the (first) rotating analyser each sample belongs to, counted within
+        its sweep (:func:`analyser_cycles`); None without a rotating analyser.
     """
 
     sensor: CompoundEyeSensor
@@ -112,10 +125,20 @@ class Instrument:
     pointing_deg: np.ndarray | None = None
     light: str = "sun"
     time_uncertainty_s: float = 0.0
+    pd_angle_row_deg: np.ndarray | None = None
+    readings_kind: str = "raw"
+    unrecoverable: list = field(default_factory=list)
+    analyser_cycle: np.ndarray | None = None
 
     @property
     def n(self) -> int:
         return self.t_s.size
+
+    @property
+    def heading_ambiguity_deg(self) -> float:
+        """180 when every unit looks within a few degrees of the zenith (its heading is known
+        modulo 180 deg, :func:`sensor.photodiodes_io.heading_ambiguity_deg`), else 360."""
+        return heading_ambiguity_deg([u.elevation_deg for u in self.sensor.units])
 
     @property
     def n_units(self) -> int:
@@ -133,7 +156,11 @@ class Instrument:
                        rotating=self.rotating[rows], pitch_deg=self.pitch_deg[rows],
                        roll_deg=self.roll_deg[rows], readings=self.readings[rows],
                        flagged=self.flagged[rows],
-                       held=None if self.held is None else self.held[rows])
+                       held=None if self.held is None else self.held[rows],
+                       pd_angle_row_deg=None if self.pd_angle_row_deg is None
+                       else self.pd_angle_row_deg[rows],
+                       analyser_cycle=None if self.analyser_cycle is None
+                       else self.analyser_cycle[rows])
 
     def with_readings(self, readings) -> "Instrument":
         """The same instrument and samples with other readings (same shape)."""
@@ -167,6 +194,20 @@ def _unwrap_per_sweep(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
         m = sweep == s
         out[m] = np.degrees(np.unwrap(np.radians(yaw[m])))
     return out
+
+
+def analyser_cycles(angle_deg: np.ndarray, sweep: np.ndarray) -> np.ndarray:
+    """Index (n,) of the half-turn of a rotating analyser each sample falls in, distinct per
+    sweep: its angle [deg] unwrapped along each sweep (successive samples less than 180 deg
+    apart), counted in steps of 180 deg from the sweep's first sample. Within a half-turn the
+    analyser passes every polarizer angle once."""
+    au = _unwrap_per_sweep(np.asarray(angle_deg, float), sweep)
+    first = np.zeros_like(au)
+    for s in np.unique(sweep):
+        m = sweep == s
+        first[m] = au[m][0]
+    half = np.floor((au - first) / 180.0).astype(int)
+    return np.unique(np.c_[sweep, half], axis=0, return_inverse=True)[1].ravel()
 
 
 def _rotating(yaw: np.ndarray, sweep: np.ndarray) -> np.ndarray:
@@ -253,11 +294,16 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
                 f"from the session's median time; samples more than {MAX_SPAN_DAYS:g} days "
                 "apart are not one session (a clock glitch?): fix or drop that row")
     readings, flagged = data.readings, data.flags.bad.copy()
+    row_angles = data.polarizer_angles_deg if data.rotating_units else None
+    analyser = data.analyser_angles_deg()[:, data.rotating_units[0]] if data.rotating_units \
+        else None
     rows = np.arange(len(table))
     if np.any(np.diff(t_s) < 0):   # rows written out of time order: samples in time order
         rows = np.argsort(t_s, kind="stable")
         table, yaw, t_s = table.iloc[rows].reset_index(drop=True), yaw[rows], t_s[rows]
         readings, flagged = readings[rows], flagged[rows]
+        row_angles = None if row_angles is None else row_angles[rows]
+        analyser = None if analyser is None else analyser[rows]
     if data.sidecar["yaw_sense"] == "counterclockwise":
         yaw = -yaw
     sweep = _sweeps(table, t_s, rows, where)
@@ -273,10 +319,10 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         att[c] = np.where(np.isfinite(v), v, 0.0)
     counts = PhotodiodeModel(counts_per_radiance=1.0, noise_counts=0.0)
     sensor = CompoundEyeSensor.from_sidecar(data.sidecar, counts)
-    pd_unit = np.array([i for i, u in enumerate(data.units) for _ in u["photodiodes"]])
+    pd_unit = data.pd_unit
     held = held_readings(readings, pd_unit)
     flagged = flagged | held
-    pd_angle = np.array([float(a) for u in data.units for a in u["photodiodes"]])
+    pd_angle = data.nominal_angles_deg
     for i in range(sensor.n_units):
         if not np.any(pd_unit == i):
             raise InstrumentDataError(f"{where}: unit {i} lists no photodiode columns")
@@ -286,11 +332,17 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         readings=readings, pd_unit=pd_unit, pd_angle_deg=pd_angle,
         columns=list(data.columns), flagged=flagged, held=held,
         absolute_yaw=data.sidecar["yaw_reference"] == "north",
+        time_uncertainty_s=data.time_uncertainty_s, pd_angle_row_deg=row_angles,
+        readings_kind=data.readings_kind, unrecoverable=data.unrecoverable,
+        analyser_cycle=None if analyser is None else analyser_cycles(analyser, sweep),
         source={"path": where, "schema": data.sidecar["schema"],
-                "readings": data.sidecar["readings"], "samples": int(len(table)),
+                "readings": data.reading_unit, "readings_kind": data.readings_kind,
+                "heading_ambiguity_deg": data.heading_ambiguity_deg,
+                "samples": int(len(table)),
                 "photodiodes": len(data.columns), "units": sensor.n_units,
                 "sweeps": int(np.unique(sweep).size),
                 "yaw_reference": data.sidecar["yaw_reference"],
                 "yaw_sense": data.sidecar["yaw_sense"],
-                "saturation_value": float(data.sidecar["saturation_value"]),
+                "saturation_value": None if data.sidecar.get("saturation_value") is None
+                else float(data.sidecar["saturation_value"]),
                 "held_readings": int(held.sum())})

@@ -97,14 +97,15 @@ def run_sessions(files, effects, out: Path, folds: int = 3, seed: int = DEFAULT_
 
     from calibration import diagnose
     from calibration.diagnosis import DiagnosisError
+    from sensor.photodiodes_io import read_photodiodes
     rows, reports = [], {}
     uncertain = times_uncertainty(files)
     for f in tqdm(files, desc="sessions", unit="session"):
         sub = out / Path(f).stem
         t0 = time.perf_counter()
         try:
-            report = diagnose(f, effects, folds=folds, seed=seed,
-                              time_uncertainty_s=uncertain[Path(f)])
+            report = diagnose(read_photodiodes(f), effects, folds=folds, seed=seed,
+                              time_uncertainty_s=uncertain[Path(f)], where=str(f))
         except DiagnosisError as exc:
             rows.append({"session": Path(f).name, "verdict": "error", "faulty": str(exc)})
             continue

@@ -5,7 +5,7 @@
 - ``[[sky_map]]``: a sky map (schema "skysim.skymap/1": DoP, AoP and Stokes I, Q, U on an
   elevation-azimuth grid) of any sky model of :func:`skysim.sky.make_sky`;
 - ``[[measurement]]``: a three-pair sensor sweep (schema "skysim.measurement/1");
-- ``[[photodiodes]]``: a compound-eye instrument's raw readings (schema "skysim.photodiodes/1");
+- ``[[photodiodes]]``: a compound-eye instrument's raw readings (schema "skysim.photodiodes/2");
 
 each with its JSON sidecar, and ``manifest.json`` (schema "skysim.groundtruth/1": the whole
 configuration, the master seed and the SHA-256 of every file). Entry ``name`` draws its random
@@ -468,13 +468,13 @@ def _quantities(schema: str, truth) -> dict:
         q.update({c: [c] for c in ("true_phi_deg", "true_dop", "true_sun_elevation_deg")
                   if c in truth})
         return q
-    if schema == "skysim.photodiodes/1":
+    if schema in ("skysim.photodiodes/1", "skysim.photodiodes/2"):
         from sensor.photodiodes_io import _PD_RE
         q = {c: [c] for c in ("yaw_deg", "pitch_deg", "roll_deg") if c in truth}
         q["photodiode_counts"] = [c for c in truth.columns if _PD_RE.match(str(c))]
         return q
     raise CompareError(f"truth schema {schema!r} is not one skysim generates; expected "
-                       f"{SKYMAP_SCHEMA}, skysim.measurement/1 or skysim.photodiodes/1")
+                       f"{SKYMAP_SCHEMA}, skysim.measurement/1 or skysim.photodiodes/2")
 
 
 def _row_labels(schema: str, truth, where: str, theirs) -> list[str] | None:

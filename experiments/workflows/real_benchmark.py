@@ -16,13 +16,14 @@ __all__ = ["run_real_benchmark", "session_files"]
 
 
 def session_files(folder, option: str = "--data") -> list[Path]:
-    """Photodiode sessions (data files with a ``skysim.photodiodes/1`` sidecar) of a folder;
-    ``option`` is the command-line option that names the folder (for the error message)."""
+    """Photodiode sessions (data files with a ``skysim.photodiodes`` sidecar, version 1 or 2)
+    of a folder; ``option`` is the command-line option that names the folder (for the error
+    message)."""
     import json
     folder = Path(folder)
     if not folder.is_dir():
         raise MissingFileError(
-            f"no session folder {folder}: give {option} DIR with skysim.photodiodes/1 files "
+            f"no session folder {folder}: give {option} DIR with skysim.photodiodes files "
             "(e.g. the ring-compass recordings of Gkanias et al. 2023)")
     out = []
     for f in sorted(folder.iterdir()):
@@ -31,13 +32,14 @@ def session_files(folder, option: str = "--data") -> list[Path]:
         for side in (f.with_name(f.name + ".json"), f.with_suffix(".json")):
             if side.exists():
                 try:
-                    if json.loads(side.read_text()).get("schema") == "skysim.photodiodes/1":
+                    if json.loads(side.read_text()).get("schema") in ("skysim.photodiodes/1",
+                                                                   "skysim.photodiodes/2"):
                         out.append(f)
                 except (ValueError, OSError):
                     pass
                 break
     if not out:
-        raise MissingFileError(f"{folder} holds no skysim.photodiodes/1 session")
+        raise MissingFileError(f"{folder} holds no skysim.photodiodes session")
     return out
 
 
