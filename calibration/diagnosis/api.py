@@ -116,22 +116,22 @@ def _camera_files(x) -> bool:
 
 def _file_adapter(path, sidecar: dict):
     from sensor.measurement import MEASUREMENT_SCHEMA, MeasurementFormatError
-    from sensor.photodiodes_io import PHOTODIODES_SCHEMA
+    from sensor.photodiodes_io import PHOTODIODES_SCHEMAS
     for a in ADAPTERS:
         if a.accepts(None, sidecar):
             return a
     raise MeasurementFormatError(
         f"{path}: sidecar schema {sidecar.get('schema')!r} is neither {MEASUREMENT_SCHEMA!r} "
-        f"nor {PHOTODIODES_SCHEMA!r}")
+        f"nor one of {', '.join(map(repr, PHOTODIODES_SCHEMAS))}")
 
 
 def _as_photodiodes(data, options: dict):
-    """A DataFrame given with a "skysim.photodiodes/1" sidecar as :class:`PhotodiodeData`
+    """A DataFrame given with a "skysim.photodiodes" sidecar as :class:`PhotodiodeData`
     (``sidecar`` taken out of ``options``); anything else unchanged."""
     import pandas as pd
 
-    from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+    from sensor.photodiodes_io import PHOTODIODES_SCHEMAS, PhotodiodeData
     side = options.get("sidecar") or {}
-    if isinstance(data, pd.DataFrame) and side.get("schema") == PHOTODIODES_SCHEMA:
+    if isinstance(data, pd.DataFrame) and side.get("schema") in PHOTODIODES_SCHEMAS:
         return PhotodiodeData(data, options.pop("sidecar"))
     return data

@@ -98,7 +98,7 @@ def pointing_from_reports(reports, n_units: int | None = None):
 def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
                    where: str = "photodiode data", pointing=None,
                    pointing_from=None, light: str = "sun",
-                   time_uncertainty_s: float = 0.0) -> DiagnosisReport:
+                   time_uncertainty_s: float | None = None) -> DiagnosisReport:
     """Diagnose a photodiode instrument.
 
     Parameters
@@ -118,11 +118,12 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     light : {"sun", "moon"}
         The body that lights the session's sky: ``"moon"`` for a session under the moonlit
         night sky (the Moon takes the Sun's place in every model).
-    time_uncertainty_s : float
-        Standard uncertainty [s] of the recorded times (>= 0; 0, the default, for a logged
-        clock): times reconstructed after the fact (a start from a photograph and a nominal
-        cadence) are uncertain by that much, and the clock candidate's uncertainty includes
-        it (:attr:`calibration.photodiode_diagnosis.instrument.Instrument.time_uncertainty_s`).
+    time_uncertainty_s : float, optional
+        Standard uncertainty [s] of the recorded times (>= 0; default: the sidecar's
+        ``time_uncertainty_s``, else 0 for a logged clock): times reconstructed after the
+        fact (a start from a photograph and a nominal cadence) are uncertain by that much,
+        and the clock candidate's uncertainty includes it
+        (:attr:`calibration.photodiode_diagnosis.instrument.Instrument.time_uncertainty_s`).
 
     Returns
     -------
@@ -145,7 +146,7 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
         raise InstrumentDataError(f"{where}: light must be one of {', '.join(LIGHTS)}; "
                                   f"got {light!r}")
     inst = data if isinstance(data, Instrument) else instrument_from_photodiodes(data, where)
-    tu = float(time_uncertainty_s)
+    tu = float(inst.time_uncertainty_s if time_uncertainty_s is None else time_uncertainty_s)
     if not (np.isfinite(tu) and tu >= 0.0):
         raise InstrumentDataError(f"{where}: time_uncertainty_s must be a finite number of "
                                   f"seconds >= 0; got {time_uncertainty_s!r}")
@@ -163,19 +164,19 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
 class RingAdapter:
     """Multi-unit photodiode instruments as an instrument of
     :func:`calibration.diagnosis.diagnose` (:class:`.protocol.InstrumentAdapter`):
-    "skysim.photodiodes/1" data that are not the one-unit three-pair sensor."""
+    "skysim.photodiodes" data (either version) that are not the one-unit three-pair sensor."""
 
     name = "photodiodes"
 
     def accepts(self, data, sidecar: dict | None = None) -> bool:
-        from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+        from sensor.photodiodes_io import PHOTODIODES_SCHEMAS, PhotodiodeData
 
         from ..photodiode_diagnosis import is_three_pair_sensor
         from ..photodiode_diagnosis.instrument import Instrument
         if isinstance(data, Instrument):
             return True
         side = data.sidecar if isinstance(data, PhotodiodeData) else (sidecar or {})
-        return side.get("schema") == PHOTODIODES_SCHEMA and not is_three_pair_sensor(side)
+        return side.get("schema") in PHOTODIODES_SCHEMAS and not is_three_pair_sensor(side)
 
     def load(self, path):
         from sensor.photodiodes_io import read_photodiodes
@@ -187,7 +188,7 @@ class RingAdapter:
     def diagnose(self, data, candidates, *, folds: int = 3, seed: int = 0,
                  where: str = "photodiode data", pointing=None,
                  pointing_from=None, light: str = "sun",
-                 time_uncertainty_s: float = 0.0) -> DiagnosisReport:
+                 time_uncertainty_s: float | None = None) -> DiagnosisReport:
         return diagnose_rings(data, candidates, folds=folds, seed=seed, where=where,
                               pointing=pointing, pointing_from=pointing_from, light=light,
                               time_uncertainty_s=time_uncertainty_s)

@@ -319,7 +319,7 @@ class ThreePairAdapter:
 
     def accepts(self, data, sidecar: dict | None = None) -> bool:
         from sensor.measurement import MEASUREMENT_SCHEMA, Measurement
-        from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData
+        from sensor.photodiodes_io import PHOTODIODES_SCHEMAS, PhotodiodeData
 
         from ..photodiode_diagnosis import is_three_pair_sensor
         if isinstance(data, (DiagnosisData, Measurement)):
@@ -329,7 +329,7 @@ class ThreePairAdapter:
         side = sidecar if sidecar is not None else {}
         if side.get("schema") == MEASUREMENT_SCHEMA:
             return True
-        return side.get("schema") == PHOTODIODES_SCHEMA and is_three_pair_sensor(side)
+        return side.get("schema") in PHOTODIODES_SCHEMAS and is_three_pair_sensor(side)
 
     def load(self, path) -> DiagnosisData:
         from .three_pair_data import load_diagnosis_data

@@ -17,7 +17,7 @@ from sensor.measurement import (
     parse_iso_times,
 )
 from sensor.opponent import CHANNEL_ANGLES_DEG, GAIN
-from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PhotodiodeData, photodiode_column
+from sensor.photodiodes_io import PHOTODIODES_SCHEMA, PHOTODIODES_SCHEMAS, PhotodiodeData
 from sensor.tables import read_table_and_sidecar
 
 from ..effects import Context
@@ -212,12 +212,13 @@ def data_from_photodiodes(pd_data: PhotodiodeData, where: str = "photodiodes") -
         raise UnsupportedInstrumentError(
             f"{where}: no unit has polarizers at 60/150, 0/90 and 120/30 deg (the three "
             "orthogonal pairs of the three-pair sensor); the diagnosis models that sensor only")
-    cols = pd_data.columns
+    mine = np.flatnonzero(pd_data.pd_unit == unit)
+    column_at = {round(float(pd_data.nominal_angles_deg[j])): int(j) for j in mine}
     bad = pd_data.flags.bad
     R = pd_data.readings
     U = np.empty((R.shape[0], 3))
     for c, (a, b) in enumerate(need):
-        ia, ib = cols.index(photodiode_column(unit, a)), cols.index(photodiode_column(unit, b))
+        ia, ib = column_at[a], column_at[b]     # the unit's own columns, whatever their names
         with np.errstate(divide="ignore", invalid="ignore"):
             U[:, c] = GAIN * np.log10(R[:, ia] / R[:, ib])
         U[bad[:, ia] | bad[:, ib], c] = np.nan
@@ -275,7 +276,7 @@ def load_diagnosis_data(path) -> DiagnosisData:
     from skysim.io import find_sidecar
     sidecar = read_sidecar(path)
     schema = sidecar.get("schema")
-    if schema == PHOTODIODES_SCHEMA:
+    if schema in PHOTODIODES_SCHEMAS:
         from sensor.photodiodes_io import read_photodiodes
         return data_from_photodiodes(read_photodiodes(path), str(path))
     if schema != MEASUREMENT_SCHEMA:
