@@ -23,7 +23,8 @@ condition:
   the row's band with its Paranal extinction, dark sky and aerosol-to-molecular scattering
   weight; the Sun is left out because the ``sun`` rows are in twilight, which the model does
   not cover) with the single-scattering Rayleigh pattern and, when the ``rt`` extra is
-  installed, the multiple-scattering one;
+  installed, the multiple-scattering one over the desert's ground albedo in the band
+  (:attr:`skysim.bands.Band.ground_albedo`);
 - writes ``moonlit_sky.csv`` (one row per measurement), ``moonlit_sky.png`` (DoP and AoP
   residuals against the scattering angle from the Moon) and ``summary.json`` (residual
   statistics per band, model and condition, for every band in the table, and the band
@@ -249,7 +250,8 @@ def compare(table: pd.DataFrame, with_multiple: bool = True,
 def band_parameters(bands) -> dict:
     """The model's parameters of each band: effective wavelength [nm], extinction and its
     molecular and aerosol parts [mag per airmass] (:func:`skysim.night.extinction_components`),
-    the aerosol term's weight [1] and the dark-sky zenith brightness [mag arcsec^-2]."""
+    the aerosol term's weight [1], the dark-sky zenith brightness [mag arcsec^-2] and the
+    ground albedo of the multiple-scattering pattern [1]."""
     from skysim.bands import get_band
     from skysim.night import aerosol_weight, extinction_components
     out = {}
@@ -260,7 +262,8 @@ def band_parameters(bands) -> dict:
                      "molecular_mag_per_airmass": round(c["rayleigh"], 5),
                      "aerosol_mag_per_airmass": round(c["aerosol"], 5),
                      "aerosol_scale": round(aerosol_weight(band), 4),
-                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2}
+                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2,
+                     "ground_albedo": round(get_band(band).ground_albedo, 4)}
     return out
 
 
@@ -392,7 +395,7 @@ def _reproduce(args) -> int:
               f"{b['extinction_mag_per_airmass']:.2f} mag/airmass (molecules "
               f"{b['molecular_mag_per_airmass']:.3f}, aerosol {b['aerosol_mag_per_airmass']:.3f}), "
               f"aerosol term x{b['aerosol_scale']:.2f}, dark sky {b['dark_sky_mag_arcsec2']:g} "
-              "mag/arcsec2")
+              f"mag/arcsec2, ground albedo {b['ground_albedo']:.2f}")
     for model, bands in summary["residuals"].items():
         for band, conds in bands.items():
             for cond, s in conds.items():
