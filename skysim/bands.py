@@ -45,8 +45,8 @@ import numpy as np
 
 from .exceptions import InvalidParameterError
 
-__all__ = ["ARCSEC2_SR", "BANDS", "Band", "DESERT_ALBEDO_NODES", "desert_albedo", "get_band", "magnitude_to_radiance",
-           "radiance_to_magnitude", "solar_irradiance"]
+__all__ = ["ARCSEC2_SR", "BANDS", "Band", "DESERT_ALBEDO_NODES", "desert_albedo", "get_band",
+           "magnitude_to_radiance", "radiance_to_magnitude", "solar_irradiance"]
 
 ARCSEC2_SR = (np.pi / 648000.0) ** 2
 """One square arcsecond [sr]."""
@@ -65,8 +65,8 @@ def desert_albedo(wavelength_nm) -> np.ndarray:
     lo, hi = DESERT_ALBEDO_NODES[0][0], DESERT_ALBEDO_NODES[-1][0]
     bad = ~((w >= lo) & (w <= hi))
     if np.any(bad):
-        raise InvalidParameterError(f"wavelength_nm={float(w[bad].flat[0]):g}: the desert albedo is "
-                                    f"tabulated between {lo:g} and {hi:g} nm")
+        raise InvalidParameterError(f"wavelength_nm={float(w[bad].flat[0]):g}: the desert "
+                                    f"albedo is tabulated between {lo:g} and {hi:g} nm")
     x, y = np.array(DESERT_ALBEDO_NODES).T
     return np.interp(w, x, y)
 

@@ -35,8 +35,8 @@ Rayleigh sky (DoP ``sin^2 rho / (1 + cos^2 rho)``, so that the Rayleigh term as 
 ``sin^2 rho / (1.06 + cos^2 rho)``) or the multiple-scattering sky of
 :mod:`skysim.multiple`, whose ground albedo carries the moonlight reflected by the ground and
 scattered back, nearly unpolarized (a desert's albedo per band:
-:attr:`skysim.bands.Band.ground_albedo`). Sources add as Stokes vectors (incoherent light); the night-sky
-background adds to ``I`` only:
+:attr:`skysim.bands.Band.ground_albedo`). Sources add as Stokes vectors (incoherent light);
+the night-sky background adds to ``I`` only:
 
     DoP = |polarized radiance| / (moonlit + sunlit + background radiance).
 
