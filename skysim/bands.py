@@ -59,8 +59,8 @@ of Aoki et al. 2005 ([4]_: 0.05-0.11 at 350 nm, 0.2-0.3 at 600 nm, maximum 0.37-
 
 def desert_albedo(wavelength_nm) -> np.ndarray:
     """Lambertian albedo of a bare desert surface at ``wavelength_nm`` [nm], 350-2000 nm:
-    linear between :data:`DESERT_ALBEDO_NODES` ([4]_; about 0.1 in U, 0.14 in B, 0.21 in V,
-    0.25 in R, 0.28 in I). Raises :class:`~skysim.exceptions.InvalidParameterError` outside."""
+    linear between :data:`DESERT_ALBEDO_NODES` ([4]_; about 0.09 in U, 0.14 in B, 0.21 in V,
+    0.26 in R, 0.28 in I). Raises :class:`~skysim.exceptions.InvalidParameterError` outside."""
     w = np.asarray(wavelength_nm, dtype=float)
     lo, hi = DESERT_ALBEDO_NODES[0][0], DESERT_ALBEDO_NODES[-1][0]
     bad = ~((w >= lo) & (w <= hi))
