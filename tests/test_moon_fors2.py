@@ -216,7 +216,7 @@ def test_ground_reflection_depolarizes_as_first_order_scattering():
 
 @needs_data
 @pytest.mark.slow
-def test_desert_ground_lowers_the_red_and_near_infrared_dop_relative_to_v(tmp_path):
+def test_desert_ground_lowers_the_red_and_near_infrared_dop_relative_to_v():
     # Prediction of the multiple-scattering pattern over the desert's albedo (B 0.14, V
     # 0.21, R 0.26, I 0.28; skysim.bands) at the V rows' fields and times, relabelled R and
     # I (clear rows, median of the model's DoP ratio to V): R/V 0.85 and I/V 0.58, against
