@@ -33,8 +33,10 @@ Polarization: the dipole part carries the degree and angle of polarization of a 
 model (:mod:`skysim.sky`) with the source in place of the Sun: the single-scattering
 Rayleigh sky (DoP ``sin^2 rho / (1 + cos^2 rho)``, so that the Rayleigh term as a whole has
 ``sin^2 rho / (1.06 + cos^2 rho)``) or the multiple-scattering sky of
-:mod:`skysim.multiple`. Sources add as Stokes vectors (incoherent light); the night-sky
-background adds to ``I`` only:
+:mod:`skysim.multiple`, whose ground albedo carries the moonlight reflected by the ground and
+scattered back, nearly unpolarized (a desert's albedo per band:
+:attr:`skysim.bands.Band.ground_albedo`). Sources add as Stokes vectors (incoherent light);
+the night-sky background adds to ``I`` only:
 
     DoP = |polarized radiance| / (moonlit + sunlit + background radiance).
 

@@ -134,12 +134,12 @@ def test_bad_input_named():
 # Published Paranal values, typed here from the papers (independent of skysim.bands):
 # Patat (2003, A&A 400:1183) abstract: zenith-corrected dark-sky brightness averaged over
 # 2000-2001 [mag arcsec^-2]; Table A.1: weighted-mean broadband extinction [mag/airmass].
-PATAT2003_DARK_SKY = {"B": 22.6, "V": 21.6, "R": 20.9, "I": 19.7}
-PATAT2003_EXTINCTION = {"B": 0.22, "V": 0.11, "R": 0.07, "I": 0.05}
+PATAT2003_DARK_SKY = {"U": 22.3, "B": 22.6, "V": 21.6, "R": 20.9, "I": 19.7}
+PATAT2003_EXTINCTION = {"U": 0.47, "B": 0.22, "V": 0.11, "R": 0.07, "I": 0.05}
 BESSELL_EFFECTIVE_NM = {"B": 438.0, "V": 545.0, "R": 641.0, "I": 798.0}  # Bessell 1998
 
 
-@pytest.mark.parametrize("band", ["B", "V", "R", "I"])
+@pytest.mark.parametrize("band", ["U", "B", "V", "R", "I"])
 def test_dark_sky_zenith_per_band_is_patat_2003(band):
     # The background at the zenith (X = 1, no extinction excess) is the band's published
     # Paranal dark sky, which was measured through the broadband filter and so includes
@@ -149,7 +149,7 @@ def test_dark_sky_zenith_per_band_is_patat_2003(band):
     assert abs(float(m) - PATAT2003_DARK_SKY[band]) <= 0.05
 
 
-@pytest.mark.parametrize("band", ["B", "V", "R", "I"])
+@pytest.mark.parametrize("band", ["U", "B", "V", "R", "I"])
 def test_background_elevation_dependence_is_airglow_van_rhijn(band):
     # Towards the horizon the background brightens as a thin emitting layer seen through
     # a longer path (van Rhijn 1921) and dims by the band's extinction over the extra
@@ -191,6 +191,44 @@ def test_aerosol_weight_closed_form(band):
     assert aerosol_weight("V") == 1.0
 
 
+def test_u_extinction_is_its_scattering_parts_within_patat_2003():
+    # U's coefficient is the sum of its molecular (Bodhaine, 744 hPa) and aerosol (Patat
+    # 2011) parts, rounded to 0.01 (ozone absorbs < 0.001 mag at 366 nm); it lies within
+    # the bi-monthly U coefficients of Patat (2003) Table A.1, 0.41 +- 0.05 and 0.47 +- 0.01
+    # (March-April and July-August 2000).
+    c = extinction_components("U")
+    assert abs(c["rayleigh"] + c["aerosol"] - c["total"]) <= 0.005
+    assert 0.41 - 0.05 <= c["total"] <= 0.47 + 0.01
+
+
+@pytest.mark.parametrize("pair, colour", [(("U", "B"), 0.166), (("B", "V"), 0.653),
+                                          (("V", "R"), 0.352), (("V", "I"), 0.702)])
+def test_sun_colours_are_ramirez_2012(pair, colour):
+    # The Sun's band magnitudes (Willmer 2018) against its colours measured from solar
+    # twins (Ramirez et al. 2012, ApJ 752:5: U-B 0.166 +- 0.022, B-V 0.653 +- 0.003,
+    # V-R 0.352 +- 0.007, V-I 0.702 +- 0.010). Tolerance 0.03 mag: Willmer's 0.02 mag per
+    # magnitude and Ramirez's error added in quadrature for the two magnitudes.
+    from skysim.bands import get_band
+    a, b = pair
+    assert get_band(a).sun_magnitude - get_band(b).sun_magnitude == pytest.approx(colour,
+                                                                                  abs=0.03)
+
+
+def test_desert_albedo_is_aoki_2005_and_atacama():
+    # The desert's spectral albedo against the ranges measured over gobi and sand (Aoki et
+    # al. 2005): 0.05-0.11 at 350 nm, 0.2-0.3 at 600 nm, 0.37-0.49 at 1.8-2.2 um; rising
+    # monotonically between. In the visible (B, V) not above the 0.25 of the Atacama's
+    # brightest spots (Cordero et al. 2021).
+    from skysim.bands import BANDS, desert_albedo
+    assert 0.05 <= desert_albedo(350.0) <= 0.11
+    assert 0.2 <= desert_albedo(600.0) <= 0.3
+    assert 0.37 <= desert_albedo(2000.0) <= 0.49
+    a = [BANDS[b].ground_albedo for b in "UBVRI"]
+    assert all(np.diff(a) > 0) and max(BANDS["B"].ground_albedo, BANDS["V"].ground_albedo) <= 0.25
+    with pytest.raises(InvalidParameterError, match="wavelength_nm=300"):
+        desert_albedo([500.0, 300.0])
+
+
 def test_red_sky_carries_more_aerosol_light():
     # The aerosol weight grows monotonically with wavelength (molecular scattering falls as
     # lambda^-4.08, aerosol as lambda^-1.38): B < V = 1 < R < I.
@@ -198,7 +236,7 @@ def test_red_sky_carries_more_aerosol_light():
     assert w[0] < w[1] == 1.0 < w[2] < w[3]
 
 
-@pytest.mark.parametrize("band", ["B", "V", "R", "I"])
+@pytest.mark.parametrize("band", ["U", "B", "V", "R", "I"])
 def test_no_background_pure_rayleigh_limit_is_single_scattering(band):
     # Property: without background (40 mag/arcsec^2) and without aerosol (scale 0) every
     # band's DoP is the single-scattering Rayleigh value with K&S's molecular depolarization

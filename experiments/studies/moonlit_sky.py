@@ -23,7 +23,8 @@ condition:
   the row's band with its Paranal extinction, dark sky and aerosol-to-molecular scattering
   weight; the Sun is left out because the ``sun`` rows are in twilight, which the model does
   not cover) with the single-scattering Rayleigh pattern and, when the ``rt`` extra is
-  installed, the multiple-scattering one;
+  installed, the multiple-scattering one over the desert's ground albedo in the band
+  (:attr:`skysim.bands.Band.ground_albedo`);
 - writes ``moonlit_sky.csv`` (one row per measurement), ``moonlit_sky.png`` (DoP and AoP
   residuals against the scattering angle from the Moon) and ``summary.json`` (residual
   statistics per band, model and condition, for every band in the table, and the band
@@ -167,10 +168,12 @@ def measured_polarization(table: pd.DataFrame) -> pd.DataFrame:
                         index=table.index)
 
 
-def pattern_skies(bands, with_multiple: bool = True) -> dict:
+def pattern_skies(bands, with_multiple: bool = True, ground_albedo: float | None = None) -> dict:
     """The polarization patterns compared: ``{"rayleigh": {band: Sky}, "multiple": ...}``;
     the multiple-scattering one (Rayleigh optical thickness at the band's wavelength and
-    Paranal's pressure) only when ``with_multiple`` and the ``rt`` extra is installed."""
+    Paranal's pressure, over a Lambertian ground of the band's desert albedo,
+    :attr:`skysim.bands.Band.ground_albedo`, or ``ground_albedo`` in every band; 0 is a
+    black ground) only when ``with_multiple`` and the ``rt`` extra is installed."""
     from skysim.bands import get_band
     from skysim.sky import RayleighSky
     out = {"rayleigh": {b: RayleighSky() for b in bands}}
@@ -182,17 +185,22 @@ def pattern_skies(bands, with_multiple: bool = True) -> dict:
         from skysim.multiple import MultipleScatteringSky
         out["multiple"] = {b: MultipleScatteringSky(
             wavelength_nm=get_band(b).wavelength_nm, pressure_hPa=PARANAL_PRESSURE_HPA,
+            albedo=get_band(b).ground_albedo if ground_albedo is None else ground_albedo,
             latitude_deg=PARANAL_LATITUDE_DEG, altitude_m=PARANAL_ALTITUDE_M, sun_step_deg=2.0)
             for b in bands}
     return out
 
 
 def compare(table: pd.DataFrame, with_multiple: bool = True,
-            aerosol_scale: float | None = None) -> pd.DataFrame:
+            aerosol_scale: float | None = None,
+            ground_albedo: float | None = None) -> pd.DataFrame:
     """Measured and modelled DoP and AoP for every row of :func:`read_fors2`'s table.
 
     ``aerosol_scale``: the weight of the aerosol term in every band; default each band's
     own (:func:`skysim.night.aerosol_weight`); 1 holds K&S's V-band split in every band.
+    ``ground_albedo``: the ground albedo of the multiple-scattering pattern in every band;
+    default each band's desert albedo (:attr:`skysim.bands.Band.ground_albedo`); 0 is a
+    black ground.
 
     Adds, per model M: ``dop_M``, ``aop_M_deg``, ``dop_resid_M`` (measured - model) and
     ``aop_resid_M_deg`` (measured - model, wrapped to [-90, 90)); and the geometry:
@@ -212,7 +220,8 @@ def compare(table: pd.DataFrame, with_multiple: bool = True,
     site = paranal()
     meas = measured_polarization(table)
     out = pd.concat([table, meas], axis=1)
-    for model, skies in pattern_skies(sorted(table.band.unique()), with_multiple).items():
+    for model, skies in pattern_skies(sorted(table.band.unique()), with_multiple,
+                                             ground_albedo).items():
         for band, sky in skies.items():
             rows = np.flatnonzero(table.band.to_numpy() == band)
             ns = night_sky(meas.elevation_deg.to_numpy()[rows], meas.azimuth_deg.to_numpy()[rows],
@@ -241,7 +250,8 @@ def compare(table: pd.DataFrame, with_multiple: bool = True,
 def band_parameters(bands) -> dict:
     """The model's parameters of each band: effective wavelength [nm], extinction and its
     molecular and aerosol parts [mag per airmass] (:func:`skysim.night.extinction_components`),
-    the aerosol term's weight [1] and the dark-sky zenith brightness [mag arcsec^-2]."""
+    the aerosol term's weight [1], the dark-sky zenith brightness [mag arcsec^-2] and the
+    ground albedo of the multiple-scattering pattern [1]."""
     from skysim.bands import get_band
     from skysim.night import aerosol_weight, extinction_components
     out = {}
@@ -252,7 +262,8 @@ def band_parameters(bands) -> dict:
                      "molecular_mag_per_airmass": round(c["rayleigh"], 5),
                      "aerosol_mag_per_airmass": round(c["aerosol"], 5),
                      "aerosol_scale": round(aerosol_weight(band), 4),
-                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2}
+                     "dark_sky_mag_arcsec2": get_band(band).dark_sky_mag_arcsec2,
+                     "ground_albedo": round(get_band(band).ground_albedo, 4)}
     return out
 
 
@@ -384,7 +395,7 @@ def _reproduce(args) -> int:
               f"{b['extinction_mag_per_airmass']:.2f} mag/airmass (molecules "
               f"{b['molecular_mag_per_airmass']:.3f}, aerosol {b['aerosol_mag_per_airmass']:.3f}), "
               f"aerosol term x{b['aerosol_scale']:.2f}, dark sky {b['dark_sky_mag_arcsec2']:g} "
-              "mag/arcsec2")
+              f"mag/arcsec2, ground albedo {b['ground_albedo']:.2f}")
     for model, bands in summary["residuals"].items():
         for band, conds in bands.items():
             for cond, s in conds.items():
