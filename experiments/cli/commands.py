@@ -7,6 +7,7 @@ import argparse
 import json
 from pathlib import Path
 
+from skysim.bands import BANDS
 from skysim.exceptions import InvalidParameterError
 from experiments.workflows.options import (PANDAS_YEARS, DefaultsHelpFormatter, aware_time,
                                            data_file_and_sidecars, existing_file, float_in,
@@ -324,7 +325,7 @@ def register(sub) -> None:
                    help="light source: the Sun, or the Moon (night sky: moonlit Stokes "
                         "radiance [W m-2 nm-1 sr-1] over the night-sky background, the Sun "
                         "added when up; needs --lat --lon --time)")
-    p.add_argument("--band", default="V", choices=("B", "V", "R", "I"),
+    p.add_argument("--band", default="V", choices=tuple(BANDS),
                    help="--source moon: photometric band of the radiances")
     p.add_argument("--directions", type=existing_file,
                    help="CSV with columns elevation_deg, azimuth_deg [deg] (instead of a grid)")
