@@ -24,7 +24,7 @@ from ..diagnosis import core
 from ..diagnosis.core import Thresholds
 from ..diagnosis.errors import DiagnosisError, InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate
-from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
+from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
 from .errors import (InstrumentDataError, PointingCalibrationError,
                      SunTooLowError)
 from .faults import bright_glare, malus_outliers, screen
@@ -527,7 +527,7 @@ def _params(effect, theta, layout):
     if effect is None:
         return {}
     return {n: {"value": float(v), "unit": un}
-            for n, v, un in zip(effect.names, theta[layout.effect], effect.units)}
+            for n, v, un in zip(effect.parameter_names, theta[layout.effect], effect.units)}
 
 
 def _no_signal_report(inst, scr, why) -> dict:
@@ -719,10 +719,9 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     unavailable, decoders, pending = {}, {}, {}
     output = instrument_output(work)
     for e in cand:
-        try:
-            e.available(sun_el)
-        except EffectUnavailableError as exc:
-            unavailable[e.name] = str(exc)
+        why = e.available_at(sun_el)
+        if why is not None:
+            unavailable[e.name] = why
     for f in np.unique(folds):
         tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
         itr, iho = _thin(work.subset(tr)), work.subset(ho)
@@ -767,7 +766,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
             if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
                 p = fr.theta[fe.layout.effect]
                 best_sky = (fr.cost, e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s)),
-                            {"effect": e.name, **dict(zip(e.names, map(float, p)))})
+                            {"effect": e.name, **dict(zip(e.parameter_names, map(float, p)))})
             if not fr.converged and not _has_sky(e):    # a sky's fit was continued above
                 pending.setdefault(e.name, []).append(dict(
                     fe=fe, pair=(fr, fr_aop), feho=feho, fho=fho, r=r, ho=ho,
@@ -803,7 +802,7 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
                      "excess_removed": core.excess_removed(gc, g0, floor),
                      "sweeps_improved": improved, "blocks_improved": improved,
                      "converged": all(fold_converged[e.name]),
-                     "at_bound": core.at_bound(P, e.lower, e.upper, e.names),
+                     "at_bound": core.at_bound(P, e.lower, e.upper, e.parameter_names),
                      "params": _fold_params(e, P, fold_sd[e.name])})
         if e.geometric:
             rows[-1]["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
@@ -1021,7 +1020,7 @@ def _fold_params(effect, P, sds) -> dict:
     effect fitted with a covariance, its uncertainty: the root sum of squares of the mean
     posterior SD of the folds' AoP fits and the spread between folds."""
     out = {}
-    for j, (n, un) in enumerate(zip(effect.names, effect.units)):
+    for j, (n, un) in enumerate(zip(effect.parameter_names, effect.units)):
         out[n] = {"value": float(np.mean(P[:, j])), "fold_spread": float(np.std(P[:, j])),
                   "unit": un}
         sd = [f[j] for f in sds if f[j] is not None]
@@ -1054,7 +1053,7 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     for e in cand:
         row = next((r for r in rows if r["effect"] == e.name), None)
         if _has_sky(e) and row is not None and row.get("available", True):
-            p = np.array([row["params"][n]["value"] for n in e.names])
+            p = np.array([row["params"][n]["value"] for n in e.parameter_names])
             skies[e.name] = e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s))
     by_sky, errors = {}, {}
     # read as the candidate reads an offset within its nearest coarse start: from the
