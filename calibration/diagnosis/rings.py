@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .legacy import from_ring_v1
 from .report import DiagnosisReport
 
 __all__ = ["RingAdapter", "clock_notes", "diagnose_rings", "pointing_from_reports",
@@ -154,7 +153,7 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
         pointing = pointing_from_reports(pointing_from, n_units=inst.n_units)
     doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
                               pointing=pointing)
-    report = from_ring_v1(doc)
+    report = DiagnosisReport.from_dict(doc)
     report.data.setdefault("path", where)
     report.notes += clock_notes(report)
     return report
