@@ -652,7 +652,8 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
                    refine_clock: bool) -> DiagnosisReport:
     """The diagnosis of a session at its times (:func:`diagnose_instrument` without the
     clock search): screen, base fit, folds, candidates, clock refinement, judge, report."""
-    sun, sun_el = light_track(inst), _sun_elevation(inst)
+    sun = light_track(inst)
+    sun_el = elevation_azimuth(sun(inst.t_s))[0]
     _check_not_saturated(inst)
     folds = core.assign_folds(inst.sweep, n_folds)
     cand = [get_ring_effect(e) for e in effects]
@@ -769,7 +770,7 @@ def _clock_pass(inst: Instrument, *, n_folds: int, max_iter: int) -> dict | None
     SunTooLowError, InstrumentDataError, InsufficientDataError
         As :func:`diagnose_instrument` at these times.
     """
-    too_low = _too_low(inst)
+    too_low = _too_low(inst, _sun_elevation(inst))
     if too_low is not None:
         raise too_low
     _check_not_saturated(inst)
@@ -894,7 +895,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
     """
     if pointing is not None:
         inst = replace(inst, pointing_deg=_checked_pointing(pointing, inst.n_units))
-    sun_el, too_low = _sun_elevation(inst), _too_low(inst)
+    sun_el = _sun_elevation(inst)
+    too_low = _too_low(inst, sun_el)
     search = refine_clock and "clock_offset" in effects and inst.light == "sun"
     if too_low is not None and not search:
         raise too_low
@@ -918,12 +920,12 @@ def _sun_elevation(inst: Instrument) -> np.ndarray:
     return elevation_azimuth(light_track(inst)(inst.t_s))[0]
 
 
-def _too_low(inst: Instrument) -> SunTooLowError | None:
+def _too_low(inst: Instrument, sun_el) -> SunTooLowError | None:
     """The error of a session whose sun is below the twilight limit at a sample (None when
-    it is not); a moonlit session is checked for its Moon and Sun (:func:`_check_moonlit`).
+    it is not), ``sun_el`` its elevations [deg]; a moonlit session is checked for its Moon
+    and Sun (:func:`_check_moonlit`).
     """
     path = inst.source.get("path", "photodiode data")
-    sun_el = _sun_elevation(inst)
     if inst.light == "moon":
         _check_moonlit(inst, sun_el, path)
     if sun_el.min() >= TWILIGHT_LIMIT_DEG:
