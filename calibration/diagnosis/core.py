@@ -84,7 +84,7 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import InsufficientDataError, ThresholdsError
-from .report import Candidate, Slice, rank, sort_slices
+from .report import Slice, rank, sort_slices
 from .shares import partition_shares, slice_limit
 
 __all__ = ["Decision", "Thresholds", "assign_folds", "at_bound", "blocks_improved", "decide",
