@@ -105,27 +105,28 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
 
 
 
-def _fit_and_hold_out(fe: Forward, theta_base, ftr: Forward, effect, sigma, iho, sun, sign,
-                      continued: bool = True):
+def _fit_and_hold_out(fe: Forward, theta_base, base_train: Forward, effect, sigma, held_inst,
+                      sun, sign, continued: bool = True):
     """One candidate on one fold: its fit on the training sweeps (:func:`_fit_effect` from
     :func:`_start_effect`; ``continued=False`` leaves it as :data:`EFFECT_MAX_ITER` stopped
     it, for :func:`_continue_and_hold_out` to take on) and its residuals on the held-out
-    sweeps ``iho``; returns ``(fit, aop_fit, held-out Forward, held-out theta, residuals)``."""
-    start = _start_effect(fe, theta_base, ftr, effect, sigma)
+    sweeps ``held_inst``; returns ``(fit, aop_fit, held-out Forward, held-out theta,
+    residuals)``."""
+    start = _start_effect(fe, theta_base, base_train, effect, sigma)
     fr, fr_aop = _fit_effect(fe, start, sigma)
     if continued:
         fr, fr_aop = _continued(fe, (fr, fr_aop), sigma, fe.aop_sky)
-    feho = Forward(iho, effect, sun=sun, polarizer_sign=sign)
-    teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
-    return fr, fr_aop, feho, teho, re
+    effect_held = Forward(held_inst, effect, sun=sun, polarizer_sign=sign)
+    theta_held, r_effect = _held_out(effect_held, fr.theta, fe.layout, sigma)
+    return fr, fr_aop, effect_held, theta_held, r_effect
 
 
-def _continue_and_hold_out(fe: Forward, pair, sigma, feho: Forward):
+def _continue_and_hold_out(fe: Forward, pair, sigma, effect_held: Forward):
     """A fold's fit stopped by :data:`EFFECT_MAX_ITER` continued (:func:`_continued`) and its
     held-out residuals; returns ``(fit, aop_fit, held-out theta, residuals)``."""
     fr, fr_aop = _continued(fe, pair, sigma, fe.aop_sky)
-    teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
-    return fr, fr_aop, teho, re
+    theta_held, r_effect = _held_out(effect_held, fr.theta, fe.layout, sigma)
+    return fr, fr_aop, theta_held, r_effect
 
 
 def _fit_effect(fe: Forward, starts, sigma):
@@ -563,37 +564,38 @@ def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOu
     work, sun, sign, sigma, L = s.work, s.sun, s.sign, s.sigma, s.layout
 
     def fit_fold(tr, ho, skip):
-        itr, iho = _thin(work.subset(tr)), work.subset(ho)
-        ftr = Forward(itr, sun=sun, polarizer_sign=sign)
-        if ftr.usable.sum() < ftr.layout.size:
+        train_inst, held_inst = _thin(work.subset(tr)), work.subset(ho)
+        base_train = Forward(train_inst, sun=sun, polarizer_sign=sign)
+        if base_train.usable.sum() < base_train.layout.size:
             full = Forward(work, sun=sun, polarizer_sign=sign)
             empty = [int(k) for k in range(work.n_sweeps)
                      if not full.usable[work.sweep == k].any()]
             raise InsufficientDataError(
                 f"{work.source.get('path', 'photodiode data')}: held-out fold "
-                f"{int(folds[ho[0]])}: its training sweeps hold {int(ftr.usable.sum())} "
-                f"usable readings, fewer than the {ftr.layout.size} parameters of the base "
+                f"{int(folds[ho[0]])}: its training sweeps hold {int(base_train.usable.sum())} "
+                f"usable readings, fewer than the {base_train.layout.size} parameters of the base "
                 f"fit; sweeps {empty} (0-based, in order of appearance) have no usable "
                 "reading (all missing, zero or saturated): drop them from the file")
-        start = np.r_[s.theta[:L.n_base], _sweep_headings(s.theta, L, work, tr, ftr)]
-        base_fit, _ = fit_pinned(ftr, start, sigma=sigma, max_iter=s.max_iter)
-        fho = Forward(iho, sun=sun, polarizer_sign=sign)
-        theta_ho, r = _held_out(fho, base_fit.theta, ftr.layout, sigma)
-        fits = {"base": judge.FoldFit(r, state=_FoldState(None, theta_ho, fho.headings(theta_ho)))}
+        start = np.r_[s.theta[:L.n_base], _sweep_headings(s.theta, L, work, tr, base_train)]
+        base_fit, _ = fit_pinned(base_train, start, sigma=sigma, max_iter=s.max_iter)
+        base_held = Forward(held_inst, sun=sun, polarizer_sign=sign)
+        theta_ho, r = _held_out(base_held, base_fit.theta, base_train.layout, sigma)
+        fits = {"base": judge.FoldFit(r, state=_FoldState(None, theta_ho,
+                                                          base_held.headings(theta_ho)))}
         best_sky = None     # (training cost, sky, description) of the best sky candidate
         for e in sorted(cand, key=lambda c: c.geometric):   # sky candidates first
             if e.name in skip:
                 continue
-            fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
+            fe = Forward(train_inst, e, sun=sun, polarizer_sign=sign)
             aop_sky = None
             if e.geometric and best_sky is not None:
                 fe.aop_sky, aop_sky = best_sky[1], best_sky[2]
-            out, why = core.run_candidate(_fit_and_hold_out, fe, base_fit.theta, ftr, e,
-                                          sigma, iho, sun, sign, continued=_has_sky(e))
+            out, why = core.run_candidate(_fit_and_hold_out, fe, base_fit.theta, base_train, e,
+                                          sigma, held_inst, sun, sign, continued=_has_sky(e))
             if why is None:
-                fr, fr_aop, feho, teho, re = out
-                why = core.non_finite_reason(np.where(fho.usable, re, np.nan),
-                                             np.where(fho.usable, r, np.nan))
+                fr, fr_aop, effect_held, theta_held, r_effect = out
+                why = core.non_finite_reason(np.where(base_held.usable, r_effect, np.nan),
+                                             np.where(base_held.usable, r, np.nan))
             if why is not None:
                 fits[e.name] = why
                 continue
@@ -603,11 +605,11 @@ def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOu
                             {"effect": e.name, **dict(zip(e.parameter_names, map(float, p)))})
             stopped = not fr.converged and not _has_sky(e)   # a sky's was continued above
             fits[e.name] = judge.FoldFit(
-                re, p, bool(fr.converged),
+                r_effect, p, bool(fr.converged),
                 None if fr_aop is None else _effect_sd(fr_aop, fe.layout),
-                _FoldState(e, teho, feho.headings(teho), aop_sky,
-                           (fe, (fr, fr_aop), feho) if stopped else None))
-        return fho.usable, fits
+                _FoldState(e, theta_held, effect_held.headings(theta_held), aop_sky,
+                           (fe, (fr, fr_aop), effect_held) if stopped else None))
+        return base_held.usable, fits
 
     return judge.cross_validate(folds, [e.name for e in cand], work.readings.shape, fit_fold,
                           unavailable)
@@ -994,20 +996,20 @@ def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma
             continue
         for i in stopped[e.name]:
             f, ho = held.fits[e.name][i], held.rows[e.name][i]
-            fe, pair, feho = f.state.resume
-            out, why = core.run_candidate(_continue_and_hold_out, fe, pair, sigma, feho)
+            fe, pair, effect_held = f.state.resume
+            out, why = core.run_candidate(_continue_and_hold_out, fe, pair, sigma, effect_held)
             if why is None:
-                fr, fr_aop, teho, re = out
+                fr, fr_aop, theta_held, r_effect = out
                 why = core.non_finite_reason(
-                    np.where(held.usable[ho], re, np.nan),
+                    np.where(held.usable[ho], r_effect, np.nan),
                     np.where(held.usable[ho], held.residual["base"][ho], np.nan))
             if why is not None:
                 held.unavailable[e.name] = why
                 break
             sd = f.sd if fr_aop is None else _effect_sd(fr_aop, fe.layout)
-            held.put(e.name, ho, judge.FoldFit(re, fr.theta[fe.layout.effect], bool(fr.converged),
-                                         sd, _FoldState(e, teho, feho.headings(teho),
-                                                        f.state.aop_sky)), index=i)
+            state = _FoldState(e, theta_held, effect_held.headings(theta_held), f.state.aop_sky)
+            held.put(e.name, ho, judge.FoldFit(r_effect, fr.theta[fe.layout.effect],
+                                               bool(fr.converged), sd, state), index=i)
 
 
 NOISE_FLOOR_METHOD = ("the larger of the white-noise RMS (second differences along each "
@@ -1039,12 +1041,12 @@ def _replica_gap(s: _Session, folds, white: float, seed: int) -> float:
                                               work.readings))
         for f in np.unique(folds):
             tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
-            ftr = Forward(_thin(rep.subset(tr)), sun=sun, polarizer_sign=sign)
-            t0 = np.r_[theta[:L.n_base], _sweep_headings(theta, L, rep, tr, ftr)]
-            btr, _ = fit_pinned(ftr, t0, sigma=s.sigma, max_iter=s.max_iter)
-            fho = Forward(rep.subset(ho), sun=sun, polarizer_sign=sign)
-            _, r = _held_out(fho, btr.theta, ftr.layout, s.sigma)
-            res[k, ho] = np.where(fho.usable, r, np.nan)
+            base_train = Forward(_thin(rep.subset(tr)), sun=sun, polarizer_sign=sign)
+            t0 = np.r_[theta[:L.n_base], _sweep_headings(theta, L, rep, tr, base_train)]
+            train_fit, _ = fit_pinned(base_train, t0, sigma=s.sigma, max_iter=s.max_iter)
+            base_held = Forward(rep.subset(ho), sun=sun, polarizer_sign=sign)
+            _, r = _held_out(base_held, train_fit.theta, base_train.layout, s.sigma)
+            res[k, ho] = np.where(base_held.usable, r, np.nan)
     return core.rms(res)
 
 
@@ -1190,7 +1192,7 @@ def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
             "fits_as_well": bool(ratio <= 1.0 + CLOCK_TIE)}
 
 
-def _sweep_headings(theta, L, inst, rows, ftr):
+def _sweep_headings(theta, L, inst, rows, base_train):
     h = theta[L.heading]
     if inst.absolute_yaw:
         return h
