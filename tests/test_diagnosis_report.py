@@ -356,11 +356,19 @@ def test_adapters_and_effects_implement_the_protocol():
     from calibration.diagnosis.protocol import Effect, InstrumentAdapter
     from calibration.diagnosis.sky import SKY_EFFECTS
     from calibration.effects import EFFECT_NAMES, get_effect
+    from calibration.photodiode_diagnosis.effects import (OPTIONAL_EFFECT_NAMES,
+                                                          RING_EFFECT_NAMES, get_ring_effect)
     assert [a.name for a in ADAPTERS] == ["three_pair", "photodiodes", "sky", "camera"]
     assert all(isinstance(a, InstrumentAdapter) for a in ADAPTERS)
+    ring = [get_ring_effect(n) for n in RING_EFFECT_NAMES + OPTIONAL_EFFECT_NAMES]
     for e in ([get_effect(n) for n in EFFECT_NAMES] + list(SKY_EFFECTS.values())
-              + list(CAMERA_EFFECTS.values())):
+              + list(CAMERA_EFFECTS.values()) + ring):
         assert isinstance(e, Effect), e.name
+        why = e.available()
+        assert why is None or (isinstance(why, str) and why), e.name
+    # a ring effect names, and gives a unit to, each parameter it adds
+    for e in ring:
+        assert e.k == len(e.parameter_names) == len(e.units), e.name
     # k counts the parameters added to the base: all of a three-pair effect's; a sky model
     # that trades d_max for tau adds none
     assert all(get_effect(n).k == len(get_effect(n).parameter_names) for n in EFFECT_NAMES)

@@ -73,15 +73,7 @@ def _cycle(graph):
     return None
 
 
-KNOWN = {
-    # the reader of a report dict hands the old skysim.diagnosis/1 shape to the legacy
-    # converter, which the ring diagnosis still writes through; goes when the ring builds
-    # its report directly
-    ("calibration.diagnosis.report", "calibration.diagnosis.legacy"),
-    # the dark-clock search diagnoses the session again at each clock start; goes when the
-    # clock search becomes an outer step (fit, shift the times, diagnose once)
-    ("calibration.photodiode_diagnosis.dark_clock", "calibration.photodiode_diagnosis.run"),
-}
+KNOWN = set()
 """Import edges that still close a cycle, each with what removes it; no other may."""
 
 

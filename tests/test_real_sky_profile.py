@@ -146,4 +146,4 @@ def test_aerosol_candidate_at_a_node_is_the_aerosol_sky():
     assert grid.AOD_NODES[1] == 0.1
     np.testing.assert_allclose(f.I, ref.I, rtol=1e-12)
     np.testing.assert_allclose(f.dop, ref.dop, rtol=1e-12, atol=1e-15)
-    assert e.k == 1 and e.names == ("aod_550",)
+    assert e.k == 1 and e.parameter_names == ("aod_550",)

@@ -1,8 +1,10 @@
 """Sim-to-real gap diagnosis: where a model disagrees with data, which effect explains it, how
 far it closes the gap; one method for every instrument (``docs/diagnosis.md``).
 
+- :mod:`.judge`: the method, run once for every instrument (folds, held-out scores, the
+  paired judge, the verdict and the shrink), around the fits an adapter supplies;
 - :mod:`.core`: folds by whole block, noise floor, held-out score, verdict, shrink with its
-  uncertainty, slices (one formula each);
+  uncertainty, slices (one formula each; slice shares in :mod:`.shares`);
 - :mod:`.protocol`: what an instrument adapter and a candidate effect implement;
 - adapters: :mod:`.three_pair` (three-pair sensor tables, with :mod:`.three_pair_data` and
   :mod:`.three_pair_fit`), :mod:`.sky` (sky fields), :mod:`.rings` (multi-unit photodiode

@@ -40,8 +40,9 @@ sky misses raw frames, and which camera or sky effect explains it.
    with ``d_max`` given).
 4. **Folds.** Whole frames when there are several, else spatial blocks of
    ``block_superpixels`` x ``block_superpixels`` super-pixels, dealt to folds round-robin
-   (:func:`calibration.diagnosis.core.assign_folds`); every fold is held out once and the
-   held-out residuals of all folds are scored.
+   (:func:`calibration.diagnosis.core.assign_folds`); every fold is held out once
+   (:func:`calibration.diagnosis.judge.cross_validate`) and the held-out residuals of all
+   folds are scored.
 5. **Noise floor.** :func:`calibration.diagnosis.core.noise_floor` of the base model's
    held-out residuals, second differences along each row of super-pixels (never across two
    rows or frames).
@@ -88,7 +89,7 @@ from pathlib import Path
 
 import numpy as np
 
-from . import core
+from . import core, judge
 from .core import Thresholds
 from .errors import DiagnosisError
 from .fit_result import FitResult
@@ -561,30 +562,53 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
     fold_all = np.full(use.size, -1)
     fold_all[use] = core.assign_folds(block[use], folds)
     offsets = np.cumsum([0] + [p.usable.size for p in prepared])
-    fold_of = [fold_all[a:b] for a, b in pairwise(offsets)]
     y_data = np.concatenate([p.y for p in prepared])
 
-    def cross_validate(effect):
-        """Held-out model y (n, 4) over every fold; parameters fitted on all usable data;
-        the parameters of every fold's fit and of the full fit (rows)."""
-        pred = np.full(y_data.shape, np.nan)
-        converged = True
-        fold_params = []
-        for k in range(folds):
-            cal = [(p, (fo >= 0) & (fo != k)) for p, fo in zip(prepared, fold_of)]
-            fit, d = _fit(cal, effect, dmax_known)
-            converged &= fit.converged
-            fold_params.append(fit.params)
-            for p, fo, a in zip(prepared, fold_of, offsets):
-                held = fo == k
-                if held.any():
-                    pred[a:a + p.usable.size][held] = _predict(p, effect, fit.params, d)[held]
-        fit, d = _fit([(p, p.usable) for p in prepared], effect, dmax_known)
-        return pred, fit, d, converged and fit.converged, np.array(fold_params + [fit.params])
+    used = np.flatnonzero(use)
 
-    pred0, fit0, d0, ok0, _ = cross_validate(None)
+    def fit_all(effect):
+        """The fit on every usable super-pixel: ``(fit, d_max)``."""
+        return _fit([(p, p.usable) for p in prepared], effect, dmax_known)
+
+    def fit_one(effect, train, held):
+        """``effect`` fitted on the ``train`` usable super-pixels; its held-out residuals
+        ``y_model - y`` on the ``held`` ones."""
+        cal, ho = np.zeros(use.size, bool), np.zeros(use.size, bool)
+        cal[used[train]], ho[used[held]] = True, True
+        fit, d = _fit([(p, cal[a:b]) for p, a, b in zip(prepared, offsets, offsets[1:])],
+                      effect, dmax_known)
+        pred = np.full(y_data.shape, np.nan)
+        for p, a, b in zip(prepared, offsets, offsets[1:]):
+            if ho[a:b].any():
+                pred[a:b][ho[a:b]] = _predict(p, effect, fit.params, d)[ho[a:b]]
+        return judge.FoldFit((pred - y_data)[ho], fit.params, bool(fit.converged))
+
+    def fit_fold(train, held, skip):
+        fits = {"base": fit_one(None, train, held)}
+        for name in tried:
+            if name not in skip:
+                out, why = core.run_candidate(fit_one, name, train, held)
+                fits[name] = out if why is None else why
+        return np.ones((held.size, 4), bool), fits
+
+    fit0, d0 = fit_all(None)
     d0_se = _parameters(fit0, None, True)["d_max"]["se"] if dmax_known is None else None
-    res0 = np.where(use[:, None], pred0 - y_data, np.nan)
+    degenerate = {name: Candidate.unavailable(
+        name, "its uniform loss of modulation equals a smaller sky DoP scale, which is "
+        "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
+        "sidecar) to tell them apart", _degeneracy(name, d0, d0_se))
+        for name in candidates if name in _DEGENERATE and dmax_known is None}
+    tried = [name for name in candidates if name not in degenerate]
+    cv = judge.cross_validate(fold_all[use], tried, (used.size, 4), fit_fold)
+
+    def residual(name):
+        """Held-out residuals (n, 4) over every super-pixel, NaN where not usable."""
+        out = np.full(y_data.shape, np.nan)
+        out[use] = cv.held(name)
+        return out
+
+    ok0 = all(f.converged for f in cv.fits["base"]) and fit0.converged
+    res0 = residual("base")
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
     floor, _ = core.noise_floor(res0, np.repeat(use[:, None], 4, 1), line)
     G0 = core.rms(res0, use[:, None] & np.ones((1, 4), bool))
@@ -594,23 +618,21 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
     rows, residuals = [], {}
     for name in candidates:
         eff = CAMERA_EFFECTS[name]
-        if name in _DEGENERATE and dmax_known is None:
-            rows.append(Candidate.unavailable(
-                name, "its uniform loss of modulation equals a smaller sky DoP scale, which is "
-                "fitted here: give the sky's d_max (dmax=..., or 'sky': {'dmax': ...} in the "
-                "sidecar) to tell them apart", _degeneracy(name, d0, d0_se)))
+        if name in degenerate:
+            rows.append(degenerate[name])
             continue
-        out, why = core.run_candidate(cross_validate, name)
+        why = cv.unavailable.get(name)
         if why is None:
-            pred, fit, d, ok, P = out
-            res = np.where(use[:, None], pred - y_data, np.nan)
-            why = core.non_finite_reason(res, res0)
+            out, why = core.run_candidate(fit_all, name)
         if why is None:
+            fit, _ = out
             params, why = core.run_candidate(_parameters, fit, eff, dmax_known is None)
         if why is not None:
             rows.append(Candidate.unavailable(name, why))
             continue
-        residuals[name] = res
+        residuals[name] = res = residual(name)
+        ok = all(f.converged for f in cv.fits[name]) and fit.converged
+        P = np.array([f.params for f in cv.fits[name]] + [fit.params])
         Gc = core.rms(res, use[:, None] & np.ones((1, 4), bool))
         rows.append(Candidate(
             name, k=eff.k, gap_after=Gc, shrink=1 - Gc / G0,

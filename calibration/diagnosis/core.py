@@ -84,7 +84,8 @@ from dataclasses import dataclass, field, replace
 import numpy as np
 
 from .errors import InsufficientDataError, ThresholdsError
-from .report import Candidate, Slice
+from .report import Slice, rank, sort_slices
+from .shares import partition_shares, slice_limit
 
 __all__ = ["Decision", "Thresholds", "assign_folds", "at_bound", "blocks_improved", "decide",
            "excess_removed", "explained_share", "explains", "held_out_score",
@@ -327,12 +328,6 @@ def explains(gap: float, gap_base: float, floor: float, thresholds: Thresholds, 
     return bool(null_excluded and (gap <= floor * (1 + thresholds.explained_margin)
                                    or gap ** 2 - floor ** 2
                                    <= thresholds.residual_excess * excess0))
-
-
-def rank(candidates: list[Candidate]) -> list[Candidate]:
-    """Available candidates by score, ties by held-out gap; unavailable ones last."""
-    ok = sorted((c for c in candidates if c.available), key=lambda c: (c.score, c.gap_after))
-    return ok + [c for c in candidates if not c.available]
 
 
 def decide(candidates, gap_before: float, floor: float,
@@ -700,14 +695,6 @@ def shrink_uncertainty(res0, res1, block, rng: np.random.Generator,
 
 
 # ------------------------------------------------------------------------------ where
-def slice_limit(floor: float, dof, margin: float) -> np.ndarray:
-    """RMS white noise at ``floor`` stays below in 99 % of slices with ``dof`` degrees of
-    freedom, times ``1 + margin`` (module docstring, step 6)."""
-    from scipy.stats import chi2
-    dof = np.maximum(np.asarray(dof, float), 1.0)
-    return floor * (1 + margin) * np.sqrt(chi2.ppf(0.99, dof) / dof)
-
-
 def partition_slices(dimension: str, masks, labels, r2, floor: float, margin: float, *,
                      dof_per_value: int = 1, bounds=None, bound_unit: str | None = None
                      ) -> list[Slice]:
@@ -751,33 +738,3 @@ def partition_slices(dimension: str, masks, labels, r2, floor: float, margin: fl
         out.append(Slice(dimension, label, n, r, float(share), lo, hi,
                          None if lo is None else bound_unit, bool(r > limit), limit))
     return out
-
-
-def partition_shares(n, rms_, floor: float) -> np.ndarray:
-    """Shares of the slices of one dimension (module docstring, step 6).
-
-    Parameters
-    ----------
-    n : array (s,)
-        Values per slice.
-    rms_ : array (s,)
-        RMS per slice [unit of ``floor``].
-    floor : float
-
-    Returns
-    -------
-    ndarray (s,)
-        ``max(ss - n f^2, 0) / sum(max(ss - n f^2, 0))`` with ``ss = n rms^2``, or
-        ``ss / sum(ss)`` where no slice exceeds the floor; they add to 1.
-    """
-    n = np.asarray(n, float)
-    ss = n * np.square(np.asarray(rms_, float))
-    excess = np.maximum(ss - n * floor ** 2, 0.0)
-    if excess.sum() > 0:
-        return excess / excess.sum()
-    return ss / max(float(ss.sum()), 1e-300)
-
-
-def sort_slices(slices) -> list[Slice]:
-    """Slices by share, largest first (stable within equal shares)."""
-    return sorted(slices, key=lambda s: -s.share)

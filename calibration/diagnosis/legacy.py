@@ -1,17 +1,17 @@
-"""Readers of the ``skysim.diagnosis/1`` report dicts into :class:`.report.DiagnosisReport`.
+"""Readers of the ``skysim.diagnosis/1`` report dicts: each is rewritten as a dict of the
+current schema, which :meth:`.report.DiagnosisReport.from_dict` reads (and ranks).
 
 Three diagnoses wrote that schema in three shapes: the three-pair sensor's (``where`` a dict
 of tables in mV), the sky field's (``level: sky``, ``where`` a dict of tables in DoLP units,
 parameters as bare numbers) and the photodiode instrument's (``instrument: photodiodes``,
-``where`` a list of slices). Each is read here into the one report; shares of the gap are
-recomputed from the slices' RMS and size with :func:`.core.partition_shares`, limits with
-:func:`.core.slice_limit`, so that every report means the same by them.
+``where`` a list of slices). Shares of the gap are recomputed from the slices' RMS and size
+with :func:`.shares.partition_shares`, limits with :func:`.shares.slice_limit`, so that every
+report means the same by them. Nothing here writes that schema.
 """
 
 from __future__ import annotations
 
-from . import core
-from .report import Candidate, DiagnosisReport, Slice, Verdict
+from .shares import partition_shares, slice_limit
 
 __all__ = ["from_legacy_dict", "from_ring_v1", "from_sky_v1", "from_three_pair_v1"]
 
@@ -22,8 +22,9 @@ _VERDICT_KEYS = ("effect", "reason", "best_candidate", "gap_before", "gap_after"
                  "gap_before_se", "gap_after_se", "shrink_se", "params")
 
 
-def from_legacy_dict(d: dict) -> DiagnosisReport:
-    """Any ``skysim.diagnosis/1`` dict (module docstring)."""
+def from_legacy_dict(d: dict) -> dict:
+    """Any ``skysim.diagnosis/1`` dict as a dict of the current schema (module docstring);
+    candidates and slices in the order written (the report ranks them)."""
     if d.get("level") == "sky":
         return from_sky_v1(d)
     if d.get("instrument") == "photodiodes":
@@ -35,13 +36,13 @@ _PAIRED_VERDICT_KEYS = ("group", "explained_share", "explained_share_se", "separ
 """Verdict keys of the paired rule, read where a dict carries them."""
 
 
-def _verdict(v: dict, params=None) -> Verdict:
+def _verdict(v: dict, params=None) -> dict:
     kw = {k: v.get(k) for k in _VERDICT_KEYS}
     kw.update({k: v[k] for k in _PAIRED_VERDICT_KEYS if v.get(k) is not None})
     kw["params"] = params if params is not None else (v.get("params") or {})
     if kw["best_candidate"] == "base":
         kw["best_candidate"] = None
-    return Verdict(**kw)
+    return kw
 
 
 def _with_split(data: dict, split: dict | None) -> dict:
@@ -55,21 +56,32 @@ def _with_split(data: dict, split: dict | None) -> dict:
     return data
 
 
-def _slices(rows, floor: float, margin: float, dof_per_value: int = 1) -> list[Slice]:
-    """Slices from ``(dimension, label, n, rms, lo, hi, unit)`` tuples, shares and limits
-    recomputed per dimension."""
+def _slices(rows, floor: float, margin: float, dof_per_value: int = 1) -> list[dict]:
+    """Slice dicts from ``(dimension, label, n, rms, lo, hi, unit)`` tuples, shares and
+    limits recomputed per dimension."""
     out = []
     for dim in dict.fromkeys(r[0] for r in rows):
         part = [r for r in rows if r[0] == dim]
-        shares = core.partition_shares([r[2] for r in part], [r[3] for r in part], floor)
+        shares = partition_shares([r[2] for r in part], [r[3] for r in part], floor)
         for r, share in zip(part, shares):
-            limit = float(core.slice_limit(floor, r[2] * dof_per_value, margin))
-            out.append(Slice(dim, r[1], r[2], r[3], float(share), r[4], r[5], r[6],
-                             bool(r[3] > limit), limit))
-    return core.sort_slices(out)
+            limit = float(slice_limit(floor, r[2] * dof_per_value, margin))
+            d = {"dimension": dim, "label": r[1], "n": r[2], "rms": r[3],
+                 "share": float(share), "carries_gap": bool(r[3] > limit), "limit": limit}
+            if r[4] is not None:
+                d[f"lo_{r[6]}"], d[f"hi_{r[6]}"] = r[4], r[5]
+            out.append(d)
+    return out
 
 
-def from_three_pair_v1(d: dict) -> DiagnosisReport:
+def _report(instrument, metric, unit, verdict, candidates, where, where_after, floor,
+            floor_method, faults, data, thresholds, seed, extra) -> dict:
+    return {"instrument": instrument, "metric": metric, "unit": unit, "verdict": verdict,
+            "candidates": candidates, "where": where, "where_after": where_after,
+            "noise_floor": floor, "noise_floor_method": floor_method, "faults": faults,
+            "data": data, "thresholds": thresholds, "seed": seed, "extra": extra}
+
+
+def from_three_pair_v1(d: dict) -> dict:
     """The three-pair sensor's ``skysim.diagnosis/1`` dict (gaps in mV)."""
     w, v = d["where"], d["verdict"]
     floor = float(v["noise_floor"])
@@ -89,11 +101,10 @@ def from_three_pair_v1(d: dict) -> DiagnosisReport:
     nf = d.get("noise_floor", {})
     if "per_channel_mV" in nf:
         extra["noise_floor_per_channel_mV"] = nf["per_channel_mV"]
-    return DiagnosisReport(
+    return _report(
         "three_pair", str(v.get("metric", "")).removesuffix(" [mV]"), "mV", _verdict(v),
-        core.rank([Candidate.from_dict(c) for c in d["candidates"]]),
-        _slices(rows, floor, margin), None, floor, nf.get("method", ""), [], data,
-        dict(d.get("thresholds", {})), d.get("seed"), extra)
+        list(d["candidates"]), _slices(rows, floor, margin), None, floor,
+        nf.get("method", ""), [], data, dict(d.get("thresholds", {})), d.get("seed"), extra)
 
 
 def _sky_params(p: dict) -> dict:
@@ -109,7 +120,7 @@ def _sky_slices(w: dict, floor: float, margin: float):
     return _slices(rows, floor, margin, dof_per_value=2)
 
 
-def from_sky_v1(d: dict) -> DiagnosisReport:
+def from_sky_v1(d: dict) -> dict:
     """The sky field's ``skysim.diagnosis/1`` dict (``level: sky``; gaps in DoLP units)."""
     v = d["verdict"]
     floor = float(v["noise_floor"])
@@ -120,12 +131,12 @@ def from_sky_v1(d: dict) -> DiagnosisReport:
         if c.get("available", True):
             c["params"] = _sky_params(c.get("params"))
             c["k"] = int(c.get("k", 1)) - 1          # parameters added to d_max
-        cands.append(Candidate.from_dict(c))
+        cands.append(c)
     wa = d.get("where_after")
     extra = {k: d[k] for k in ("engine_settings", "seconds") if k in d}
-    return DiagnosisReport(
+    return _report(
         "sky", str(v.get("metric", "")).removesuffix(" [DoLP units]"), "DoLP",
-        _verdict(v, _sky_params(v.get("params"))), core.rank(cands),
+        _verdict(v, _sky_params(v.get("params"))), cands,
         _sky_slices(d["where"], floor, margin),
         None if wa is None else _sky_slices(wa, floor, margin), floor,
         "given: the RMS Stokes residual a perfect model leaves on these data", [],
@@ -142,7 +153,7 @@ def _sky_data(data: dict) -> dict:
     return _with_split(data, split)
 
 
-def from_ring_v1(d: dict) -> DiagnosisReport:
+def from_ring_v1(d: dict) -> dict:
     """The photodiode instrument's ``skysim.diagnosis/1`` dict (gaps as fractions of each
     unit's mean reading)."""
     v = d["verdict"]
@@ -162,8 +173,7 @@ def from_ring_v1(d: dict) -> DiagnosisReport:
     parts = {k: nf[k] for k in ("white_noise_rms", "replica_held_out_gap") if k in nf}
     if parts:
         extra["noise_floor_parts"] = parts
-    return DiagnosisReport(
-        "photodiodes", str(v.get("metric", "")), "1",
-        _verdict(v), core.rank([Candidate.from_dict(c) for c in d["candidates"]]), where,
-        None, None if floor is None else float(floor), nf.get("method", ""),
+    return _report(
+        "photodiodes", str(v.get("metric", "")), "1", _verdict(v), list(d["candidates"]),
+        where, None, None if floor is None else float(floor), nf.get("method", ""),
         list(d.get("faults", [])), data, thresholds, d.get("seed"), extra)

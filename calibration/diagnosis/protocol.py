@@ -2,10 +2,11 @@
 
 An **instrument adapter** knows one kind of data (three-pair sensor tables, sky fields,
 photodiode rings): how to recognise it, its base model, how to fit the base model plus one
-candidate on calibration folds, and how to predict held-out data. It hands residuals to
-:mod:`.core` (folds, noise floor, score, verdict, shrink, slices) and returns a
-:class:`.report.DiagnosisReport`. :func:`calibration.diagnosis.diagnose` asks each
-registered adapter in turn whether it :meth:`~InstrumentAdapter.accepts` the data.
+candidate on calibration folds, and how to predict held-out data. It hands those fits to
+:mod:`.judge` (folds, held-out scores, paired judge, verdict, shrink; the formulas of
+:mod:`.core`) and returns a :class:`.report.DiagnosisReport`.
+:func:`calibration.diagnosis.diagnose` asks each registered adapter in turn whether it
+:meth:`~InstrumentAdapter.accepts` the data.
 
 An **effect** is one unmodelled physical effect: a named extension of an adapter's base model
 with its own parameters, which reduces to the base model at its null parameters.

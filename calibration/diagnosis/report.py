@@ -18,14 +18,15 @@ photodiodes``) into the same report.
 from __future__ import annotations
 
 import json
-from dataclasses import asdict, dataclass, field, fields
+from dataclasses import asdict, dataclass, field, fields, replace
 
 from skysim.io import _json_default
 
 from .errors import ReportFormatError
+from .legacy import from_legacy_dict
 
-__all__ = ["DIAGNOSIS_SCHEMA", "LEGACY_SCHEMA", "PREVIOUS_SCHEMA", "Candidate", "DiagnosisReport", "Slice",
-           "Verdict"]
+__all__ = ["DIAGNOSIS_SCHEMA", "LEGACY_SCHEMA", "PREVIOUS_SCHEMA", "Candidate",
+           "DiagnosisReport", "Slice", "Verdict", "rank", "sort_slices"]
 
 DIAGNOSIS_SCHEMA = "skysim.diagnosis/3"
 PREVIOUS_SCHEMA = "skysim.diagnosis/2"
@@ -66,7 +67,7 @@ class Slice:
         ``rms > limit``.
     limit : float
         RMS that white noise at the floor stays below in 99 % of slices of this size
-        (:func:`calibration.diagnosis.core.slice_limit`) [report unit].
+        (:func:`calibration.diagnosis.shares.slice_limit`) [report unit].
     """
 
     dimension: str
@@ -236,6 +237,17 @@ class Verdict:
     separated_by: dict = field(default_factory=dict)
 
 
+def rank(candidates: list[Candidate]) -> list[Candidate]:
+    """Available candidates by score, ties by held-out gap; unavailable ones last."""
+    ok = sorted((c for c in candidates if c.available), key=lambda c: (c.score, c.gap_after))
+    return ok + [c for c in candidates if not c.available]
+
+
+def sort_slices(slices) -> list[Slice]:
+    """Slices by share, largest first (stable within equal shares)."""
+    return sorted(slices, key=lambda s: -s.share)
+
+
 @dataclass
 class DiagnosisReport:
     """One diagnosis (module docstring).
@@ -250,7 +262,7 @@ class DiagnosisReport:
         Unit of every gap, floor and slice RMS of the report.
     verdict : Verdict
     candidates : list of Candidate
-        Ranked (:func:`calibration.diagnosis.core.rank`); unavailable ones last.
+        Ranked (:func:`rank`); unavailable ones last.
     where : list of Slice
         Held-out residuals of the base model, by share, largest first.
     where_after : list of Slice or None
@@ -329,9 +341,11 @@ class DiagnosisReport:
             if schema in (DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA) and "unit" in d:
                 return cls._from_v2(d)
             if schema in (LEGACY_SCHEMA, DIAGNOSIS_SCHEMA, PREVIOUS_SCHEMA):
-                # no "unit": a v1-shaped dict
-                from .legacy import from_legacy_dict
-                return from_legacy_dict(d)
+                # no "unit": a v1-shaped dict, rewritten in the current shape
+                r = cls._from_v2(from_legacy_dict(d))
+                return replace(r, candidates=rank(r.candidates), where=sort_slices(r.where),
+                               where_after=(None if r.where_after is None
+                                            else sort_slices(r.where_after)))
         except KeyError as exc:
             raise ReportFormatError(f"diagnosis report ({schema}) without the key "
                                     f"{exc.args[0]!r}") from None

@@ -1,9 +1,9 @@
 """Adapter of multi-unit photodiode instruments (rings, domes): runs
-:func:`calibration.photodiode_diagnosis.diagnose_instrument` and reads its result into the
-shared :class:`.report.DiagnosisReport`.
+:func:`calibration.photodiode_diagnosis.diagnose_instrument`, which returns the shared
+:class:`.report.DiagnosisReport`.
 
 The ring diagnosis keeps its own physics (forward model, fits, fault screen, clock
-refinement, pointing) and scores and decides through :mod:`.core` like every instrument: the
+refinement, pointing) and runs the method of every instrument (:mod:`.judge`): the
 one verdict rule with the ring's thresholds
 (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`: the paired rule of every
 instrument, with the named effect also lowering the gap in most held-out sweeps). This
@@ -14,7 +14,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from .legacy import from_ring_v1
 from .report import DiagnosisReport
 
 __all__ = ["RingAdapter", "clock_notes", "diagnose_rings", "pointing_from_reports",
@@ -153,9 +152,8 @@ def diagnose_rings(data, effects=None, *, folds: int = 3, seed: int = 0,
     inst = replace(inst, light=light, time_uncertainty_s=tu)
     if pointing_from is not None:
         pointing = pointing_from_reports(pointing_from, n_units=inst.n_units)
-    doc = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
-                              pointing=pointing)
-    report = from_ring_v1(doc)
+    report = diagnose_instrument(inst, ring_candidates(effects), n_folds=folds, seed=seed,
+                                 pointing=pointing)
     report.data.setdefault("path", where)
     report.notes += clock_notes(report)
     return report

@@ -10,9 +10,9 @@
    the turntable angle (``extra["harmonics"]``).
 4. **Which.** Each candidate effect of :mod:`calibration.effects` is added to the base model
    and refitted fold by fold, scored by :func:`.core.held_out_score`.
-5. **Verdict and how far.** :func:`.core.decide`; gaps before and after, the shrink with
-   block-bootstrap standard errors (:func:`.core.shrink_uncertainty`) and the effect's
-   parameters fitted on all data with their covariance.
+5. **Verdict and how far.** :func:`.judge.verdict` (the paired judge, :func:`.core.decide`,
+   gaps before and after, the shrink with block-bootstrap standard errors) and the best
+   effect's parameters fitted on all data with their covariance.
 
 References
 ----------
@@ -27,10 +27,10 @@ from itertools import pairwise
 import numpy as np
 
 from ..effects import EFFECT_NAMES, all_effects, geometry
-from . import core
+from . import core, judge
 from .core import Thresholds
 from .errors import InsufficientDataError, SingleHeadingError
-from .report import Candidate, DiagnosisReport, Verdict
+from .report import Candidate, DiagnosisReport
 from .three_pair_data import MIN_SUN_ELEVATION_DEG, DiagnosisData
 from .three_pair_fit import base_parameters, effect_parameters, fit_model, predict
 
@@ -55,7 +55,8 @@ MIN_HEADING_SPAN_DEG = 10.0
 
 
 def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
-    """Held-out residuals (n, 3) [V] of the base model and of each candidate.
+    """Held-out residuals (n, 3) [V] of the base model and of each candidate: the method's
+    folds (:func:`.judge.cross_validate`) with the three-pair sensor's fits.
 
     Returns
     -------
@@ -70,41 +71,30 @@ def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
         failed in a fold, or left non-finite held-out residuals
         (:func:`.core.run_candidate`); it is not tried in the later folds.
     """
-    res = {"base": np.full(data.U.shape, np.nan)}
-    res.update({e.name: np.full(data.U.shape, np.nan) for e in effects})
-    fits = {name: [] for name in res}
-    failed = {}
-
     def fit_and_predict(e, cctx, hctx, cal, ho, base):
         fit = fit_model(cctx, data.U[cal], data.valid[cal], e, base0=base.base,
                         sigma_V=sigma_V)
         return fit, predict(hctx, fit, e) - data.U[ho]
 
-    for f in np.unique(folds):
-        cal, ho = folds != f, folds == f
+    def fit_fold(train, held, skip):
+        cal, ho = np.zeros(folds.size, bool), np.zeros(folds.size, bool)
+        cal[train], ho[held] = True, True
         cctx, hctx = data.ctx.subset(cal), data.ctx.subset(ho)
         base = fit_model(cctx, data.U[cal], data.valid[cal], sigma_V=sigma_V)
-        fits["base"].append(base)
-        res["base"][ho] = predict(hctx, base, None) - data.U[ho]
+        fits = {"base": judge.FoldFit(predict(hctx, base, None) - data.U[ho], state=base)}
         for e in effects:
-            if e.name in failed:
-                continue
-            out, why = core.run_candidate(fit_and_predict, e, cctx, hctx, cal, ho, base)
-            if why is None:
-                fit, r = out
-                why = core.non_finite_reason(np.where(data.valid[ho], r, np.nan),
-                                             np.where(data.valid[ho], res["base"][ho], np.nan))
-            if why is not None:
-                failed[e.name] = why
-                continue
-            fits[e.name].append(fit)
-            res[e.name][ho] = r
-    for name in failed:
-        res.pop(name)
-        fits.pop(name)
-    for r in res.values():
-        r[~data.valid] = np.nan
-    return res, fits, failed
+            if e.name not in skip:
+                out, why = core.run_candidate(fit_and_predict, e, cctx, hctx, cal, ho, base)
+                fits[e.name] = why if why is not None else judge.FoldFit(
+                    out[1], out[0].params, bool(out[0].converged), state=out[0])
+        return data.valid[ho], fits
+
+    folds = np.asarray(folds)
+    held = judge.cross_validate(folds, [e.name for e in effects], data.U.shape, fit_fold)
+    names = ["base"] + held.available([e.name for e in effects])
+    res = {name: held.held(name) for name in names}
+    fits = {name: [f.state for f in held.fits[name]] for name in names}
+    return res, fits, held.unavailable
 
 
 def _terciles(x):
@@ -266,20 +256,10 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
         else:
             rows[0].details["all_data_fit"] = why
     rows += [Candidate.unavailable(name, msg) for name, msg in unavailable.items()]
-    rows, dec = core.judge(rows, res, ctx.block, 1e3 * floor, thresholds, scale=1e3)
-    effect = dec.effect
+    rows, verdict = judge.verdict(rows, res, ctx.block, 1e3 * floor, thresholds,
+                                  np.random.default_rng(seed), scale=1e3)
     best = rows[0] if rows and rows[0].available else None
     after = best.effect if best is not None else "base"
-    se = core.shrink_uncertainty(res["base"], res[after], ctx.block,
-                                 np.random.default_rng(seed))
-    G1 = core.rms(res[after]) if effect != "none" else G0
-    named = best is not None and effect == best.effect
-    verdict = Verdict(effect, dec.reason, best.effect if best else None, 1e3 * G0, 1e3 * G1,
-                      1 - G1 / G0, 1e3 * se["gap_before_se"],
-                      1e3 * (se["gap_after_se"] if effect != "none" else se["gap_before_se"]),
-                      se["shrink_se"] if effect != "none" else 0.0,
-                      best.params if named else {}, dec.group, dec.share, dec.share_se,
-                      dec.separated_by)
     phi, _ = geometry(ctx)
     sun_el, _ = ctx.sun.elevation_azimuth(ctx.t_s)
     from ..effects.dark_current import scene_illuminance_lx

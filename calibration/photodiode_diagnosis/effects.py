@@ -105,7 +105,7 @@ class RingEffect:
     """Base class: the hooks are identities (the base model)."""
 
     name: ClassVar[str] = ""
-    names: ClassVar[tuple] = ()
+    parameter_names: ClassVar[tuple] = ()
     units: ClassVar[tuple] = ()
     null: ClassVar[tuple] = ()
     lower: ClassVar[tuple] = ()
@@ -140,7 +140,7 @@ class RingEffect:
 
     @property
     def k(self) -> int:
-        return len(self.names)
+        return len(self.parameter_names)
 
     @property
     def prior_mean(self) -> np.ndarray:
@@ -170,14 +170,22 @@ class RingEffect:
     def modify(self, obs: SkySample, p, sun_enu=None) -> SkySample:
         return obs
 
-    def available(self, sun_elevation_deg) -> None:
-        """Raise :class:`EffectUnavailableError` when the effect cannot be evaluated."""
+    def available(self) -> str | None:
+        """None when the effect can run on this machine, else why not (a missing optional
+        engine)."""
+        return None
+
+    def available_at(self, sun_elevation_deg) -> str | None:
+        """None when the effect can run on a session whose sun (or moon) stands at
+        ``sun_elevation_deg`` [deg] (array of the samples' elevations), else why not: what
+        :meth:`available` says, or a sky the effect's model does not hold for."""
+        return self.available()
 
 
 class ClockOffset(RingEffect):
     name = "clock_offset"
     geometric = True
-    names = ("clock_offset_s",)
+    parameter_names = ("clock_offset_s",)
     units = ("s",)
     null = (0.0,)
     lower = (-14 * 3600.0,)
@@ -195,7 +203,7 @@ class ClockOffset(RingEffect):
 class YawScale(RingEffect):
     name = "yaw_scale"
     geometric = True
-    names = ("factor",)
+    parameter_names = ("factor",)
     units = ("1",)
     null = (1.0,)
     lower = (0.8,)
@@ -212,7 +220,7 @@ class YawScale(RingEffect):
 class Tilt(RingEffect):
     name = "tilt"
     geometric = True
-    names = ("pitch_deg", "roll_deg")
+    parameter_names = ("pitch_deg", "roll_deg")
     units = ("deg", "deg")
     null = (0.0, 0.0)
     lower = (-15.0, -15.0)
@@ -243,7 +251,7 @@ def integrate_stokes(radiance, dop, aop_deg, axis):
 
 class FieldOfView(RingEffect):
     name = "fov"
-    names = ("alpha_deg",)
+    parameter_names = ("alpha_deg",)
     units = ("deg",)
     null = (0.0,)
     lower = (0.0,)
@@ -281,7 +289,7 @@ def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):
 
 class Occlusion(RingEffect):
     name = "occlusion"
-    names = ("center_deg", "width_deg", "depolarization", "edge_deg")
+    parameter_names = ("center_deg", "width_deg", "depolarization", "edge_deg")
     units = ("deg", "deg", "1", "deg")
     null = (180.0, 90.0, 0.0, 3.0)
     lower = (-720.0, 10.0, 0.0, 1.0)
@@ -388,7 +396,7 @@ class GridMultipleSky:
 
 class MultipleScattering(RingEffect):
     name = "multiple_scattering"
-    names = ("tau", "albedo")
+    parameter_names = ("tau", "albedo")
     units = ("1", "1")
     null = (0.0, 0.0)
     lower = (0.02, 0.0)
@@ -403,15 +411,17 @@ class MultipleScattering(RingEffect):
     def starts(self, ctx) -> list:
         return [np.array([0.15, 0.1])]
 
-    def available(self, sun_elevation_deg) -> None:
+    def available(self) -> str | None:
         if importlib.util.find_spec("sasktran2") is None:
-            raise EffectUnavailableError(
-                f"{self.name} needs the radiative-transfer engine: pip install -e "
-                "'.[rt]' in the skysim checkout")
+            return (f"{self.name} needs the radiative-transfer engine: pip install -e "
+                    "'.[rt]' in the skysim checkout")
+        return None
+
+    def available_at(self, sun_elevation_deg) -> str | None:
         if np.min(sun_elevation_deg) <= 0.0:
-            raise EffectUnavailableError(
-                f"{self.name} needs the sun above the horizon (plane-parallel "
-                f"atmosphere); got {float(np.min(sun_elevation_deg)):.2f} deg")
+            return (f"{self.name} needs the sun above the horizon (plane-parallel "
+                    f"atmosphere); got {float(np.min(sun_elevation_deg)):.2f} deg")
+        return self.available()
 
     def __init__(self):
         self._grid = None
@@ -439,7 +449,7 @@ class NeutralPoints(RingEffect):
     DoP, tested)."""
 
     name = "neutral_points"
-    names = ("separation_deg",)
+    parameter_names = ("separation_deg",)
     units = ("deg",)
     null = (0.0,)
     lower = (0.0,)
@@ -531,7 +541,7 @@ class Aerosol(RingEffect):
     single scattering; the candidate's null is its lowest node (0.03)."""
 
     name = "aerosol"
-    names = ("aod_550",)
+    parameter_names = ("aod_550",)
     units = ("1",)
     null = (0.03,)
     lower = (0.03,)
@@ -551,8 +561,8 @@ class Aerosol(RingEffect):
     def __init__(self):
         self._grid = None
 
-    def available(self, sun_elevation_deg) -> None:
-        MultipleScattering.available(self, sun_elevation_deg)
+    available = MultipleScattering.available
+    available_at = MultipleScattering.available_at
 
     def sky(self, p, base_sky, sun_enu):
         if self._grid is None:
@@ -585,7 +595,7 @@ class Overcast(RingEffect):
 
     name = "overcast"
     dop_scale_in_sky = True
-    names = ("cloud_tau",)
+    parameter_names = ("cloud_tau",)
     units = ("1",)
     null = (0.0,)
     lower = (0.0,)
@@ -597,11 +607,11 @@ class Overcast(RingEffect):
         # thin (the pattern through the cloud), medium, thick (the cloud's own light)
         return [np.array([t]) for t in (0.3, 1.0, 3.0)]
 
-    def available(self, sun_elevation_deg) -> None:
+    def available_at(self, sun_elevation_deg) -> str | None:
         if np.min(sun_elevation_deg) <= 0.0:
-            raise EffectUnavailableError(
-                f"{self.name} needs the sun above the horizon (the cloud is lit by the "
-                f"sunbeam); got {float(np.min(sun_elevation_deg)):.2f} deg")
+            return (f"{self.name} needs the sun above the horizon (the cloud is lit by the "
+                    f"sunbeam); got {float(np.min(sun_elevation_deg)):.2f} deg")
+        return None
 
     def sky(self, p, base_sky, sun_enu):
         from skysim.cloud_field import CloudField
@@ -612,7 +622,7 @@ class Overcast(RingEffect):
 
 class Aureole(RingEffect):
     name = "aureole"
-    names = ("amplitude", "scale_deg")
+    parameter_names = ("amplitude", "scale_deg")
     units = ("1", "deg")
     null = (0.0, 15.0)
     lower = (0.0, 2.0)
@@ -649,14 +659,14 @@ class StrayLight(RingEffect):
     output_only = True
 
     def __init__(self):
-        self.names, self.units = ("scale_deg",), ("deg",)
+        self.parameter_names, self.units = ("scale_deg",), ("deg",)
         self.null, self.lower, self.upper = (15.0,), (2.0,), (90.0,)
         self.prior_sd, self.fd_step = (np.inf,), (0.05,)
 
     def bind(self, inst) -> None:
         P = len(inst.columns)
         self.per_photodiode = P
-        self.names = tuple(f"S_{c}" for c in inst.columns) + ("scale_deg",)
+        self.parameter_names = tuple(f"S_{c}" for c in inst.columns) + ("scale_deg",)
         self.units = ("1",) * P + ("deg",)
         self.null = (0.0,) * P + (15.0,)
         self.lower = (0.0,) * P + (2.0,)
@@ -706,14 +716,14 @@ class SideGlare(RingEffect):
     output_only = True
 
     def __init__(self):
-        self.names, self.units = ("scale_deg",), ("deg",)
+        self.parameter_names, self.units = ("scale_deg",), ("deg",)
         self.null, self.lower, self.upper = (15.0,), (2.0,), (90.0,)
         self.prior_sd, self.fd_step = (np.inf,), (0.05,)
 
     def bind(self, inst) -> None:
         P = len(inst.columns)
         self.per_photodiode = 2 * P
-        self.names = (tuple(f"S_{c}" for c in inst.columns)
+        self.parameter_names = (tuple(f"S_{c}" for c in inst.columns)
                       + tuple(f"b_{c}" for c in inst.columns) + ("scale_deg",))
         self.units = ("1",) * (2 * P) + ("deg",)
         self.null = (0.0,) * (2 * P) + (15.0,)
@@ -773,7 +783,7 @@ class ReadLag(RingEffect):
 
     name = "read_lag"
     geometric = True
-    names = ("lag_s",)
+    parameter_names = ("lag_s",)
     units = ("s",)
     null = (0.0,)
     lower = (-2.0,)

@@ -31,9 +31,11 @@ from skysim.exceptions import InvalidParameterError
 
 from ..diagnosis.fit_result import FitResult
 from .forward import Forward
+from .instrument import Instrument
 
 __all__ = ["FitResult", "Priors", "fit", "fit_pinned", "geometry_mask", "fit_headings",
-           "coarse_headings", "ANGLE_SD_DEG", "OFFSET_SD"]
+           "coarse_headings", "ANGLE_SD_DEG", "OFFSET_SD",
+           "FIT_SAMPLES", "orient", "thin"]
 
 OFFSET_SD = 0.02
 """Prior SD of each photodiode's dark offset, in units of the session's median reading. A
@@ -384,3 +386,57 @@ def fit_headings(fwd: Forward, theta, *, sigma: float = 0.01, coarse: bool = Tru
     free = np.zeros(L.size, bool)
     free[L.heading] = True
     return fit(fwd, t, free, sigma=sigma)
+
+
+FIT_SAMPLES = 1500
+"""Fits use every k-th sample of a sweep so that about this many samples remain: a platform
+turning once in ~400 samples moves ~1 deg per sample, far finer than the sky's polarization
+pattern varies, so thinning loses only noise averaging; held-out gaps use every sample."""
+
+
+def thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
+    """Every k-th sample (about ``target`` remain), and the first sample of any sweep shorter
+    than k that this skips: each sweep keeps its heading offset, so the thinned fit has the
+    same parameters as the full model."""
+    k = max(1, int(np.ceil(inst.n / target)))
+    if k == 1:
+        return inst
+    rows = np.arange(0, inst.n, k)
+    ids, first = np.unique(inst.sweep, return_index=True)
+    missed = first[~np.isin(ids, inst.sweep[rows])]
+    return inst.subset(np.union1d(rows, missed) if missed.size else rows)
+
+
+def orient(fwd: Forward, theta) -> tuple[float, np.ndarray]:
+    """Polarizer-angle sense (+1/-1) and a common polarizer offset (0/45/90/135 deg) that fit
+    the readings best, with per-sweep headings from a 30-deg grid; returns ``(sign, theta)``.
+
+    The sky is sampled once per heading of the grid: sense and offset act on the output
+    stage only.
+    """
+    L = fwd.layout
+    grid = np.arange(0.0, 360.0, 30.0)
+    key = np.zeros(fwd.inst.n, int) if fwd.inst.absolute_yaw else fwd.inst.sweep
+    obs = []
+    for off in grid:
+        t = np.array(theta, float)
+        t[L.heading] = off
+        obs.append((t, fwd.observe(t)))
+    best = (np.inf, 1.0, None)
+    for sign in (1.0, -1.0):
+        fwd.polarizer_sign = sign
+        for d0 in (0.0, 45.0, 90.0, 135.0):
+            score = np.empty((grid.size, L.n_heading))
+            for g, (t, o) in enumerate(obs):
+                t = t.copy()
+                t[L.delta] = d0
+                r2 = np.sum(fwd.residual(t, o) ** 2, axis=1)
+                score[g] = np.bincount(key, weights=r2, minlength=L.n_heading)
+            total = float(score.min(axis=0).sum())
+            if total < best[0]:
+                t = np.array(theta, float)
+                t[L.delta] = d0
+                t[L.heading] = grid[np.argmin(score, axis=0)]
+                best = (total, sign, t)
+    fwd.polarizer_sign = best[1]
+    return best[1], best[2]

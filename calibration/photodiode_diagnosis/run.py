@@ -1,34 +1,40 @@
 """The diagnosis of a photodiode instrument: faults, base fit, held-out gap, where, which, how
-far (its dict is read into the shared report by :mod:`calibration.diagnosis.rings`; method in
+far, returned as the shared :class:`calibration.diagnosis.report.DiagnosisReport` (method in
 ``docs/diagnosis.md``, section "Photodiode instruments").
 
-The ring-specific physics is here (forward model, fits, clock refinement, pointing, fault
-screen); folds, noise floor, held-out score, verdict, shrink and slice shares are those of
-every diagnosis, :mod:`calibration.diagnosis.core`, with the ring's thresholds
-:data:`RING_THRESHOLDS`.
+The ring-specific pieces are here (the fault screen and base fit of a session, fitting the
+base model and every candidate on one fold, the noise-only replicas of the floor, the clock
+candidate's report and refinement, heading decoding, slices); the method that runs them
+(folds, held-out scores, the paired judge, the verdict and the shrink) is every
+instrument's, :mod:`calibration.diagnosis.judge`, with the ring's thresholds
+:data:`RING_THRESHOLDS`. A clock hours off is searched before the diagnosis
+(:mod:`.dark_clock`) and refined after the candidates' fits (:func:`_refine_clock`): both
+shift the times and fit again, neither diagnoses the session twice.
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from sensor.photodiodes_io import PhotodiodeData
-from skysim.geometry import angle_between_deg, direction_vector, wrap_deg
 from skysim.exceptions import InvalidParameterError
+from skysim.geometry import angle_between_deg, direction_vector, elevation_azimuth, wrap_deg
 from skysim.sky import RayleighSky
 from skysim.validation import TWILIGHT_LIMIT_DEG
 
-from ..diagnosis import core
+from ..diagnosis import core, judge
 from ..diagnosis.core import Thresholds
 from ..diagnosis.errors import DiagnosisError, InsufficientDataError
-from ..diagnosis.report import LEGACY_SCHEMA, Candidate
-from .effects import RING_EFFECT_NAMES, EffectUnavailableError, RingEffect, get_ring_effect
-from .errors import (InstrumentDataError, PointingCalibrationError,
-                     SunTooLowError)
+from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
+from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
+                         search_clock)
+from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
+from .errors import InstrumentDataError, PointingCalibrationError, SunTooLowError
 from .faults import bright_glare, malus_outliers, screen
-from .fit import fit, fit_headings, fit_pinned
+from .fit import FIT_SAMPLES, fit, fit_headings, fit_pinned, orient
+from .fit import thin as _thin
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
 
@@ -44,63 +50,11 @@ held-out sweeps. A real sky is never reproduced to the noise floor by one effect
 clouds, the instrument's own optics all add), so a smaller share is reported as
 ``partly_explained`` with the share rather than named; the sweep-by-sweep consistency keeps a
 candidate that wins on a few sweeps only from being named."""
-FIT_SAMPLES = 1500
-"""Fits use every k-th sample of a sweep so that about this many samples remain: a platform
-turning once in ~400 samples moves ~1 deg per sample, far finer than the sky's polarization
-pattern varies, so thinning loses only noise averaging; held-out gaps use every sample."""
 
 
 EFFECT_MAX_ITER = 12
 """Iterations of a candidate's fit (it starts from the fold's base fit and its best coarse
 start, so its descent is short); a fit stopped here is reported ``converged: false``."""
-
-
-def _thin(inst: Instrument, target: int = FIT_SAMPLES) -> Instrument:
-    """Every k-th sample (about ``target`` remain), and the first sample of any sweep shorter
-    than k that this skips: each sweep keeps its heading offset, so the thinned fit has the
-    same parameters as the full model."""
-    k = max(1, int(np.ceil(inst.n / target)))
-    if k == 1:
-        return inst
-    rows = np.arange(0, inst.n, k)
-    ids, first = np.unique(inst.sweep, return_index=True)
-    missed = first[~np.isin(ids, inst.sweep[rows])]
-    return inst.subset(np.union1d(rows, missed) if missed.size else rows)
-
-
-def orient(fwd: Forward, theta) -> tuple[float, np.ndarray]:
-    """Polarizer-angle sense (+1/-1) and a common polarizer offset (0/45/90/135 deg) that fit
-    the readings best, with per-sweep headings from a 30-deg grid; returns ``(sign, theta)``.
-
-    The sky is sampled once per heading of the grid: sense and offset act on the output
-    stage only.
-    """
-    L = fwd.layout
-    grid = np.arange(0.0, 360.0, 30.0)
-    key = np.zeros(fwd.inst.n, int) if fwd.inst.absolute_yaw else fwd.inst.sweep
-    obs = []
-    for off in grid:
-        t = np.array(theta, float)
-        t[L.heading] = off
-        obs.append((t, fwd.observe(t)))
-    best = (np.inf, 1.0, None)
-    for sign in (1.0, -1.0):
-        fwd.polarizer_sign = sign
-        for d0 in (0.0, 45.0, 90.0, 135.0):
-            score = np.empty((grid.size, L.n_heading))
-            for g, (t, o) in enumerate(obs):
-                t = t.copy()
-                t[L.delta] = d0
-                r2 = np.sum(fwd.residual(t, o) ** 2, axis=1)
-                score[g] = np.bincount(key, weights=r2, minlength=L.n_heading)
-            total = float(score.min(axis=0).sum())
-            if total < best[0]:
-                t = np.array(theta, float)
-                t[L.delta] = d0
-                t[L.heading] = grid[np.argmin(score, axis=0)]
-                best = (total, sign, t)
-    fwd.polarizer_sign = best[1]
-    return best[1], best[2]
 
 
 def _extend(theta_base, fwd_base: Forward, fwd: Forward, p_eff) -> np.ndarray:
@@ -110,22 +64,6 @@ def _extend(theta_base, fwd_base: Forward, fwd: Forward, p_eff) -> np.ndarray:
     return t
 
 
-CLOCK_TIE = 0.005
-"""Clock-offset fits whose costs differ by less than this fraction are ties, resolved towards
-the smaller offset: with every sample stamped at one time, the per-sweep headings absorb the
-sun's azimuth, and a sky symmetric about the solar meridian looks the same with the sun at
-the same elevation before and after noon (the mirror time), so the data cannot tell them
-apart; a clock that is minutes off is likelier than one many hours off."""
-
-
-NOMINAL_DOP_SCALE = 0.6
-"""DoP scale of the nominal instrument that scores coarse clock starts (a clear sky's maximum
-DoP is 0.6-0.8 in the visible; the refinement fits the scale)."""
-
-CLOCK_START_MARGIN_DEG = 3.0
-"""A coarse clock start keeps the sun this far [deg] above the lowest elevation the sky model
-holds for at the session's mean time: a session spans 12-13 minutes, over which the sun's
-elevation changes by up to 2.5 deg."""
 
 
 def _nominal_instrument(theta, L, groups) -> np.ndarray:
@@ -167,27 +105,28 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
 
 
 
-def _fit_and_hold_out(fe: Forward, theta_base, ftr: Forward, effect, sigma, iho, sun, sign,
-                      continued: bool = True):
+def _fit_and_hold_out(fe: Forward, theta_base, base_train: Forward, effect, sigma, held_inst,
+                      sun, sign, continued: bool = True):
     """One candidate on one fold: its fit on the training sweeps (:func:`_fit_effect` from
     :func:`_start_effect`; ``continued=False`` leaves it as :data:`EFFECT_MAX_ITER` stopped
     it, for :func:`_continue_and_hold_out` to take on) and its residuals on the held-out
-    sweeps ``iho``; returns ``(fit, aop_fit, held-out Forward, held-out theta, residuals)``."""
-    start = _start_effect(fe, theta_base, ftr, effect, sigma)
+    sweeps ``held_inst``; returns ``(fit, aop_fit, held-out Forward, held-out theta,
+    residuals)``."""
+    start = _start_effect(fe, theta_base, base_train, effect, sigma)
     fr, fr_aop = _fit_effect(fe, start, sigma)
     if continued:
         fr, fr_aop = _continued(fe, (fr, fr_aop), sigma, fe.aop_sky)
-    feho = Forward(iho, effect, sun=sun, polarizer_sign=sign)
-    teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
-    return fr, fr_aop, feho, teho, re
+    effect_held = Forward(held_inst, effect, sun=sun, polarizer_sign=sign)
+    theta_held, r_effect = _held_out(effect_held, fr.theta, fe.layout, sigma)
+    return fr, fr_aop, effect_held, theta_held, r_effect
 
 
-def _continue_and_hold_out(fe: Forward, pair, sigma, feho: Forward):
+def _continue_and_hold_out(fe: Forward, pair, sigma, effect_held: Forward):
     """A fold's fit stopped by :data:`EFFECT_MAX_ITER` continued (:func:`_continued`) and its
     held-out residuals; returns ``(fit, aop_fit, held-out theta, residuals)``."""
     fr, fr_aop = _continued(fe, pair, sigma, fe.aop_sky)
-    teho, re = _held_out(feho, fr.theta, fe.layout, sigma)
-    return fr, fr_aop, teho, re
+    theta_held, r_effect = _held_out(effect_held, fr.theta, fe.layout, sigma)
+    return fr, fr_aop, theta_held, r_effect
 
 
 def _fit_effect(fe: Forward, starts, sigma):
@@ -520,24 +459,68 @@ def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
         out += core.partition_slices(dim, masks, labels, r2, floor,
                                      RING_THRESHOLDS.none_margin, bounds=bounds,
                                      bound_unit=None if bounds is None else "deg")
-    return [sl.to_dict() for sl in core.sort_slices(out)]
+    return core.sort_slices(out)
 
 
-def _params(effect, theta, layout):
-    if effect is None:
-        return {}
-    return {n: {"value": float(v), "unit": un}
-            for n, v, un in zip(effect.names, theta[layout.effect], effect.units)}
+METRIC = ("held-out RMS of relative photodiode residuals (fraction of the unit's mean "
+          "reading)")
+"""What the ring's gap measures (:attr:`DiagnosisReport.metric`)."""
 
 
-def _no_signal_report(inst, scr, why) -> dict:
-    return {"schema": LEGACY_SCHEMA, "instrument": "photodiodes",
-            "verdict": {"effect": "unexplained", "reason": why, "gap_before": None,
-                        "gap_after": None, "shrink": None, "params": {},
-                        "metric": "held-out RMS of relative photodiode residuals"},
-            "candidates": [], "where": [], "faults": scr.faults,
-            "noise_floor": None, "heading_error": None,
-            "data": dict(inst.source, readings_excluded=scr.counts)}
+@dataclass
+class _Session:
+    """A session screened for faults and fitted by the base model (:func:`_fit_session`):
+    what every fold's fits start from."""
+
+    inst: Instrument
+    work: Instrument
+    """The session with the screen's exclusions flagged."""
+    screen: object
+    sun: SunTrack
+    sign: float
+    """Polarizer-angle sense (:func:`orient`)."""
+    base: Forward
+    """The base model on the samples thinned for fits."""
+    layout: object
+    theta: np.ndarray
+    """The base fit (pointing pinned)."""
+    sigma: float
+    """White-noise RMS of its residuals: the weight of every fit."""
+    max_iter: int
+
+
+def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
+    """Screen the faults and fit the base model: ``(session, None)``, or ``(None, (screen,
+    why))`` when fewer than two units read a usable sky."""
+    scr = screen(inst)
+    if scr.unit_ok.sum() < 2:
+        return None, (scr, f"fewer than two units keep three working photodiodes "
+                           f"({len(scr.faults)} faults)")
+    work = replace(inst, flagged=~scr.reading_ok)
+    base = Forward(_thin(work), sun=sun)
+    L = base.layout
+    theta = np.zeros(L.size)
+    theta[L.scale] = NOMINAL_DOP_SCALE
+    sign, theta = orient(base, theta)
+    # the screen (glare, Malus outliers) reads residuals of the plain fit, as it was tuned;
+    # the base model proper is the pinned fit after it
+    plain = fit(base, theta, sigma=0.02, max_iter=max_iter)
+    full = Forward(work, sun=sun, polarizer_sign=sign)
+    glare = bright_glare(inst, scr, full.residual(plain.theta), full.usable)
+    if glare.bright is not None and glare.bright.any():
+        work, base, plain, full = _refit(inst, glare, plain.theta, sun, sign, max_iter)
+    scr = glare
+    outliers = malus_outliers(inst, scr, full.residual(plain.theta), full.usable)
+    if outliers is not scr:
+        scr = outliers
+        if scr.unit_ok.sum() < 2:
+            return None, (scr, "fewer than two units follow Malus's law")
+        work, base, plain, full = _refit(inst, scr, plain.theta, sun, sign, max_iter)
+    start = plain.theta.copy()
+    start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
+    pinned, _ = fit_pinned(base, start, sigma=0.02, max_iter=max_iter)
+    sigma = max(core.noise_floor(full.residual(pinned.theta), full.usable, work.sweep)[0], 1e-4)
+    return _Session(inst, work, scr, sun, sign, base, L, pinned.theta, sigma, max_iter), None
 
 
 def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
@@ -547,6 +530,223 @@ def _refit(inst: Instrument, scr, theta, sun, sign, max_iter):
     base = Forward(_thin(work), sun=sun, polarizer_sign=sign)
     first = fit(base, theta, sigma=0.02, max_iter=max_iter)
     return work, base, first, Forward(work, sun=sun, polarizer_sign=sign)
+
+
+@dataclass
+class _FoldState:
+    """What the ring keeps of one fold fit (:attr:`.judge.FoldFit.state`)."""
+
+    effect: RingEffect | None
+    theta: np.ndarray
+    """Parameters on the held-out sweeps (their headings refitted)."""
+    headings: np.ndarray
+    """Fitted heading of every held-out sample [deg]."""
+    aop_sky: dict | None = None
+    """The sky a geometric candidate's angle of polarization was read under."""
+    resume: tuple | None = None
+    """``(training Forward, (fit, aop_fit), held-out Forward)`` of a fit stopped by
+    :data:`EFFECT_MAX_ITER`, to continue (:func:`_continue_stopped`)."""
+
+
+def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOut:
+    """Every fold's base fit and candidate fits (:func:`.judge.cross_validate`).
+
+    A sky candidate's fit is continued within its fold: the best-fitting sky of the fold (by
+    its continued cost) is the one the geometric candidates read the angle of polarization
+    under; the others' stopped fits wait for the ranking (:func:`_continue_stopped`).
+
+    Raises
+    ------
+    InsufficientDataError
+        For a fold whose training sweeps hold fewer usable readings than the base fit has
+        parameters.
+    """
+    work, sun, sign, sigma, L = s.work, s.sun, s.sign, s.sigma, s.layout
+
+    def fit_fold(tr, ho, skip):
+        train_inst, held_inst = _thin(work.subset(tr)), work.subset(ho)
+        base_train = Forward(train_inst, sun=sun, polarizer_sign=sign)
+        if base_train.usable.sum() < base_train.layout.size:
+            full = Forward(work, sun=sun, polarizer_sign=sign)
+            empty = [int(k) for k in range(work.n_sweeps)
+                     if not full.usable[work.sweep == k].any()]
+            raise InsufficientDataError(
+                f"{work.source.get('path', 'photodiode data')}: held-out fold "
+                f"{int(folds[ho[0]])}: its training sweeps hold {int(base_train.usable.sum())} "
+                f"usable readings, fewer than the {base_train.layout.size} parameters of the base "
+                f"fit; sweeps {empty} (0-based, in order of appearance) have no usable "
+                "reading (all missing, zero or saturated): drop them from the file")
+        start = np.r_[s.theta[:L.n_base], _sweep_headings(s.theta, L, work, tr, base_train)]
+        base_fit, _ = fit_pinned(base_train, start, sigma=sigma, max_iter=s.max_iter)
+        base_held = Forward(held_inst, sun=sun, polarizer_sign=sign)
+        theta_ho, r = _held_out(base_held, base_fit.theta, base_train.layout, sigma)
+        fits = {"base": judge.FoldFit(r, state=_FoldState(None, theta_ho,
+                                                          base_held.headings(theta_ho)))}
+        best_sky = None     # (training cost, sky, description) of the best sky candidate
+        for e in sorted(cand, key=lambda c: c.geometric):   # sky candidates first
+            if e.name in skip:
+                continue
+            fe = Forward(train_inst, e, sun=sun, polarizer_sign=sign)
+            aop_sky = None
+            if e.geometric and best_sky is not None:
+                fe.aop_sky, aop_sky = best_sky[1], best_sky[2]
+            out, why = core.run_candidate(_fit_and_hold_out, fe, base_fit.theta, base_train, e,
+                                          sigma, held_inst, sun, sign, continued=_has_sky(e))
+            if why is None:
+                fr, fr_aop, effect_held, theta_held, r_effect = out
+                why = core.non_finite_reason(np.where(base_held.usable, r_effect, np.nan),
+                                             np.where(base_held.usable, r, np.nan))
+            if why is not None:
+                fits[e.name] = why
+                continue
+            p = fr.theta[fe.layout.effect]
+            if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
+                best_sky = (fr.cost, e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s)),
+                            {"effect": e.name, **dict(zip(e.parameter_names, map(float, p)))})
+            stopped = not fr.converged and not _has_sky(e)   # a sky's was continued above
+            fits[e.name] = judge.FoldFit(
+                r_effect, p, bool(fr.converged),
+                None if fr_aop is None else _effect_sd(fr_aop, fe.layout),
+                _FoldState(e, theta_held, effect_held.headings(theta_held), aop_sky,
+                           (fe, (fr, fr_aop), effect_held) if stopped else None))
+        return base_held.usable, fits
+
+    return judge.cross_validate(folds, [e.name for e in cand], work.readings.shape, fit_fold,
+                          unavailable)
+
+
+def _candidate_rows(s: _Session, held: judge.HeldOut, cand, floor: float, n_cal: int) -> list:
+    """Each candidate's row: its held-out scores (:func:`.judge.score`), fold-mean
+    parameters, parameters at a bound, and what a geometric or clock candidate reports
+    beside (:func:`clock_report`); a clock report that fails makes the clock not
+    applicable."""
+    rows = []
+    for e in cand:
+        if e.name in held.unavailable:
+            rows.append({"effect": e.name, "available": False,
+                         "error": held.unavailable[e.name]})
+            continue
+        fits = held.fits[e.name]
+        P = np.array([f.params for f in fits])
+        row = judge.score(held, e.name, e.k, s.work.sweep, floor, n_cal)
+        row["sweeps_improved"] = row["blocks_improved"]
+        row["at_bound"] = core.at_bound(P, e.lower, e.upper, e.parameter_names, null=e.null)
+        row["params"] = _fold_params(e, P, [f.sd for f in fits if f.sd is not None])
+        rows.append(row)
+        if e.geometric:
+            row["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
+                                "best-fitting sky candidate of each fold, then held")
+            row["aop_sky_by_fold"] = [f.state.aop_sky for f in fits
+                                      if f.state.aop_sky is not None]
+        if e.name == "clock_offset":
+            report, why = core.run_candidate(
+                clock_report, s.work, e, s.theta, s.layout, s.sun, s.sign, s.sigma,
+                row["params"]["clock_offset_s"], rows, cand)
+            if why is not None:
+                rows[-1] = {"effect": e.name, "available": False, "error": why}
+                held.unavailable[e.name] = why
+                continue
+            row.update(report)
+    return rows
+
+
+def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_iter: int,
+                   refine_clock: bool) -> DiagnosisReport:
+    """The diagnosis of a session at its times (:func:`diagnose_instrument` without the
+    clock search): screen, base fit, folds, candidates, clock refinement, judge, report."""
+    sun = light_track(inst)
+    sun_el = elevation_azimuth(sun(inst.t_s))[0]
+    _check_not_saturated(inst)
+    folds = core.assign_folds(inst.sweep, n_folds)
+    cand = [get_ring_effect(e) for e in effects]
+    s, silent = _fit_session(inst, sun, max_iter)
+    if silent is not None:
+        return _no_signal_report(inst, *silent, seed)
+    unavailable = {e.name: why for e in cand if (why := e.available_at(sun_el)) is not None}
+    held = _cross_validate(s, cand, folds, unavailable)
+    white, _ = core.noise_floor(held.residual["base"], held.usable, s.work.sweep)
+    replica = _replica_gap(s, folds, white, seed)
+    floor = max(white, replica)
+    n_cal = int(held.usable.sum() * (1 - 1 / np.unique(folds).size))
+    _continue_stopped(held, cand, floor, n_cal, s.sigma)
+    rows = _candidate_rows(s, held, cand, floor, n_cal)
+    clock = next((r for r in rows if r["effect"] == "clock_offset"
+                  and r.get("available", True)), None)
+    # refined whether or not it is significant yet: under a clock hours off, the sky
+    # candidates fitted at the recorded times scatter the clock (``by_sky``) so much that a
+    # true 2 h came out as +58 +- 43 min
+    if refine_clock and clock is not None and \
+            abs(clock["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
+        _refine_clock(inst, clock, n_folds=n_folds, seed=seed, max_iter=max_iter)
+    for e, row in zip(cand, rows):
+        # a clock offset within twice its uncertainty is no finding, however it fits; nor
+        # is an effect fitted at its null in every fold (its refit found a better optimum
+        # of the instrument's own parameters, not the effect: an overcast of thickness 0 on
+        # an open-sky session)
+        if row.get("available", True):
+            P = np.array([f.params for f in held.fits[e.name]])
+            row["null_excluded"] = bool(row.get("significant", True) and not _at_null(e, P))
+    names = ["base"] + held.available([e.name for e in cand])
+    ranked, verdict = judge.verdict([Candidate.from_dict(r) for r in rows],
+                                    {k: held.held(k) for k in names}, s.work.sweep, floor,
+                                    RING_THRESHOLDS, np.random.default_rng(seed))
+    return _report(s, held, ranked, verdict, (floor, white, replica), n_folds, sun_el, seed)
+
+
+def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, n_folds: int,
+            sun_el, seed: int) -> DiagnosisReport:
+    """The report: where the base model's held-out gap lies, the heading error of the base
+    model and of a named effect, the base fit and the model-free checks."""
+    floor, white, replica = floors
+    work, L = s.work, s.layout
+    output = instrument_output(work)
+    named = verdict.best_candidate is not None and verdict.effect == verdict.best_candidate
+    heading_error = {}
+    for key in ("base", verdict.best_candidate if named else None):
+        if key is None:
+            continue
+        errs = []
+        for f, ho in zip(held.fits[key], held.rows[key]):
+            fwd = Forward(output.subset(ho), f.state.effect, sun=s.sun, polarizer_sign=s.sign)
+            errs.append(wrap_deg(decode_headings(fwd, f.state.theta)
+                                 - fwd.headings(f.state.theta)))
+        e_all = np.concatenate(errs)
+        e_all = e_all[np.isfinite(e_all)]
+        heading_error[key] = float(np.sqrt(np.mean(e_all ** 2))) if e_all.size else None
+    headings = np.full(work.n, np.nan)
+    for f, ho in zip(held.fits["base"], held.rows["base"]):
+        headings[ho] = f.state.headings
+    theta_all = np.r_[s.theta[:L.n_base], np.zeros(L.n_heading)]
+    theta_all[L.heading] = _assemble_headings(headings, work)
+    where = _slices(work, Forward(work, sun=s.sun, polarizer_sign=s.sign), theta_all,
+                    held.residual["base"], held.usable, floor)
+    best = verdict.best_candidate
+    data = dict(s.inst.source, readings_excluded=s.screen.counts, glare=s.screen.glare,
+                sun_elevation_deg=[float(sun_el.min()), float(sun_el.max())],
+                split={"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
+                       "held_out_values": int(held.usable.sum())})
+    extra = {"heading_error": {
+                 "metric": "RMS over held-out samples of decoded minus fitted heading [deg], "
+                           "decoded from the instrument's output (held readings at the "
+                           "heading of their conversion)"
+                           + ("" if work.absolute_yaw else
+                              " (relative yaw: per-sweep offset fitted)"),
+                 "base_deg": heading_error.get("base"),
+                 "best_deg": heading_error.get(best) if best in heading_error else None},
+             "base_fit": _base_fit_report(s.theta, L, s.base, work, s.sign),
+             "instrument_checks": _instrument_checks(work, s.theta, L, s.base, s.sun),
+             "noise_floor_parts": {"white_noise_rms": white, "replica_held_out_gap": replica}}
+    return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None, floor,
+                           NOISE_FLOOR_METHOD, s.screen.faults, data,
+                           RING_THRESHOLDS.to_dict(), seed, extra)
+
+
+def _no_signal_report(inst: Instrument, scr, why: str, seed: int) -> DiagnosisReport:
+    """``unexplained`` with the reason, for a session whose units read no usable sky."""
+    return DiagnosisReport(
+        "photodiodes", METRIC, "1", Verdict("unexplained", why), faults=scr.faults,
+        data=dict(inst.source, readings_excluded=scr.counts),
+        thresholds=RING_THRESHOLDS.to_dict(), seed=seed)
 
 
 CLOCK_NEAR_S = 1800.0
@@ -562,15 +762,48 @@ CLOCK_PASSES = 3
 third of :data:`CLOCK_REFINE_S`."""
 
 
+def _clock_pass(inst: Instrument, *, n_folds: int, max_iter: int) -> dict | None:
+    """The clock candidate's row on a session at its times (one pass of
+    :func:`_refine_clock`): screen, base fit, the clock's fold fits and its report, as the
+    diagnosis makes them; None when no unit reads a usable sky.
+
+    Raises
+    ------
+    SunTooLowError, InstrumentDataError, InsufficientDataError
+        As :func:`diagnose_instrument` at these times.
+    """
+    too_low = _too_low(inst, _sun_elevation(inst))
+    if too_low is not None:
+        raise too_low
+    _check_not_saturated(inst)
+    folds = core.assign_folds(inst.sweep, n_folds)
+    clock = get_ring_effect("clock_offset")
+    s, silent = _fit_session(inst, light_track(inst), max_iter)
+    if silent is not None:
+        return None
+    held = _cross_validate(s, [clock], folds, {})
+    # one candidate: its stopped fits are continued whatever the floor, and nothing read
+    # from the pass depends on it, so the white-noise floor stands in for the replicas'
+    white, _ = core.noise_floor(held.residual["base"], held.usable, s.work.sweep)
+    n_cal = int(held.usable.sum() * (1 - 1 / np.unique(folds).size))
+    _continue_stopped(held, [clock], white, n_cal, s.sigma)
+    return _candidate_rows(s, held, [clock], white, n_cal)[0]
+
+
 def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
                   max_iter: int) -> None:
-    """Refine a large clock offset by diagnosing the session again at the corrected times
-    (clock candidate alone) and adding the offset that pass finds, until a pass moves it by
-    less than ``CLOCK_REFINE_S / 3``; updates ``row`` (value, uncertainty, ``significant``,
-    ``refinement``). The passes fit the clock alone, under single scattering; when they end
-    within ``CLOCK_REFINE_S`` of the first fit, whose sky candidates were then fitted near the
-    right times, its ``sky_model_spread_s`` is added in quadrature to the last pass's
-    uncertainty.
+    """Refine a large clock offset: shift the times by it, fit the clock again there
+    (:func:`_clock_pass`) and add the offset that pass finds, until a pass moves it by less
+    than ``CLOCK_REFINE_S / 3``; updates ``row`` (value, uncertainty, ``significant``,
+    ``refinement``).
+
+    The refined offset is the sum of the first fit and every pass's step, each read at the
+    times the ones before corrected; its uncertainty is that of all the passes, their
+    uncertainties added in quadrature (the last pass's alone would claim a precision the
+    passes before it did not have). The passes fit the clock alone, under single
+    scattering; when they end within ``CLOCK_REFINE_S`` of the first fit, whose sky
+    candidates were then fitted near the right times, its ``sky_model_spread_s`` is added
+    in quadrature too.
 
     Under a clock hours off, everything read from the base fit's residuals is read wrong: the
     glare screen finds no brightness at which the residuals grow (they are large everywhere)
@@ -582,51 +815,72 @@ def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
     param = row["params"]["clock_offset_s"]
     total, passes = float(param["value"]), []
     for _ in range(CLOCK_PASSES):
-        shifted = replace(inst, t_s=inst.t_s + total)
         try:
-            doc = diagnose_instrument(shifted, ("clock_offset",), n_folds=n_folds, seed=seed,
-                                      max_iter=max_iter, refine_clock=False)
+            c = _clock_pass(replace(inst, t_s=inst.t_s + total), n_folds=n_folds,
+                            max_iter=max_iter)
         except (DiagnosisError, InvalidParameterError) as exc:
             row["refinement_error"] = str(exc)
             break
-        c = next((r for r in doc["candidates"] if r["effect"] == "clock_offset"), None)
         if c is None or not c.get("available", True):
             row["refinement_error"] = (c or {}).get("error", "no clock fit at the corrected "
                                                              "times")
             break
         step = float(c["params"]["clock_offset_s"]["value"])
         total += step
-        param["uncertainty"] = float(c["uncertainty_s"])
         passes.append({"offset_s": step, "uncertainty_s": float(c["uncertainty_s"]),
                        "by_sky": c["by_sky"]})
         if abs(step) < CLOCK_REFINE_S / 3.0:
             break
-    if passes:
-        row["refinement"] = {"first_fit_s": float(param["value"]), "passes": passes,
-                             "method": "session diagnosed again at the corrected times "
-                                       "(screen, base fit, clock candidate)"}
-        if abs(total - float(param["value"])) <= CLOCK_REFINE_S:
-            # the passes read the clock under single scattering alone; a first fit this
-            # close to the corrected times had its sky candidates fitted to about the right
-            # sky, so the spread of the clock over them still holds (on a real session an
-            # hour past culmination, 745 s that the passes would drop)
-            spread = float(row.get("sky_model_spread_s", 0.0))
-            param["uncertainty"] = float(np.hypot(param["uncertainty"], spread))
-            row["refinement"]["sky_model_spread_kept_s"] = spread
-        param["value"] = total
-        row["uncertainty_s"] = param["uncertainty"]
-        row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
+    if not passes:
+        return
+    row["refinement"] = {"first_fit_s": float(param["value"]), "passes": passes,
+                         "method": "clock fitted again at the corrected times (screen, base "
+                                   "fit, clock candidate); uncertainty of all passes in "
+                                   "quadrature"}
+    param["uncertainty"] = float(np.sqrt(sum(p["uncertainty_s"] ** 2 for p in passes)))
+    if abs(total - float(param["value"])) <= CLOCK_REFINE_S:
+        # the passes read the clock under single scattering alone; a first fit this close
+        # to the corrected times had its sky candidates fitted to about the right sky, so
+        # the spread of the clock over them still holds (on a real session an hour past
+        # culmination, 745 s that the passes would drop)
+        spread = float(row.get("sky_model_spread_s", 0.0))
+        param["uncertainty"] = float(np.hypot(param["uncertainty"], spread))
+        row["refinement"]["sky_model_spread_kept_s"] = spread
+    param["value"] = total
+    row["uncertainty_s"] = param["uncertainty"]
+    row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
 
 
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
                         seed: int = 0, max_iter: int = 25, pointing=None,
-                        refine_clock: bool = True) -> dict:
-    """Diagnose a photodiode instrument (see module doc); returns the report dict.
+                        refine_clock: bool = True) -> DiagnosisReport:
+    """Diagnose a photodiode instrument (see module doc).
 
-    ``pointing`` (2 U,) [deg]: the units' calibrated pointing offsets
-    (:func:`calibrated_pointing` of other sessions' reports), held in every fit (NaN: a unit
-    not calibrated, fitted); ``None`` fits them all on this session (where a common elevation offset and a clock error trade one
-    for the other, :mod:`.pointing`).
+    A session whose recorded times put the sun below the twilight limit, or within
+    :data:`.dark_clock.CLOCK_START_MARGIN_DEG` of it, while the clock candidate is asked
+    for, has its clock searched first (:mod:`.dark_clock`): the times are shifted by the
+    offset found and the session diagnosed once there.
+
+    Parameters
+    ----------
+    inst : Instrument
+    effects : sequence of str
+        Candidates (:data:`.effects.RING_EFFECT_NAMES` by default).
+    n_folds, seed, max_iter : int
+    pointing : ndarray (2 U,), optional
+        The units' calibrated pointing offsets [deg] (:func:`calibrated_pointing` of other
+        sessions' reports), held in every fit (NaN: a unit not calibrated, fitted); None
+        fits them all on this session (where a common elevation offset and a clock error
+        trade one for the other, :mod:`.pointing`).
+    refine_clock : bool
+        Refine a clock offset found (:func:`_refine_clock`) and search the clock of a dark
+        session.
+
+    Returns
+    -------
+    DiagnosisReport
+        Gaps as fractions of each unit's mean reading; heading error [deg], base fit and
+        instrument checks in ``extra``.
 
     Raises
     ------
@@ -634,270 +888,72 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         A ``pointing`` that is not 2 U angles within +-20 deg (or NaN).
     SunTooLowError
         With the sun below the twilight limit at a sample, unless the clock candidate is
-        asked for and the units read a lit sky at a clock offset that puts the sun up
-        (:mod:`.dark_clock`: the clock is then searched first).
+        asked for and the units read a lit sky at a clock offset that puts the sun up.
     InstrumentDataError
         When every reading is saturated.
     InsufficientDataError
         For folds that do not fit the sweeps, or a fold whose training sweeps hold fewer
         usable readings than the base fit has parameters (the other sweeps have none).
     """
-    path = inst.source.get("path", "photodiode data")
     if pointing is not None:
         inst = replace(inst, pointing_deg=_checked_pointing(pointing, inst.n_units))
-    sun = light_track(inst)
-    from skysim.geometry import elevation_azimuth
-    sun_el, _ = elevation_azimuth(sun(inst.t_s))
+    sun_el = _sun_elevation(inst)
+    too_low = _too_low(inst, sun_el)
+    search = refine_clock and "clock_offset" in effects and inst.light == "sun"
+    if too_low is not None and not search:
+        raise too_low
+    options = dict(n_folds=n_folds, seed=seed, max_iter=max_iter, refine_clock=refine_clock)
+    if search and sun_el.min() < TWILIGHT_LIMIT_DEG + CLOCK_START_MARGIN_DEG:
+        # a lit sky stamped after dusk, or in deep twilight (where a fit from the recorded
+        # times walks below the limit), is a clock hours off: searched first
+        found = search_clock(inst, too_low)
+        if found is not None:
+            report = _diagnose_once(replace(inst, t_s=inst.t_s + found.offset_s), effects,
+                                    **options)
+            if report.verdict.gap_before is not None:
+                return clock_found(report, found, sun_el)
+        if too_low is not None:
+            raise too_low
+    return _diagnose_once(inst, effects, **options)
+
+
+def _sun_elevation(inst: Instrument) -> np.ndarray:
+    """Elevation [deg] of the body lighting the sky (:func:`light_track`) at every sample."""
+    return elevation_azimuth(light_track(inst)(inst.t_s))[0]
+
+
+def _too_low(inst: Instrument, sun_el) -> SunTooLowError | None:
+    """The error of a session whose sun is below the twilight limit at a sample (None when
+    it is not), ``sun_el`` its elevations [deg]; a moonlit session is checked for its Moon
+    and Sun (:func:`_check_moonlit`).
+    """
+    path = inst.source.get("path", "photodiode data")
     if inst.light == "moon":
         _check_moonlit(inst, sun_el, path)
-    if sun_el.min() < TWILIGHT_LIMIT_DEG:
-        i = int(np.argmin(sun_el))
-        too_low = SunTooLowError(
-            f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
-            f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
-            "Check the times and their UTC offset, or drop the night samples")
-        if not (refine_clock and "clock_offset" in effects) or inst.light != "sun":
-            raise too_low
-        # a lit sky stamped after dusk is a clock hours off: searched first
-        from .dark_clock import diagnose_dark_clock
-        return diagnose_dark_clock(inst, effects, too_low, n_folds=n_folds, seed=seed,
-                                   max_iter=max_iter)
-    if sun_el.min() < TWILIGHT_LIMIT_DEG + CLOCK_START_MARGIN_DEG and refine_clock \
-            and "clock_offset" in effects and inst.light == "sun":
-        # deep twilight: clock starts that keep the sun up are scored against the recorded
-        # times first (a fit from the recorded times walks below the limit)
-        from .dark_clock import diagnose_dark_clock
-        doc = diagnose_dark_clock(inst, effects, None, n_folds=n_folds, seed=seed,
-                                  max_iter=max_iter)
-        if doc is not None:
-            return doc
+    if sun_el.min() >= TWILIGHT_LIMIT_DEG:
+        return None
+    i = int(np.argmin(sun_el))
+    return SunTooLowError(
+        f"{path}: the sun is at {sun_el[i]:.2f} deg at sample {i}, below the twilight limit "
+        f"{TWILIGHT_LIMIT_DEG:g} deg: the sky is too dark for a polarization compass. "
+        "Check the times and their UTC offset, or drop the night samples")
+
+
+def _check_not_saturated(inst: Instrument) -> None:
+    """Raise :class:`InstrumentDataError` when every reading is saturated."""
     finite = np.isfinite(inst.readings)
+    if inst.source.get("saturation_value") is None:     # normalised readings: no rail
+        return
     if finite.any() and np.all(inst.readings[finite] >= inst.source["saturation_value"]):
         raise InstrumentDataError(
-            f"{path}: all {int(finite.sum())} readings are at or above the saturation value "
-            f"{inst.source['saturation_value']:g}: shorten the exposure or lower the gain")
-    folds = core.assign_folds(inst.sweep, n_folds)
-    cand = [get_ring_effect(e) for e in effects]
-    scr = screen(inst)
-    if scr.unit_ok.sum() < 2:
-        return _no_signal_report(inst, scr, f"fewer than two units keep three working "
-                                            f"photodiodes ({len(scr.faults)} faults)")
-    work = replace(inst, flagged=~scr.reading_ok)
-    base = Forward(_thin(work), sun=sun)
-    L = base.layout
-    theta = np.zeros(L.size)
-    theta[L.scale] = 0.6
-    sign, theta = orient(base, theta)
-    # the screen (glare, Malus outliers) reads residuals of the plain fit, as it was tuned;
-    # the base model proper is the pinned fit after it
-    first = fit(base, theta, sigma=0.02, max_iter=max_iter)
-    full = Forward(work, sun=sun, polarizer_sign=sign)
-    scr2 = bright_glare(inst, scr, full.residual(first.theta), full.usable)
-    if scr2.bright is not None and scr2.bright.any():
-        work, base, first, full = _refit(inst, scr2, first.theta, sun, sign, max_iter)
-    scr = scr2
-    scr2 = malus_outliers(inst, scr, full.residual(first.theta), full.usable)
-    if scr2 is not scr:
-        scr = scr2
-        if scr.unit_ok.sum() < 2:
-            return _no_signal_report(inst, scr, "fewer than two units follow Malus's law")
-        work, base, first, full = _refit(inst, scr, first.theta, sun, sign, max_iter)
-    start = first.theta.copy()
-    start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
-    first, _ = fit_pinned(base, start, sigma=0.02, max_iter=max_iter)
-    sigma = max(core.noise_floor(full.residual(first.theta), full.usable, work.sweep)[0], 1e-4)
-
-    shape = work.readings.shape
-    res = {"base": np.zeros(shape)}
-    res.update({e.name: np.zeros(shape) for e in cand})
-    heads = {k: np.full(work.n, np.nan) for k in res}
-    w_ho = np.zeros(shape, bool)
-    fold_params = {e.name: [] for e in cand}
-    fold_converged = {e.name: [] for e in cand}
-    fold_sd = {e.name: [] for e in cand}
-    fold_aop_sky = {e.name: [] for e in cand}
-    unavailable, decoders, pending = {}, {}, {}
-    output = instrument_output(work)
-    for e in cand:
-        try:
-            e.available(sun_el)
-        except EffectUnavailableError as exc:
-            unavailable[e.name] = str(exc)
-    for f in np.unique(folds):
-        tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
-        itr, iho = _thin(work.subset(tr)), work.subset(ho)
-        ftr = Forward(itr, sun=sun, polarizer_sign=sign)
-        if ftr.usable.sum() < ftr.layout.size:
-            empty = [int(s) for s in range(work.n_sweeps) if not full.usable[work.sweep == s].any()]
-            raise InsufficientDataError(
-                f"{path}: held-out fold {int(f)}: its training sweeps hold "
-                f"{int(ftr.usable.sum())} usable readings, fewer than the {ftr.layout.size} "
-                f"parameters of the base fit; sweeps {empty} (0-based, in order of appearance) "
-                "have no usable reading (all missing, zero or saturated): drop them from the file")
-        t0 = np.r_[first.theta[:L.n_base], _sweep_headings(first.theta, L, work, tr, ftr)]
-        btr, _ = fit_pinned(ftr, t0, sigma=sigma, max_iter=max_iter)
-        fho = Forward(iho, sun=sun, polarizer_sign=sign)
-        tho, r = _held_out(fho, btr.theta, ftr.layout, sigma)
-        res["base"][ho], w_ho[ho] = r, fho.usable
-        heads["base"][ho] = fho.headings(tho)
-        decoders.setdefault("base", []).append((None, tho, ho))
-        best_sky = None     # (training cost, sky) of the best-fitting sky candidate
-        for e in sorted(cand, key=lambda c: c.geometric):   # sky candidates first
-            if e.name in unavailable:
-                continue
-            fe = Forward(itr, e, sun=sun, polarizer_sign=sign)
-            if e.geometric and best_sky is not None:
-                fe.aop_sky = best_sky[1]
-                fold_aop_sky[e.name].append(best_sky[2])
-            # a fit that fails (leaves the model's valid range on the training or the
-            # held-out sweeps, a numerical failure) or leaves non-finite held-out residuals
-            # makes the candidate not applicable to this session; it never ends the diagnosis
-            # a sky candidate's fit is continued here: the best-fitting sky of the fold (by
-            # its continued cost) is the one the geometric candidates are fitted on; the
-            # others' continuation waits for the ranking (:func:`_continue_pending`)
-            out, why = core.run_candidate(_fit_and_hold_out, fe, btr.theta, ftr, e, sigma,
-                                          iho, sun, sign, continued=_has_sky(e))
-            if why is None:
-                fr, fr_aop, feho, teho, re = out
-                why = core.non_finite_reason(np.where(fho.usable, re, np.nan),
-                                             np.where(fho.usable, r, np.nan))
-            if why is not None:
-                unavailable[e.name] = why
-                continue
-            if _has_sky(e) and (best_sky is None or fr.cost < best_sky[0]):
-                p = fr.theta[fe.layout.effect]
-                best_sky = (fr.cost, e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s)),
-                            {"effect": e.name, **dict(zip(e.names, map(float, p)))})
-            if not fr.converged and not _has_sky(e):    # a sky's fit was continued above
-                pending.setdefault(e.name, []).append(dict(
-                    fe=fe, pair=(fr, fr_aop), feho=feho, fho=fho, r=r, ho=ho,
-                    i=len(fold_params[e.name]), i_sd=len(fold_sd[e.name]),
-                    i_dec=len(decoders.get(e.name, []))))
-            if fr_aop is not None:
-                fold_sd[e.name].append(_effect_sd(fr_aop, fe.layout))
-            fold_params[e.name].append(fr.theta[fe.layout.effect])
-            fold_converged[e.name].append(bool(fr.converged))
-            res[e.name][ho] = re
-            heads[e.name][ho] = feho.headings(teho)
-            decoders.setdefault(e.name, []).append((e, teho, ho))
-    white, _ = core.noise_floor(res["base"], w_ho, work.sweep)
-    replica = _replica_gap(work, first.theta, L, folds, sun, sign, sigma, white, max_iter, seed)
-    floor = max(white, replica)
-    n_ho = int(w_ho.sum())
-    n_cal = int(n_ho * (1 - 1 / np.unique(folds).size))
-    _continue_pending(pending, cand, unavailable, res, heads, w_ho, floor, n_ho, n_cal, sigma,
-                      fold_params, fold_sd, fold_converged, decoders)
-    # held-out residuals, NaN where a reading is not used
-    held = {k: np.where(w_ho, r, np.nan) for k, r in res.items()}
-    g0 = core.rms(held["base"])
-    rows = []
-    for e in cand:
-        if e.name in unavailable:
-            rows.append({"effect": e.name, "available": False, "error": unavailable[e.name]})
-            continue
-        gc = core.rms(held[e.name])
-        P = np.array(fold_params[e.name])
-        improved = core.blocks_improved(held["base"], held[e.name], work.sweep)
-        rows.append({"effect": e.name, "gap_after": gc, "shrink": 1 - gc / g0,
-                     "score": core.held_out_score(gc, g0, floor, n_ho, e.k, n_cal), "k": e.k,
-                     "excess_removed": core.excess_removed(gc, g0, floor),
-                     "sweeps_improved": improved, "blocks_improved": improved,
-                     "converged": all(fold_converged[e.name]),
-                     "at_bound": core.at_bound(P, e.lower, e.upper, e.names, null=e.null),
-                     "params": _fold_params(e, P, fold_sd[e.name])})
-        if e.geometric:
-            rows[-1]["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
-                                     "best-fitting sky candidate of each fold, then held")
-            rows[-1]["aop_sky_by_fold"] = fold_aop_sky[e.name]
-        if e.name == "clock_offset":
-            report, why = core.run_candidate(
-                clock_report, work, e, first.theta, L, sun, sign, sigma,
-                rows[-1]["params"]["clock_offset_s"], rows, cand)
-            if why is not None:
-                rows[-1] = {"effect": e.name, "available": False, "error": why}
-                held.pop(e.name)
-                continue
-            rows[-1].update(report)
-            # refined whether or not it is significant yet: under a clock hours off, the sky
-            # candidates fitted at the recorded times scatter the clock (``by_sky``) so much
-            # that a true 2 h came out as +58 +- 43 min
-            if refine_clock and \
-                    abs(rows[-1]["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
-                _refine_clock(inst, rows[-1], n_folds=n_folds, seed=seed, max_iter=max_iter)
-        # a clock offset within twice its uncertainty is no finding, however it fits; nor is
-        # an effect fitted at its null in every fold (its refit found a better optimum of the
-        # instrument's own parameters, not the effect: an overcast of thickness 0 on an
-        # open-sky session)
-        rows[-1]["null_excluded"] = bool(rows[-1].get("significant", True)
-                                         and not _at_null(e, P))
-    ranked, decision = core.judge([Candidate.from_dict(r) for r in rows],
-                                  {k: v for k, v in held.items()
-                                   if k == "base" or k not in unavailable},
-                                  work.sweep, floor, RING_THRESHOLDS)
-    verdict, reason = decision
-    rows = [c.to_dict() for c in ranked]
-    avail = [r for r in rows if r["available"]]
-    best = avail[0]["effect"] if avail else None
-    named = best is not None and verdict == best
-    herr = {}
-    for key in ("base", best if named else None):
-        if key is None:
-            continue
-        errs = []
-        for effect, t, ho in decoders[key]:
-            fwd = Forward(output.subset(ho), effect, sun=sun, polarizer_sign=sign)
-            dec = decode_headings(fwd, t)
-            ref = fwd.headings(t)
-            errs.append(wrap_deg(dec - ref))
-        e_all = np.concatenate(errs)
-        e_all = e_all[np.isfinite(e_all)]
-        herr[key] = float(np.sqrt(np.mean(e_all ** 2))) if e_all.size else None
-    # slices of the held-out base residual
-    fho_all = Forward(work, sun=sun, polarizer_sign=sign)
-    theta_all = np.r_[first.theta[:L.n_base], np.zeros(L.n_heading)]
-    theta_all[L.heading] = _assemble_headings(heads["base"], work)
-    where = _slices(work, fho_all, theta_all, res["base"], w_ho, floor)
-    # how far: the best candidate's gap (the base's for ``none``), with bootstrap standard
-    # errors over the held-out sweeps
-    after = best if best is not None and verdict != "none" else "base"
-    se = core.shrink_uncertainty(held["base"], held[after], work.sweep,
-                                 np.random.default_rng(seed))
-    g1 = core.rms(held[after])
-    v = {"effect": verdict, "reason": reason, "gap_before": g0, "gap_after": g1,
-         "shrink": 1 - g1 / g0,
-         "gap_before_se": se["gap_before_se"],
-         "gap_after_se": se["gap_after_se" if after != "base" else "gap_before_se"],
-         "shrink_se": se["shrink_se"] if after != "base" else 0.0,
-         "metric": "held-out RMS of relative photodiode residuals (fraction of the unit's "
-                   "mean reading)",
-         "noise_floor": floor, "best_candidate": best,
-         "params": avail[0]["params"] if named else {}, "group": decision.group,
-         "explained_share": decision.share, "explained_share_se": decision.share_se,
-         "separated_by": decision.separated_by}
-    return {
-        "schema": LEGACY_SCHEMA, "instrument": "photodiodes", "verdict": v,
-        "thresholds": RING_THRESHOLDS.to_dict(), "candidates": rows, "where": where, "faults": scr.faults,
-        "noise_floor": {"rms": floor, "method": NOISE_FLOOR_METHOD,
-                        "white_noise_rms": white, "replica_held_out_gap": replica},
-        "heading_error": {"metric": "RMS over held-out samples of decoded minus fitted "
-                                    "heading [deg], decoded from the instrument's output "
-                                    "(held readings at the heading of their conversion)"
-                                    + ("" if work.absolute_yaw else
-                                       " (relative yaw: per-sweep offset fitted)"),
-                          "base_deg": herr.get("base"),
-                          "best_deg": herr.get(best) if best in herr else None},
-        "base_fit": _base_fit_report(first.theta, L, base, work, sign),
-        "instrument_checks": _instrument_checks(work, first.theta, L, base, sun),
-        "data": dict(inst.source, readings_excluded=scr.counts, glare=scr.glare,
-                     sun_elevation_deg=[float(sun_el.min()), float(sun_el.max())]),
-        "split": {"folds": int(n_folds), "by": "whole sweeps, round-robin in time order",
-                  "held_out_readings": n_ho},
-        "seed": seed}
+            f"{inst.source.get('path', 'photodiode data')}: all {int(finite.sum())} readings "
+            f"are at or above the saturation value {inst.source['saturation_value']:g}: "
+            "shorten the exposure or lower the gain")
 
 
 CONTINUE_TOP = 3
 """The best-ranked candidates (held-out score of their fits as :data:`EFFECT_MAX_ITER` left
-them) whose stopped fits are always continued (:func:`_continue_pending`)."""
+them) whose stopped fits are always continued (:func:`_continue_stopped`)."""
 CONTINUE_GAP_MARGIN = 0.10
 """A lower-ranked candidate's stopped fits are continued unless its held-out gap exceeds the
 best-ranked candidate's by more than this fraction: three times the largest change of a
@@ -909,11 +965,9 @@ def _effect_sd(fr_aop, layout) -> list:
     return [fr_aop.sd(i) for i in range(layout.effect.start, layout.effect.stop)]
 
 
-def _continue_pending(pending, cand, unavailable, res, heads, w_ho, floor, n_ho, n_cal, sigma,
-                      fold_params, fold_sd, fold_converged, decoders) -> None:
+def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma: float) -> None:
     """Continue (:func:`_continued`) the stopped fold fits of the candidates that can matter
-    to the verdict, updating their held-out residuals, headings, parameters and convergence
-    in place.
+    to the verdict, replacing their fold fits in ``held``.
 
     The candidates are ranked on the held-out residuals of their fits as they stand (sky
     candidates continued, the others as :data:`EFFECT_MAX_ITER` left them). The
@@ -926,40 +980,38 @@ def _continue_pending(pending, cand, unavailable, res, heads, w_ho, floor, n_ho,
     on a real ring session, was 3.3 % of the gap; the best's own continuation only widens
     the distance). ``converged`` of a continued candidate is that of its continued fits.
     """
-    if not pending:
+    live = [e for e in cand if e.name not in held.unavailable]
+    stopped = {e.name: [i for i, f in enumerate(held.fits[e.name]) if f.state.resume]
+               for e in live}
+    if not any(stopped.values()):
         return
-    held = {k: np.where(w_ho, r, np.nan) for k, r in res.items()}
-    g0 = core.rms(held["base"])
-    live = [e for e in cand if e.name not in unavailable]
-    gap = {e.name: core.rms(held[e.name]) for e in live}
-    score = {e.name: core.held_out_score(gap[e.name], g0, floor, n_ho, e.k, n_cal)
-             for e in live}
-    ranked = sorted(live, key=lambda e: (score[e.name], gap[e.name]))
+    g0 = core.rms(held.held("base"))
+    n_ho = int(held.usable.sum())
+    gap = {e.name: core.rms(held.held(e.name)) for e in live}
+    rank_key = {e.name: (core.held_out_score(gap[e.name], g0, floor, n_ho, e.k, n_cal),
+                         gap[e.name]) for e in live}
+    ranked = sorted(live, key=lambda e: rank_key[e.name])
     best = ranked[0].name
     for pos, e in enumerate(ranked):
-        if e.name not in pending:
+        if not stopped[e.name] or (pos >= CONTINUE_TOP and
+                                   gap[e.name] > gap[best] * (1 + CONTINUE_GAP_MARGIN)):
             continue
-        if pos >= CONTINUE_TOP and \
-                gap[e.name] > gap[best] * (1 + CONTINUE_GAP_MARGIN):
-            continue
-        for p in pending[e.name]:
-            out, why = core.run_candidate(_continue_and_hold_out, p["fe"], p["pair"], sigma,
-                                          p["feho"])
+        for i in stopped[e.name]:
+            f, ho = held.fits[e.name][i], held.rows[e.name][i]
+            fe, pair, effect_held = f.state.resume
+            out, why = core.run_candidate(_continue_and_hold_out, fe, pair, sigma, effect_held)
             if why is None:
-                fr, fr_aop, teho, re = out
-                why = core.non_finite_reason(np.where(p["fho"].usable, re, np.nan),
-                                             np.where(p["fho"].usable, p["r"], np.nan))
+                fr, fr_aop, theta_held, r_effect = out
+                why = core.non_finite_reason(
+                    np.where(held.usable[ho], r_effect, np.nan),
+                    np.where(held.usable[ho], held.residual["base"][ho], np.nan))
             if why is not None:
-                unavailable[e.name] = why
+                held.unavailable[e.name] = why
                 break
-            ho, fe = p["ho"], p["fe"]
-            if fr_aop is not None:
-                fold_sd[e.name][p["i_sd"]] = _effect_sd(fr_aop, fe.layout)
-            fold_params[e.name][p["i"]] = fr.theta[fe.layout.effect]
-            fold_converged[e.name][p["i"]] = bool(fr.converged)
-            res[e.name][ho] = re
-            heads[e.name][ho] = p["feho"].headings(teho)
-            decoders[e.name][p["i_dec"]] = (e, teho, ho)
+            sd = f.sd if fr_aop is None else _effect_sd(fr_aop, fe.layout)
+            state = _FoldState(e, theta_held, effect_held.headings(theta_held), f.state.aop_sky)
+            held.put(e.name, ho, judge.FoldFit(r_effect, fr.theta[fe.layout.effect],
+                                               bool(fr.converged), sd, state), index=i)
 
 
 NOISE_FLOOR_METHOD = ("the larger of the white-noise RMS (second differences along each "
@@ -968,19 +1020,19 @@ NOISE_FLOOR_METHOD = ("the larger of the white-noise RMS (second differences alo
                       "as the data)")
 
 
-def _replica_gap(work: Instrument, theta, L, folds, sun, sign, sigma, white: float,
-                 max_iter: int, seed: int) -> float:
+def _replica_gap(s: _Session, folds, white: float, seed: int) -> float:
     """Held-out gap [relative] the base model reaches on a noise-only replica of the session.
 
-    The replica's readings are the base model's full fit (``theta``) plus Gaussian white
-    noise of RMS ``white`` (relative to each unit's mean reading, as the residuals); it is
-    split, fitted and scored fold by fold as the data are. Its held-out gap is what a
-    correct base model reaches held out on these sweeps: white noise plus the spread of
-    parameters fitted on fewer sweeps (on three sweeps, training folds of two read a unit's
-    pointing from the angle of polarization alone, which leaves it loose, and the held-out
-    gap of noise-only sessions came out at 1.7-1.9 x the white noise). A gap within it is no
-    evidence of an unmodelled effect.
+    The replica's readings are the base model's full fit plus Gaussian white noise of RMS
+    ``white`` (relative to each unit's mean reading, as the residuals); it is split, fitted
+    and scored fold by fold as the data are. Its held-out gap is what a correct base model
+    reaches held out on these sweeps: white noise plus the spread of parameters fitted on
+    fewer sweeps (on three sweeps, training folds of two read a unit's pointing from the
+    angle of polarization alone, which leaves it loose, and the held-out gap of noise-only
+    sessions came out at 1.7-1.9 x the white noise). A gap within it is no evidence of an
+    unmodelled effect.
     """
+    work, theta, L, sun, sign = s.work, s.theta, s.layout, s.sun, s.sign
     full = Forward(work, sun=sun, polarizer_sign=sign)
     rng = np.random.default_rng([int(seed), 20260])
     res = np.full((REPLICAS,) + work.readings.shape, np.nan)
@@ -991,12 +1043,12 @@ def _replica_gap(work: Instrument, theta, L, folds, sun, sign, sigma, white: flo
                                               work.readings))
         for f in np.unique(folds):
             tr, ho = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
-            ftr = Forward(_thin(rep.subset(tr)), sun=sun, polarizer_sign=sign)
-            t0 = np.r_[theta[:L.n_base], _sweep_headings(theta, L, rep, tr, ftr)]
-            btr, _ = fit_pinned(ftr, t0, sigma=sigma, max_iter=max_iter)
-            fho = Forward(rep.subset(ho), sun=sun, polarizer_sign=sign)
-            _, r = _held_out(fho, btr.theta, ftr.layout, sigma)
-            res[k, ho] = np.where(fho.usable, r, np.nan)
+            base_train = Forward(_thin(rep.subset(tr)), sun=sun, polarizer_sign=sign)
+            t0 = np.r_[theta[:L.n_base], _sweep_headings(theta, L, rep, tr, base_train)]
+            train_fit, _ = fit_pinned(base_train, t0, sigma=s.sigma, max_iter=s.max_iter)
+            base_held = Forward(rep.subset(ho), sun=sun, polarizer_sign=sign)
+            _, r = _held_out(base_held, train_fit.theta, base_train.layout, s.sigma)
+            res[k, ho] = np.where(base_held.usable, r, np.nan)
     return core.rms(res)
 
 
@@ -1021,7 +1073,7 @@ def _fold_params(effect, P, sds) -> dict:
     effect fitted with a covariance, its uncertainty: the root sum of squares of the mean
     posterior SD of the folds' AoP fits and the spread between folds."""
     out = {}
-    for j, (n, un) in enumerate(zip(effect.names, effect.units)):
+    for j, (n, un) in enumerate(zip(effect.parameter_names, effect.units)):
         out[n] = {"value": float(np.mean(P[:, j])), "fold_spread": float(np.std(P[:, j])),
                   "unit": un}
         sd = [f[j] for f in sds if f[j] is not None]
@@ -1054,7 +1106,7 @@ def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict
     for e in cand:
         row = next((r for r in rows if r["effect"] == e.name), None)
         if _has_sky(e) and row is not None and row.get("available", True):
-            p = np.array([row["params"][n]["value"] for n in e.names])
+            p = np.array([row["params"][n]["value"] for n in e.parameter_names])
             skies[e.name] = e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s))
     by_sky, errors = {}, {}
     # read as the candidate reads an offset within its nearest coarse start: from the
@@ -1142,7 +1194,7 @@ def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
             "fits_as_well": bool(ratio <= 1.0 + CLOCK_TIE)}
 
 
-def _sweep_headings(theta, L, inst, rows, ftr):
+def _sweep_headings(theta, L, inst, rows, base_train):
     h = theta[L.heading]
     if inst.absolute_yaw:
         return h
@@ -1207,8 +1259,8 @@ def _base_fit_report(theta, L, fwd, inst, sign):
 def diagnose_photodiodes(data: PhotodiodeData, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
                          seed: int = 0, where: str = "photodiode data", pointing=None,
                          light: str = "sun") -> dict:
-    """:func:`diagnose_instrument` of a photodiode file; ``light="moon"`` for a session under
-    the moonlit night sky.
+    """:func:`diagnose_instrument` of a photodiode file, as the ring's result dict
+    (:func:`result_dict`); ``light="moon"`` for a session under the moonlit night sky.
 
     Raises
     ------
@@ -1219,7 +1271,37 @@ def diagnose_photodiodes(data: PhotodiodeData, effects=RING_EFFECT_NAMES, *, n_f
         raise InstrumentDataError(f"{where}: light must be one of {', '.join(LIGHTS)}; "
                                   f"got {light!r}")
     inst = replace(instrument_from_photodiodes(data, where), light=light)
-    return diagnose_instrument(inst, effects, n_folds=n_folds, seed=seed, pointing=pointing)
+    return result_dict(diagnose_instrument(inst, effects, n_folds=n_folds, seed=seed,
+                                           pointing=pointing))
+
+
+def result_dict(report: DiagnosisReport) -> dict:
+    """The ring's result dict of a report (:func:`diagnose_photodiodes`): the report's
+    verdict, candidates and slices, with what the ring reports beside them at the top level
+    (``heading_error``, ``base_fit``, ``instrument_checks``, ``dark_clock``), the noise floor
+    with its parts (``noise_floor``: ``rms``, ``method``, ``white_noise_rms``,
+    ``replica_held_out_gap``) and the split (``split``). Labelled ``skysim.diagnosis/1``:
+    :meth:`DiagnosisReport.from_dict` reads it back."""
+    d = report.to_dict()
+    extra = d.pop("extra")
+    parts = extra.pop("noise_floor_parts", {})
+    verdict = dict(d["verdict"], metric=report.metric)
+    dark = extra.get("dark_clock")
+    if dark is not None and "at_corrected_times" in dark:
+        verdict["at_corrected_times"] = dict(dark.pop("at_corrected_times"),
+                                             metric=report.metric,
+                                             noise_floor=report.noise_floor)
+    data = d["data"]
+    split = data.pop("split", None)
+    if split is not None:
+        split["held_out_readings"] = split.pop("held_out_values")
+    floor = None if report.noise_floor is None else {
+        "rms": report.noise_floor, "method": report.noise_floor_method, **parts}
+    return {"schema": LEGACY_SCHEMA, "instrument": report.instrument, "verdict": verdict,
+            "thresholds": d["thresholds"], "candidates": d["candidates"], "where": d["where"],
+            "faults": d["faults"], "noise_floor": floor,
+            "heading_error": extra.pop("heading_error", None), **extra, "data": data,
+            "split": split, "seed": report.seed}
 
 
 LIGHTS = ("sun", "moon")
