@@ -509,7 +509,9 @@ class AerosolSky(Sky):
     sun_node_origin_deg : float
         One of the sun nodes [deg] (default 0).
     n_zenith, n_azimuth : int
-        Table grid (:class:`AerosolTable`); the engine traces ``n_zenith * n_azimuth`` rays.
+        Table grid (:func:`table_grid`: the view zenith nodes of
+        :func:`skysim.multiple.mode_nodes_deg` for ``n_zenith``, 24 for the default 25, times
+        ``n_azimuth`` azimuths 0-180 deg); the engine traces one ray per node.
     settings : EngineSettings
         Numerical set-up of sasktran2.
     n_moments : int

@@ -399,7 +399,8 @@ def phase_f11_f12(greek, cos_scattering) -> tuple[np.ndarray, np.ndarray]:
     ``sqrt((l+1)^2 - 4) P^{l+1}_02 = (2l + 1) x P^l_02 - sqrt(l^2 - 4) P^{l-1}_02`` from
     ``P^2_02 = (sqrt(6) / 4)(1 - x^2)``. In the engine's convention (``alpha1_0 = 1``:
     ``F11`` averages to 1 over the sphere) ``F12 > 0`` is light polarized perpendicular to
-    the scattering plane (Rayleigh: ``F12 = (3/4) Delta sin^2``, :func:`rayleigh_greek_coefficients`).
+    the scattering plane (Rayleigh: ``F12 = (3/4) Delta sin^2``,
+    :func:`rayleigh_greek_coefficients`).
 
     Parameters
     ----------
