@@ -130,3 +130,16 @@ def test_neutral_points_approach_the_sun_as_it_nears_the_zenith():
     d = [neutral_points(s, 0.25) for s in (80.0, 86.0, 89.0)]
     assert np.all(np.diff([p.babinet_distance_deg for p in d]) < 0)
     assert np.all(np.diff([p.brewster_distance_deg for p in d]) < 0)
+
+
+def test_no_off_vertical_pair_beside_a_high_sun():
+    """The off-vertical search (kept for a scan that finds neither point), started from the
+    DoLP minimum beside a sun at 86 deg (tau 0.25), converges onto the solar vertical, at
+    the Babinet point of the scan (within 0.01 deg; measured 1e-8 deg, azimuth 2e-6 deg): the
+    sky has no zero of (Q, U) off the vertical there."""
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    from skysim.multiple import MultipleScatteringSky
+    from skysim.neutral_points import _off_meridian_pair
+    el, off = _off_meridian_pair(MultipleScatteringSky(tau=0.25), 86.0)
+    assert abs(off) < 1e-3
+    assert el == pytest.approx(neutral_points(86.0, 0.25).babinet_elevation_deg, abs=0.01)
