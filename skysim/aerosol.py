@@ -21,12 +21,16 @@ profile enters as the aerosol fraction of the extinction at each level
 
 Speed
 -----
-The aerosol phase function is forward peaked, so the azimuthal Fourier series of the field
-does not stop at ``m = 2`` as for Rayleigh scattering. The engine is called once per (sun
-elevation; all AODs and albedos of a batch together) on a grid of view zenith angles x
-relative azimuths (:class:`AerosolTable`), and the field is interpolated on that grid
-(cubic in both angles, mirror-symmetric about the solar meridian, continued through the
-zenith). Grid and error: ``docs/physical_sky.md``, tested in ``tests/test_aerosol.py``.
+The aerosol phase function is forward peaked: the singly scattered light falls by orders of
+magnitude over the first degrees from the sun, which no table of a few tens of directions
+follows. It is computed in closed form at every direction (:class:`SingleScatter`: the
+engine's single scatter, line-of-sight weights per view angle times the phase matrix at the
+exact scattering angle). What remains, light scattered at least twice, is smooth (the
+engine's multiple scatter sees the phase function truncated to ``n_streams`` moments); the
+engine is called once per (sun elevation; all AODs and albedos of a batch together) on a
+grid of view zenith angles x relative azimuths, and that remainder is interpolated as
+azimuthal Fourier modes (:class:`AerosolTable`). Grid and error: ``docs/physical_sky.md``,
+tested in ``tests/test_aerosol.py`` and ``tests/test_tabled_skies.py``.
 
 Units: ``I`` (and Q, U) are normalised to an incident solar flux ``pi`` per unit area normal
 to the beam, direct beam excluded, as in :mod:`skysim.multiple`; Stokes basis and AoP as in
@@ -41,6 +45,9 @@ References
    doi:10.1016/j.atmosres.2010.07.011.
 .. [3] B. A. Bodhaine, N. B. Wood, E. G. Dutton, J. R. Slusser, J. Atmos. Oceanic Technol.
    16:1854-1861 (1999), doi:10.1175/1520-0426(1999)016<1854:ORODC>2.0.CO;2.
+.. [4] T. Nakajima, M. Tanaka, "Algorithms for radiative intensity calculations in
+   moderately thick atmospheres using a truncation approximation", J. Quant. Spectrosc.
+   Radiat. Transfer 40:51-69 (1988), doi:10.1016/0022-4073(88)90031-3.
 """
 
 from __future__ import annotations
@@ -54,14 +61,15 @@ from .aerosol_types import (N_MOMENTS, REFERENCE_WAVELENGTH_NM, AerosolType, aer
                             aerosol_type)
 from .exceptions import InvalidParameterError
 from .rt_sasktran import (DEFAULT_SETTINGS, EngineSettings, layered_stokes_cases, lru_take,
-                          rayleigh_depolarization_factor, rayleigh_greek_coefficients)
+                          phase_f11_f12, rayleigh_depolarization_factor,
+                          rayleigh_greek_coefficients)
 from .sky import Sky
 from .validation import check_finite, check_in_range
 
 __all__ = ["AOD_RANGE", "AerosolSky", "AerosolTable", "AerosolType", "N_AZIMUTH", "N_ZENITH",
-           "RAYLEIGH_SCALE_HEIGHT_KM", "aerosol_fraction_levels", "aerosol_stokes_cases",
-           "aerosol_tables_cases", "clear_tables_cache", "prefetch_tables", "table_grid",
-           "zenith_cap_repaired"]
+           "RAYLEIGH_SCALE_HEIGHT_KM", "SingleScatter", "aerosol_fraction_levels",
+           "aerosol_single_scatter_cases", "aerosol_stokes_cases", "aerosol_tables_cases",
+           "clear_tables_cache", "prefetch_tables", "table_grid"]
 
 RAYLEIGH_SCALE_HEIGHT_KM = 8.0
 """Scale height of the molecular extinction [km] (US Standard Atmosphere 1976, lower
@@ -115,6 +123,26 @@ def aerosol_fraction_levels(tau_rayleigh: float, tau_aerosol, scale_height_km: f
     return out
 
 
+def _slab_optics(aods_550, preset, wavelength_nm: float, pressure_hPa: float,
+                 depolarization_ratio: float, settings: EngineSettings, n_moments: int):
+    """The slab of :func:`aerosol_stokes_cases` per case: total optical thickness ``(m,)``,
+    Rayleigh and aerosol scattering per unit extinction at the levels ``(m, n_levels)``
+    (level 0 at the ground), and the Greek coefficients ``(n_moments, 4)`` of the molecules
+    and of the aerosol."""
+    from .molecular import bodhaine_optical_thickness
+    aods = np.atleast_1d(check_in_range("aods_550", aods_550, *AOD_RANGE,
+                                        hint="aerosol optical depth at 550 nm"))
+    t = aerosol_type(preset)
+    tau_r = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa))
+    optics = aerosol_optics(t, wavelength_nm, n_moments)
+    ref = aerosol_optics(t, REFERENCE_WAVELENGTH_NM, n_moments)
+    tau_a = aods * optics.extinction / ref.extinction
+    f = aerosol_fraction_levels(tau_r, tau_a, t.scale_height_km, settings.n_levels)
+    g_r = rayleigh_greek_coefficients(rayleigh_depolarization_factor(depolarization_ratio),
+                                      n_moments)
+    return tau_r + tau_a, 1.0 - f, f * optics.ssa, g_r, optics.greek
+
+
 def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
                          wavelength_nm: float, pressure_hPa: float = 1013.25,
                          depolarization_ratio: float = 0.0,
@@ -153,108 +181,223 @@ def aerosol_stokes_cases(aods_550, albedos, mu0: float, mu, phi_deg, *, preset,
     ndarray (m, n, 3)
         ``I, Q, U`` (skysim basis, incident flux ``pi``, direct beam excluded).
     """
-    from .molecular import bodhaine_optical_thickness
-    aods = np.atleast_1d(check_in_range("aods_550", aods_550, *AOD_RANGE,
-                                        hint="aerosol optical depth at 550 nm"))
-    albedos = np.broadcast_to(check_in_range("albedos", albedos, 0.0, 1.0), aods.shape)
-    t = aerosol_type(preset)
-    tau_r = float(bodhaine_optical_thickness(wavelength_nm, pressure_hPa))
-    optics = aerosol_optics(t, wavelength_nm, n_moments)
-    ref = aerosol_optics(t, REFERENCE_WAVELENGTH_NM, n_moments)
-    tau_a = aods * optics.extinction / ref.extinction
-    f = aerosol_fraction_levels(tau_r, tau_a, t.scale_height_km, settings.n_levels)
-    scat_r, scat_a = 1.0 - f, f * optics.ssa                    # (m, levels)
+    taus, scat_r, scat_a, g_r, g_a = _slab_optics(aods_550, preset, wavelength_nm,
+                                                  pressure_hPa, depolarization_ratio,
+                                                  settings, n_moments)
+    albedos = np.broadcast_to(check_in_range("albedos", albedos, 0.0, 1.0), taus.shape)
     ssa = scat_r + scat_a
-    g_r = rayleigh_greek_coefficients(rayleigh_depolarization_factor(depolarization_ratio),
-                                      n_moments)
-    greek = (scat_r[..., None, None] * g_r + scat_a[..., None, None] * optics.greek) \
+    greek = (scat_r[..., None, None] * g_r + scat_a[..., None, None] * g_a) \
         / ssa[..., None, None]
-    return layered_stokes_cases(tau_r + tau_a, ssa, greek, albedos, mu0, mu, phi_deg,
+    return layered_stokes_cases(taus, ssa, greek, albedos, mu0, mu, phi_deg,
                                 settings=settings, delta_m=True,
                                 multiple_scatter=multiple_scatter)
 
 
 # --------------------------------------------------------------------------------------------
-# Tables: the field on a (view zenith x relative azimuth) grid, cubic B-spline interpolation
+# The single scatter in closed form (the aureole's forward peak, exact at every direction)
 # --------------------------------------------------------------------------------------------
 
-N_ZENITH = 25
-"""View zenith nodes of a table (:func:`skysim.multiple.zenith_nodes_deg`: sine spaced)."""
-N_AZIMUTH = 37
-"""Relative-azimuth nodes of a table, 0-180 deg (5 deg apart)."""
-REFINE = 4
-"""The cubic B-spline of a table is sampled this many times finer per grid step and then
-interpolated bilinearly (differs from the spline by <= 8.5e-4 in I/I beyond 20 deg from the
-sun and <= 6e-4 in DoP everywhere, at 20 000 random directions, suns at 10 and 35 deg;
-docs/physical_sky.md)."""
-_PAD = 3            # ghost nodes on each side of the grid (symmetry or extrapolation)
-_PARITY = np.array([1.0, 1.0, -1.0])  # I, Q even and U odd in the relative azimuth
+class _AerosolPhase:
+    """``F11``, ``F12`` of an aerosol type on a grid of scattering angles
+    :data:`PHASE_STEP_DEG` apart (from its Greek coefficients), interpolated linearly."""
+
+    def __init__(self, greek):
+        self.angle_deg = np.linspace(0.0, 180.0, int(round(180.0 / PHASE_STEP_DEG)) + 1)
+        self.f11, self.f12 = phase_f11_f12(greek, np.cos(np.radians(self.angle_deg)))
+
+    def __call__(self, scattering_deg):
+        x = np.clip(np.asarray(scattering_deg, float) / PHASE_STEP_DEG, 0.0,
+                    self.angle_deg.size - 1.0)
+        i = np.minimum(x.astype(np.intp), self.angle_deg.size - 2)
+        w = x - i
+        return ((1.0 - w) * self.f11[i] + w * self.f11[i + 1],
+                (1.0 - w) * self.f12[i] + w * self.f12[i + 1])
 
 
-class AerosolTable:
-    """Diffuse Stokes field for one (aerosol, AOD, albedo, wavelength, sun) on a grid.
+PHASE_STEP_DEG = 0.01
+"""Scattering-angle step [deg] of the tabulated aerosol phase function (linear interpolation
+between; the 512-moment expansion resolves about 0.35 deg, so the interpolation errs by
+< 1e-4 of F11 in the forward peak of the coarsest preset, desert: tested)."""
 
-    The grid is uniform in the index ``k`` of the sine-spaced zenith nodes
-    ``theta_k = 90 sin(pi k / (2 (n - 1)))`` [deg] and in the relative azimuth
-    ``phi`` in [0, 180] deg, so a cubic B-spline on a uniform grid
-    (:func:`scipy.ndimage.map_coordinates`) interpolates it. The grid is extended before the
-    spline is fitted: past ``phi = 0`` and ``180`` by the mirror symmetry about the solar
-    meridian (I, Q even, U odd), past the zenith by continuing along the great circle
-    (``f(-theta, phi) = s f(theta, 180 - phi)``, ``s = +1`` for I, Q and ``-1`` for U; the
-    meridian basis turns by 180 deg, which leaves Q and U unchanged), and past the horizon
-    by quadratic extrapolation. The spline interpolates ``ln I``, ``Q/I`` and ``U/I`` (same
-    parities), smooth also in the aureole; for speed it is sampled :data:`REFINE` times finer
-    once and evaluated bilinearly on that grid.
+
+@functools.lru_cache(maxsize=32)
+def _aerosol_phase(preset: AerosolType, wavelength_nm: float, n_moments: int) -> _AerosolPhase:
+    return _AerosolPhase(aerosol_optics(preset, wavelength_nm, n_moments).greek)
+
+
+class SingleScatter:
+    """The singly scattered light of one aerosol table (one sun), at any direction.
+
+    ``I = (1/4) sum_x A_x(mu) F11_x(Theta)`` over the molecules and the aerosol (``x``), and
+    the polarized radiance likewise with ``F12`` (> 0: perpendicular to the scattering plane),
+    rotated to the local meridian (:func:`skysim.slab_single_scatter.perpendicular_stokes`).
+    The line-of-sight weights ``A_x`` (:func:`skysim.slab_single_scatter.single_scatter_weights`
+    on the engine's levels, tabulated in view zenith angle :data:`SINGLE_ZENITH_STEP_DEG` apart)
+    depend on the view cosine only; the phase-matrix elements (the Rayleigh ones from their
+    three moments, the aerosol's tabulated :data:`PHASE_STEP_DEG` apart from its Greek
+    moments, :func:`skysim.rt_sasktran.phase_f11_f12`) are taken at the exact scattering
+    angle ``Theta``. As in the engine's exact single scatter with delta-M scaling (the TMS
+    method of Nakajima & Tanaka 1988 [4]_), the beam and the scattered light are attenuated
+    by the extinction less the truncated forward peak (the share ``a1[n_streams] /
+    (2 n_streams + 1)`` of each level's scattering, which the engine counts as going on),
+    while the source keeps the whole phase function: with the true extinction the desert sky
+    comes out 7 % low at 5 deg elevation. The result is the engine's single scatter within
+    2.7e-4 in I and 2.1e-4 in Q/I, U/I (``tests/test_aerosol.py``), the forward peak
+    included, which no table of a few tens of azimuths and zenith nodes follows.
 
     Parameters
     ----------
-    stokes : ndarray (n_zenith, n_azimuth, 3)
-        ``I, Q, U`` at the nodes (skysim basis).
+    sun_zenith_deg : float
+        Solar zenith angle [deg].
+    weights : ndarray (2, n)
+        ``A_Rayleigh``, ``A_aerosol`` at :func:`single_zenith_grid_deg`.
+    greek_rayleigh : ndarray (n_moments, 4)
+    phase : callable
+        Scattering angle [deg] -> aerosol ``(F11, F12)``.
     """
 
-    def __init__(self, stokes: np.ndarray):
-        from scipy import ndimage
-        st = np.asarray(stokes, dtype=float)
-        self.n_zenith, self.n_azimuth = st.shape[:2]
-        self.azimuth_step_deg = 180.0 / (self.n_azimuth - 1)
-        p = _PAD
-        # log I, Q/I, U/I: smooth where I has the aureole's steep peak (a spline of I itself
-        # rings there, down to I ~ 0 a degree from the sun)
-        v = np.stack([np.log(st[..., 0]), st[..., 1] / st[..., 0], st[..., 2] / st[..., 0]])
-        left = _PARITY[:, None, None] * v[:, :, p:0:-1]                   # phi < 0
-        right = _PARITY[:, None, None] * v[:, :, -2:-2 - p:-1]            # phi > 180
-        v = np.concatenate([left, v, right], axis=2)
-        through = _PARITY[:, None, None] * v[:, p:0:-1, ::-1]             # theta < 0
-        last = v[:, -3:]
-        beyond = np.stack([last[:, 2] * (1 + j) * (2 + j) / 2 - last[:, 1] * j * (2 + j)
-                           + last[:, 0] * j * (1 + j) / 2 for j in range(1, p + 1)], axis=1)
-        v = np.concatenate([through, v, beyond], axis=1)
-        self.stokes = st
-        self._coefficients = [ndimage.spline_filter(c, order=3, mode="nearest") for c in v]
+    def __init__(self, sun_zenith_deg: float, weights, greek_rayleigh, phase):
+        self.sun_zenith_deg = float(sun_zenith_deg)
+        self.weights = np.asarray(weights, float)
+        self.greek_rayleigh = np.asarray(greek_rayleigh, float)[:3]
+        self.phase = phase
+
+    def weights_at(self, theta_deg) -> np.ndarray:
+        """``(A_Rayleigh, A_aerosol)`` at view zenith angles [deg], shape ``(2,) + shape``."""
+        x = np.clip(np.asarray(theta_deg, float) / SINGLE_ZENITH_STEP_DEG, 0.0,
+                    self.weights.shape[1] - 1.0)
+        i = np.minimum(x.astype(np.intp), self.weights.shape[1] - 2)
+        w = x - i
+        return (1.0 - w) * self.weights[:, i] + w * self.weights[:, i + 1]
+
+    def stokes(self, theta_deg, phi_deg, sun_zenith_deg=None, weights=None) -> np.ndarray:
+        """``(I, Q, U)`` ``(3,) + shape`` at view zenith ``theta_deg`` and relative azimuth
+        ``phi_deg`` [deg]; ``sun_zenith_deg`` and ``weights`` (default: this table's sun and
+        :meth:`weights_at`) for a sun between tables."""
+        from .rayleigh import meridian_components
+        from .slab_single_scatter import perpendicular_stokes
+        theta, phi = np.broadcast_arrays(np.asarray(theta_deg, float),
+                                         np.asarray(phi_deg, float))
+        sz = self.sun_zenith_deg if sun_zenith_deg is None else sun_zenith_deg
+        sz = np.broadcast_to(np.asarray(sz, float), theta.shape)
+        wts = self.weights_at(theta) if weights is None else weights
+        a, b = meridian_components(90.0 - theta, phi, 90.0 - sz, 0.0)
+        t, s = np.radians(theta), np.radians(sz)
+        cos_g = np.cos(t) * np.cos(s) + np.sin(t) * np.sin(s) * np.cos(np.radians(phi))
+        f11_r, f12_r = phase_f11_f12(self.greek_rayleigh, cos_g)
+        f11_a, f12_a = self.phase(np.degrees(np.arccos(np.clip(cos_g, -1.0, 1.0))))
+        return np.stack(perpendicular_stokes(0.25 * (wts[0] * f11_r + wts[1] * f11_a),
+                                             0.25 * (wts[0] * f12_r + wts[1] * f12_a), a, b))
+
+
+SINGLE_ZENITH_STEP_DEG = 0.05
+"""View-zenith step [deg] of a table's single-scatter weights (smooth in the view angle:
+linear interpolation errs by < 1e-6 of them)."""
+
+
+def single_zenith_grid_deg() -> np.ndarray:
+    """View zenith angles [deg] of the single-scatter weights, 0-90."""
+    return np.linspace(0.0, 90.0, int(round(90.0 / SINGLE_ZENITH_STEP_DEG)) + 1)
+
+
+def aerosol_single_scatter_cases(aods_550, mu0: float, *, preset, wavelength_nm: float,
+                                 pressure_hPa: float = 1013.25,
+                                 depolarization_ratio: float = 0.0,
+                                 settings: EngineSettings = DEFAULT_SETTINGS,
+                                 n_moments: int = N_MOMENTS) -> list:
+    """:class:`SingleScatter` of the slab of :func:`aerosol_stokes_cases` for several AODs
+    at one sun (no engine call; the albedo does not enter the single scatter).
+
+    Parameters are those of :func:`aerosol_stokes_cases`. Returns a list, one per AOD.
+    """
+    from .rt_sasktran import MU_MAX, MU_MIN
+    t = aerosol_type(preset)
+    taus, scat_r, scat_a, g_r, g_a = _slab_optics(aods_550, t, wavelength_nm, pressure_hPa,
+                                                  depolarization_ratio, settings, n_moments)
+    from .slab_single_scatter import single_scatter_weights
+    n = settings.n_streams
+    # the engine's delta-M truncation at each level: the share a1[n] / (2n + 1) of the
+    # level's scattering in the forward peak stays in the attenuated beam
+    truncated = (scat_r * g_r[n, 0] + scat_a * g_a[n, 0]) / (2 * n + 1)
+    altitudes = np.linspace(0.0, settings.slab_height_m, settings.n_levels)
+    k = taus[:, None] / settings.slab_height_m                      # extinction [1/m]
+    mu = np.clip(np.cos(np.radians(single_zenith_grid_deg())), MU_MIN, MU_MAX)
+    phase = _aerosol_phase(t, float(wavelength_nm), int(n_moments))
+    sz = float(np.degrees(np.arccos(mu0)))
+    return [SingleScatter(sz, single_scatter_weights(
+        altitudes, np.column_stack([kc * scat_r[c], kc * scat_a[c]]),
+        kc * (1.0 - truncated[c]), mu, float(mu0)), g_r, phase)
+        for c, kc in enumerate(k[:, 0])]
+
+
+# --------------------------------------------------------------------------------------------
+# Tables: the multiply scattered light as azimuthal Fourier modes, the single scatter exact
+# --------------------------------------------------------------------------------------------
+
+N_ZENITH = 25
+"""Basis of the view zenith nodes of a table (:func:`skysim.multiple.mode_nodes_deg`: 24
+nodes, at the view cosines where the engine's multiple-scatter source is exact)."""
+N_AZIMUTH = 37
+"""Relative-azimuth nodes of a table, 0-180 deg (5 deg apart)."""
+FINE_ZENITH_STEP_DEG = 0.5
+FINE_AZIMUTH_STEP_DEG = 1.25
+"""The multiply scattered light of a table is sampled once on a grid of these steps [deg]
+(view zenith x relative azimuth) and evaluated bilinearly there (within 1e-4 of the modes
+in I/I: ``tests/test_aerosol.py``)."""
+
+
+class AerosolTable:
+    """Diffuse Stokes field for one (aerosol, AOD, albedo, wavelength, sun).
+
+    The singly scattered light (:class:`SingleScatter`) is computed in closed form at every
+    direction; it holds the aerosol's forward peak. The rest, light scattered at least twice
+    (through the engine's phase function truncated to ``n_streams`` moments, so it varies
+    over several degrees even beside the sun), is the engine's total minus that single
+    scatter at the nodes: view zenith angles where the engine's multiple-scatter source is
+    exact (:func:`skysim.multiple.mode_nodes_deg`) x equally spaced relative azimuths
+    0-180 deg. It is expanded in azimuth (cosine series for I, Q, sine series for U:
+    :class:`skysim.clouds.AzimuthModes`) and each mode interpolated in view zenith angle by
+    :class:`skysim.multiple.PoleSpline` (exact in its behaviour through the zenith); for
+    speed it is sampled once on a grid :data:`FINE_ZENITH_STEP_DEG` x
+    :data:`FINE_AZIMUTH_STEP_DEG` and evaluated bilinearly.
+
+    Parameters
+    ----------
+    theta_deg : ndarray (n,)
+        View zenith angles [deg] of the engine rays (the first the zenith's, below 1 deg).
+    phi_deg : ndarray (k,)
+        Relative azimuths [deg], equally spaced from 0 to 180.
+    multiple : ndarray (n, k, 3)
+        ``I, Q, U`` of the multiply scattered light at the nodes (skysim basis).
+    single : SingleScatter
+    """
+
+    def __init__(self, theta_deg, phi_deg, multiple, single: SingleScatter):
+        from .clouds import AzimuthModes
+        self.theta_deg = np.asarray(theta_deg, float)
+        self.phi_deg = np.asarray(phi_deg, float)
+        self.modes = AzimuthModes.from_samples(self.theta_deg, multiple)
+        self.single = single
 
     @functools.cached_property
     def _fine(self) -> np.ndarray:
-        """The spline sampled on a grid :data:`REFINE` times finer in both indices,
-        ``(rows, columns, 3)``: evaluation is then bilinear (4 taps instead of 16)."""
-        from scipy import ndimage
-        k = np.arange((self.n_zenith - 1) * REFINE + 1) / REFINE + _PAD
-        j = np.arange((self.n_azimuth - 1) * REFINE + 1) / REFINE + _PAD
-        K, J = np.meshgrid(k, j, indexing="ij")
-        return np.stack([ndimage.map_coordinates(c, [K, J], order=3, prefilter=False,
-                                                 mode="nearest")
-                         for c in self._coefficients], axis=-1)
+        """The modes sampled on the fine grid, ``(rows, columns, 3)`` float32 (bilinear
+        evaluation: 4 taps)."""
+        th = np.linspace(0.0, 90.0, int(round(90.0 / FINE_ZENITH_STEP_DEG)) + 1)
+        ph = np.linspace(0.0, 180.0, int(round(180.0 / FINE_AZIMUTH_STEP_DEG)) + 1)
+        T, P = np.meshgrid(th, ph, indexing="ij")
+        return np.stack(self.modes.evaluate(T, P), axis=-1).astype(np.float32)
 
-    def evaluate(self, theta_deg, phi_deg):
-        """``(I, Q, U)`` at view zenith angles ``theta_deg`` in [0, 90] and relative azimuths
-        ``phi_deg`` [deg] (any real value; broadcast)."""
+    def multiple_scatter(self, theta_deg, phi_deg) -> np.ndarray:
+        """``(I, Q, U)`` ``(3,) + shape`` of the multiply scattered light at view zenith
+        angles in [0, 90] and relative azimuths (any real value) [deg] (broadcast)."""
         theta, phi = np.broadcast_arrays(np.asarray(theta_deg, float),
                                          np.asarray(phi_deg, float))
         rel = (phi.ravel() + 180.0) % 360.0 - 180.0
         fine = self._fine
         rows, cols = fine.shape[:2]
-        x = (2.0 * (self.n_zenith - 1) * REFINE / np.pi) * np.arcsin(
-            np.clip(theta.ravel() / 90.0, 0.0, 1.0))
-        y = np.abs(rel) * (REFINE / self.azimuth_step_deg)
+        x = np.clip(theta.ravel(), 0.0, 90.0) / FINE_ZENITH_STEP_DEG
+        y = np.abs(rel) / FINE_AZIMUTH_STEP_DEG
         i0 = np.minimum(x.astype(np.intp), rows - 2)
         j0 = np.minimum(y.astype(np.intp), cols - 2)
         fx, fy = (x - i0)[:, None], (y - j0)[:, None]
@@ -262,19 +405,29 @@ class AerosolTable:
         top = i0 * cols + j0
         v = ((1.0 - fx) * ((1.0 - fy) * flat[top] + fy * flat[top + 1])
              + fx * ((1.0 - fy) * flat[top + cols] + fy * flat[top + cols + 1]))
-        i = np.exp(v[:, 0])
-        q, u = i * v[:, 1], i * np.where(rel < 0.0, -v[:, 2], v[:, 2])
-        return tuple(o.reshape(theta.shape) for o in (i, q, u))
+        v[:, 2] = np.where(rel < 0.0, -v[:, 2], v[:, 2])
+        return v.T.reshape((3,) + theta.shape)
+
+    def evaluate(self, theta_deg, phi_deg):
+        """``(I, Q, U)`` at view zenith angles ``theta_deg`` in [0, 90] and relative azimuths
+        ``phi_deg`` [deg] (any real value; broadcast)."""
+        out = self.multiple_scatter(theta_deg, phi_deg) + self.single.stokes(theta_deg,
+                                                                             phi_deg)
+        return out[0], out[1], out[2]
 
 
 def table_grid(n_zenith: int = N_ZENITH, n_azimuth: int = N_AZIMUTH):
-    """View zenith [deg] and relative azimuth [deg] nodes of a table, as ``(n_zenith,
-    n_azimuth)`` arrays."""
-    from .multiple import zenith_nodes_deg
+    """View zenith [deg] and relative azimuth [deg] of a table's engine rays, as
+    ``(n_nodes, n_azimuth)`` arrays: :func:`skysim.multiple.mode_nodes_deg` (the zenith and
+    the horizon at the angles the engine traces, :data:`skysim.rt_sasktran.MU_MAX` and
+    ``MU_MIN``) x ``n_azimuth`` azimuths 0-180 deg."""
+    from .multiple import mode_nodes_deg
+    from .rt_sasktran import MU_MAX, MU_MIN
     if int(n_azimuth) < 5:
         raise InvalidParameterError(f"n_azimuth must be >= 5; got {n_azimuth}. Default: "
                                     f"{N_AZIMUTH}.")
-    return np.meshgrid(zenith_nodes_deg(int(n_zenith)), np.linspace(0.0, 180.0, int(n_azimuth)),
+    mu = np.clip(np.cos(np.radians(mode_nodes_deg(int(n_zenith)))), MU_MIN, MU_MAX)
+    return np.meshgrid(np.degrees(np.arccos(mu)), np.linspace(0.0, 180.0, int(n_azimuth)),
                        indexing="ij")
 
 
@@ -308,76 +461,18 @@ def aerosol_tables_cases(aods_550, albedos, mu0: float, *, preset, wavelength_nm
     keys = [(float(a), float(b)) + shared for a, b in zip(aods, albedos)]
     missing = list(dict.fromkeys(k for k in keys if k not in _TABLES))
     if missing:
-        from .rt_sasktran import SOURCE_GRID_MU_STEP
         theta, phi = table_grid(n_zenith, n_azimuth)
-        cap = 1.0 - SOURCE_GRID_MU_STEP * np.arange(1, 3)
-        mu = np.concatenate([np.cos(np.radians(theta.ravel())), np.repeat(cap, phi.shape[1])])
-        az = np.concatenate([phi.ravel(), np.tile(phi[0], cap.size)])
-        total, single = (aerosol_stokes_cases(
-            [k[0] for k in missing], [k[1] for k in missing], float(mu0), mu, az, preset=t,
-            wavelength_nm=wavelength_nm, pressure_hPa=pressure_hPa,
-            depolarization_ratio=depolarization_ratio, settings=settings,
-            n_moments=n_moments, multiple_scatter=ms) for ms in (True, False))
-        shape = (theta.shape[0] + cap.size,) + theta.shape[1:] + (3,)
-        for key, st, ss in zip(missing, total, single):
-            _TABLES[key] = AerosolTable(zenith_cap_repaired(
-                np.concatenate([theta[:, 0], np.degrees(np.arccos(cap))]), phi[0],
-                st.reshape(shape), ss.reshape(shape))[:theta.shape[0]])
+        kw = dict(preset=t, wavelength_nm=wavelength_nm, pressure_hPa=pressure_hPa,
+                  depolarization_ratio=depolarization_ratio, settings=settings,
+                  n_moments=n_moments)
+        total = aerosol_stokes_cases([k[0] for k in missing], [k[1] for k in missing],
+                                     float(mu0), np.cos(np.radians(theta.ravel())),
+                                     phi.ravel(), **kw)
+        singles = aerosol_single_scatter_cases([k[0] for k in missing], float(mu0), **kw)
+        for key, st, ss in zip(missing, total, singles):
+            multiple = st.reshape(theta.shape + (3,)) - np.moveaxis(ss.stokes(theta, phi), 0, -1)
+            _TABLES[key] = AerosolTable(theta[:, 0], phi[0], multiple, ss)
     return lru_take(_TABLES, keys, TABLES_CACHE_SIZE)
-
-
-def zenith_cap_repaired(theta_deg, phi_deg, total, single) -> np.ndarray:
-    """Engine Stokes on a (view zenith x relative azimuth) grid with the multiply scattered
-    light of the rows near the zenith replaced by its interpolation from the rows where the
-    engine's multiple-scatter source is exact.
-
-    Between the zenith and the view cosine 0.98 (11.5 deg) the engine interpolates its
-    multiple-scatter source linearly in the cosine, which gives its azimuthal modes the wrong
-    shape (:data:`skysim.rt_sasktran.SOURCE_GRID_MU_STEP`); at the zenith and at the cosines
-    0.98, 0.96 it is exact, and the single scatter is exact everywhere (the aerosol's forward
-    peak included). So the multiple scatter (``total - single``) of the rows within 16.8 deg
-    of the zenith (other than the zenith's) is taken from its azimuthal Fourier modes
-    (:class:`skysim.clouds.AzimuthModes`, cosine/sine series over the grid's azimuths)
-    interpolated in zenith angle by :class:`skysim.multiple.PoleSpline` over the zenith row,
-    the rows at the cosines 0.98 and 0.96 and the rows beyond, and the single scatter is added
-    back. Cost: the single-scatter engine call adds about a fifth to a table's (measured 0.9 s
-    against 4.6 s of CPU, 999 rays).
-
-    Parameters
-    ----------
-    theta_deg : ndarray (n,)
-        View zenith angles [deg] of the rows (the first the zenith's, below 1 deg), among
-        them the cosines 0.98 and 0.96 (any order after the first).
-    phi_deg : ndarray (k,)
-        Relative azimuths [deg], equally spaced from 0 to 180.
-    total, single : ndarray (n, k, 3)
-        The engine's ``I, Q, U`` with and without its multiple-scatter source.
-
-    Returns
-    -------
-    ndarray (n, k, 3)
-        ``total`` with the rows within 16.8 deg of the zenith repaired.
-    """
-    from .clouds import AzimuthModes
-    from .rt_sasktran import SOURCE_GRID_MU_STEP
-    th = np.asarray(theta_deg, float)
-    mu = np.cos(np.radians(th))
-    exact = np.isclose(mu, 1.0 - SOURCE_GRID_MU_STEP, atol=1e-9) | np.isclose(
-        mu, 1.0 - 2.0 * SOURCE_GRID_MU_STEP, atol=1e-9)
-    cap_edge = np.degrees(np.arccos(1.0 - 2.0 * SOURCE_GRID_MU_STEP)) + 0.5
-    bad = (th > 1.0) & (th < cap_edge) & ~exact
-    use = np.flatnonzero(~bad)
-    use = use[np.argsort(th[use])]
-    multiple = np.asarray(total, float) - np.asarray(single, float)
-    modes = AzimuthModes.from_samples(th[use], multiple[use])
-    out = np.array(total, dtype=float)
-    rows = np.flatnonzero(bad)
-    if rows.size:
-        fixed = np.stack(modes.evaluate(th[rows][:, None], np.asarray(phi_deg, float)[None, :]),
-                         axis=-1)
-        out[rows] = np.asarray(single, float)[rows] + fixed
-    return out
-
 
 # --------------------------------------------------------------------------------------------
 # The Sky object
@@ -414,7 +509,9 @@ class AerosolSky(Sky):
     sun_node_origin_deg : float
         One of the sun nodes [deg] (default 0).
     n_zenith, n_azimuth : int
-        Table grid (:class:`AerosolTable`); the engine traces ``n_zenith * n_azimuth`` rays.
+        Table grid (:func:`table_grid`: the view zenith nodes of
+        :func:`skysim.multiple.mode_nodes_deg` for ``n_zenith``, 24 for the default 25, times
+        ``n_azimuth`` azimuths 0-180 deg); the engine traces one ray per node.
     settings : EngineSettings
         Numerical set-up of sasktran2.
     n_moments : int
@@ -496,7 +593,8 @@ class AerosolSky(Sky):
     def _stokes(self, vel, vaz, sel, saz):
         theta, phi = 90.0 - vel, vaz - saz
         lo, hi, w = self._sun_interval(sel)
-        out = np.zeros((3,) + vel.shape)
+        multiple = np.zeros((3,) + vel.shape)
+        weights = np.zeros((2,) + vel.shape)
         nodes, inverse = np.unique(np.concatenate([lo.ravel(), hi.ravel()]),
                                    return_inverse=True)
         i_lo, i_hi = inverse[:lo.size].reshape(lo.shape), inverse[lo.size:].reshape(hi.shape)
@@ -504,8 +602,13 @@ class AerosolSky(Sky):
             weight = np.where(i_lo == k, 1.0 - w, 0.0) + np.where(i_hi == k, w, 0.0)
             use = weight > 0.0
             if use.any():
-                st = self.table(node).evaluate(theta[use], phi[use])
-                out[:, use] += weight[use] * np.asarray(st)
+                table = self.table(node)
+                multiple[:, use] += weight[use] * table.multiple_scatter(theta[use], phi[use])
+                weights[:, use] += weight[use] * table.single.weights_at(theta[use])
+        # the single scatter at each sample's own sun: its line-of-sight weights (smooth in
+        # the sun's elevation) interpolated between the sun nodes, the phase function (the
+        # aureole's sharp peak) at the exact scattering angle
+        out = multiple + table.single.stokes(theta, phi, 90.0 - sel, weights)
         return out[0], out[1], out[2]
 
     def flux_pi_scale(self, view_elevation_deg, sun_elevation_deg) -> np.ndarray:

@@ -16,22 +16,28 @@ to the scattering plane, "negative" polarization). The neutral points are the ze
 :mod:`skysim.multiple` (``Q(theta, 0) = Q_0 + Q_1 + Q_2`` towards the sun,
 ``Q(theta, 180) = Q_0 - Q_1 + Q_2`` away from it).
 
-**High sun.** Babinet and Brewster then lie a few degrees from the sun, near the zenith,
-where the spline's nodes are ~6 deg apart; and Babinet passes the zenith once it is closer
-to it than the sun is. For suns above :data:`DENSE_SCAN_ELEVATION_DEG` (or when the spline
-finds no point beside the sun) the two are found on a dense engine scan of ``Q`` along the
-solar vertical (:data:`DENSE_SCAN_STEP_DEG` steps, across the zenith; ``Q`` is continuous
-there since the meridian basis turns by 180 deg), refined by Brent's method on a cubic
-spline of the scan. A Babinet point past the zenith is reported with an elevation above
-90 deg (measured along the solar vertical through the zenith: ``180 - e`` above the
-anti-solar horizon).
+**High sun.** Babinet and Brewster then lie a few degrees from the sun, near the zenith;
+and Babinet passes the zenith once it is closer to it than the sun is. For suns above
+:data:`DENSE_SCAN_ELEVATION_DEG` (or when the scan of the half meridians finds no point
+beside the sun) the two are found on a dense scan of ``Q`` along the whole solar vertical
+(:data:`DENSE_SCAN_STEP_DEG` steps, across the zenith; ``Q`` is continuous there since the
+meridian basis turns by 180 deg), refined by Brent's method, on the same mode spline: the
+engine's own rays within 11.5 deg of the zenith are wrong (its multiple-scatter source is
+interpolated linearly in the view cosine there,
+:data:`skysim.rt_sasktran.SOURCE_GRID_MU_STEP`), the spline is not
+(:func:`skysim.multiple.mode_nodes_deg`). A Babinet point past the zenith is reported with
+an elevation above 90 deg (measured along the solar vertical through the zenith:
+``180 - e`` above the anti-solar horizon).
 
-Higher still, the two approach each other on the vertical, meet, and leave it as a mirror
-pair on either side (both index +1/2, so the total index +1 about the sun is kept; Berry et
-al. [2]_ describe such off-meridian pairs): ``Q`` then keeps its sign along the whole
-vertical. The pair is found as the zero of ``(Q, U)`` on a dense engine grid beside the sun
-(view zenith x relative azimuth, :func:`_off_meridian_pair`), refined on a bicubic spline of
-the grid; it is reported with both elevations equal and the relative azimuth
+As the sun nears the zenith the two close in on it along the vertical (with the sun at the
+zenith the sky is symmetric about it and they merge into it): tau 0.25, sun at 80, 86 and
+89 deg: Babinet 2.9, 1.2 and 0.3 deg from the sun, Brewster 3.5, 1.4 and 0.3 deg. (The
+engine's own rays, wrong within 11.5 deg of the zenith, make ``Q`` keep its sign along the
+vertical above a sun at about 81.5 deg, as if the pair had left it.) Should the scan find
+neither point, the pair is looked for off the vertical, as a mirror pair on either side
+(both index +1/2, so the total index +1 about the sun is kept; Berry et al. [2]_ describe
+such off-meridian pairs): the zero of ``(Q, U)`` of the mode spline beside the sun
+(:func:`_off_meridian_pair`), reported with both elevations equal and the relative azimuth
 ``near_sun_azimuth_offset_deg`` (the pair at +-offset from the sun's azimuth).
 
 References
@@ -156,25 +162,23 @@ def _zeros_on_half_meridian(modes, sign: float, step_deg: float = 0.05) -> np.nd
 
 
 def _dense_near_sun(sky, sun_elevation_deg: float) -> tuple[float, float]:
-    """Babinet and Brewster elevations [deg] from a dense engine scan of Q along the solar
-    vertical (module docstring, "High sun")."""
-    from scipy.interpolate import CubicSpline
+    """Babinet and Brewster elevations [deg] from a dense scan of Q along the solar vertical
+    on the sky's Fourier-mode spline (module docstring, "High sun")."""
     from scipy.optimize import brentq
-
-    from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes
+    modes = sky.modes(sun_elevation_deg)
     theta_sun = 90.0 - float(sun_elevation_deg)
-    # signed zenith angle x along the vertical: x > 0 towards the sun, x < 0 beyond the zenith
+
+    def q(x):
+        # signed zenith angle x along the vertical: x > 0 towards the sun, x < 0 beyond the
+        # zenith (the relative azimuth 180 deg)
+        x = np.atleast_1d(np.asarray(x, float))
+        return modes.evaluate(np.abs(x), np.where(x >= 0.0, 0.0, 180.0))[1]
+
     x = np.arange(theta_sun - 30.0, min(theta_sun + 30.0, 90.0) + 1e-9, DENSE_SCAN_STEP_DEG)
-    mu = np.clip(np.cos(np.radians(np.abs(x))), MU_MIN, MU_MAX)
-    x = np.sign(x) * np.degrees(np.arccos(mu))          # the angles the engine traces
-    phi = np.where(x >= 0.0, 0.0, 180.0)
-    _, Q, _ = transmitted_stokes(sky.tau, sky.albedo, float(np.sin(np.radians(sun_elevation_deg))),
-                                 mu, phi, depolarization_ratio=sky.depolarization_ratio,
-                                 settings=sky.settings)
-    x, keep = np.unique(x, return_index=True)
-    q = CubicSpline(x, Q[keep])
-    idx = np.flatnonzero(np.sign(Q[keep][:-1]) * np.sign(Q[keep][1:]) < 0)
-    roots = np.array([brentq(q, x[i], x[i + 1], xtol=1e-6) for i in idx])
+    values = q(x)
+    idx = np.flatnonzero(np.sign(values[:-1]) * np.sign(values[1:]) < 0)
+    roots = np.array([brentq(lambda t: float(q(t)[0]), x[i], x[i + 1], xtol=1e-6)
+                      for i in idx])
     above, below = roots[roots < theta_sun], roots[roots > theta_sun]
     babinet = 90.0 - float(above.max()) if above.size else np.nan
     brewster = 90.0 - float(below.min()) if below.size else np.nan
@@ -184,30 +188,24 @@ def _dense_near_sun(sky, sun_elevation_deg: float) -> tuple[float, float]:
 def _off_meridian_pair(sky, sun_elevation_deg: float, half_width_deg: float = 4.0,
                        step_deg: float = 0.25, azimuth_step_deg: float = 5.0):
     """``(elevation, relative azimuth)`` [deg] of the near-sun pair off the solar vertical, or
-    ``(nan, nan)``: zero of ``(Q, U)`` on an engine grid of view zenith angles within
-    ``half_width_deg`` of the sun times relative azimuths 0-180 deg (one half: the pair is
-    mirror symmetric), refined on bicubic splines of ``Q/I`` and ``U/I`` from the grid's DoLP
-    minimum off the vertical."""
-    from scipy.interpolate import RectBivariateSpline
+    ``(nan, nan)``: zero of ``(Q, U)`` of the sky's Fourier-mode spline, started from the
+    DoLP minimum off the vertical on a grid of view zenith angles within ``half_width_deg``
+    of the sun times relative azimuths 0-180 deg (one half: the pair is mirror symmetric)."""
     from scipy.optimize import minimize
-
-    from .rt_sasktran import MU_MAX, MU_MIN, transmitted_stokes
+    modes = sky.modes(sun_elevation_deg)
     theta_sun = 90.0 - float(sun_elevation_deg)
     th = np.arange(max(theta_sun - half_width_deg, step_deg), theta_sun + half_width_deg + 1e-9,
                    step_deg)
     ph = np.arange(0.0, 180.0 + 1e-9, azimuth_step_deg)
     T, P = np.meshgrid(th, ph, indexing="ij")
-    mu = np.clip(np.cos(np.radians(T)), MU_MIN, MU_MAX)
-    I, Q, U = transmitted_stokes(sky.tau, sky.albedo, float(np.sin(np.radians(sun_elevation_deg))),
-                                 mu, P, depolarization_ratio=sky.depolarization_ratio,
-                                 settings=sky.settings)
-    q, u = RectBivariateSpline(th, ph, Q / I), RectBivariateSpline(th, ph, U / I)
+    I, Q, U = modes.evaluate(T, P)
     dop = np.hypot(Q, U) / I
     inner = (P > 0.0) & (P < 180.0) & (T > th[0]) & (T < th[-1])
     k = np.unravel_index(np.argmin(np.where(inner, dop, np.inf)), dop.shape)
 
     def f(v):
-        return float(q(v[0], v[1])[0, 0] ** 2 + u(v[0], v[1])[0, 0] ** 2)
+        i, q, u = modes.evaluate(v[0], v[1])
+        return float((q ** 2 + u ** 2) / i ** 2)
 
     res = minimize(f, [T[k], P[k]], method="Nelder-Mead",
                    options={"xatol": 1e-5, "fatol": 1e-16, "maxiter": 2000})
@@ -240,8 +238,6 @@ def neutral_points(sun_elevation_deg: float, tau: float, albedo: float = 0.0,
     ----------
     sun_elevation_deg : float
         Sun elevation [deg] in (0, 89.5] (at the zenith the solar meridian is undefined).
-        Above :data:`DENSE_SCAN_ELEVATION_DEG` one more engine call (the dense scan), and one
-        more (~1000 rays) when Babinet and Brewster have left the solar vertical.
     tau, albedo : float
         Rayleigh optical thickness and Lambertian ground albedo.
     **sky_kwargs

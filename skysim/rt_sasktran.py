@@ -76,6 +76,7 @@ __all__ = [
     "particle_layer_profile",
     "layered_stokes_cases",
     "lru_take",
+    "phase_f11_f12",
     "rayleigh_greek_coefficients",
     "tau_check",
     "rayleigh_depolarization_factor",
@@ -104,7 +105,7 @@ Measured from the engine's own rays (the kinks of ``I_1 / sin(theta)`` at mu = 0
 0.96, whatever the number of streams); the tables of :mod:`skysim.multiple`,
 :mod:`skysim.clouds` and :mod:`skysim.aerosol` sample the engine near the zenith only at
 these cosines (:func:`skysim.multiple.mode_nodes_deg`,
-:func:`skysim.aerosol.zenith_cap_repaired`)."""
+:func:`skysim.aerosol.table_grid`)."""
 
 
 TABLE_TAU_RANGE = (1.0e-3, 1.0)
@@ -385,6 +386,50 @@ def rayleigh_greek_coefficients(delta: float, n_moments: int) -> np.ndarray:
     g[2, 1] = 3.0 * delta
     g[2, 3] = np.sqrt(6.0) * delta / 2.0
     return g
+
+
+def phase_f11_f12(greek, cos_scattering) -> tuple[np.ndarray, np.ndarray]:
+    """Phase-matrix elements ``F11`` and ``F12`` from Greek coefficients, at scattering-angle
+    cosines.
+
+    ``F11 = sum_l alpha1_l P_l(x)`` and ``F12 = sum_l beta1_l P^l_02(x)`` (Hovenier & van
+    der Mee 1983 [4]_; de Rooij & van der Stap 1984, A&A 131:237), ``P_l`` the Legendre
+    polynomials and ``P^l_02`` the generalised spherical functions, by their three-term
+    recurrences: ``(l + 1) P_{l+1} = (2l + 1) x P_l - l P_{l-1}`` and
+    ``sqrt((l+1)^2 - 4) P^{l+1}_02 = (2l + 1) x P^l_02 - sqrt(l^2 - 4) P^{l-1}_02`` from
+    ``P^2_02 = (sqrt(6) / 4)(1 - x^2)``. In the engine's convention (``alpha1_0 = 1``:
+    ``F11`` averages to 1 over the sphere) ``F12 > 0`` is light polarized perpendicular to
+    the scattering plane (Rayleigh: ``F12 = (3/4) Delta sin^2``,
+    :func:`rayleigh_greek_coefficients`).
+
+    Parameters
+    ----------
+    greek : array-like (n_moments, 4)
+        ``alpha1, alpha2, alpha3, beta1`` (only ``alpha1`` and ``beta1`` enter).
+    cos_scattering : array-like
+        Cosines of the scattering angle, in [-1, 1].
+
+    Returns
+    -------
+    F11, F12 : ndarray, the shape of ``cos_scattering``.
+    """
+    g = np.asarray(greek, float)
+    x = np.clip(np.asarray(cos_scattering, float), -1.0, 1.0)
+    a1, b1 = g[:, 0], g[:, 3]
+    p_prev, p = np.ones_like(x), x.copy()
+    f11 = a1[0] * p_prev + (a1[1] * p if a1.size > 1 else 0.0)
+    for l in range(1, a1.size - 1):
+        p_prev, p = p, ((2 * l + 1) * x * p - l * p_prev) / (l + 1)
+        f11 += a1[l + 1] * p
+    f12 = np.zeros_like(x)
+    if b1.size > 2:
+        q_prev, q = np.zeros_like(x), (np.sqrt(6.0) / 4.0) * (1.0 - x * x)
+        f12 += b1[2] * q
+        for l in range(2, b1.size - 1):
+            q_prev, q = q, (((2 * l + 1) * x * q - np.sqrt(l * l - 4.0) * q_prev)
+                            / np.sqrt((l + 1.0) ** 2 - 4.0))
+            f12 += b1[l + 1] * q
+    return f11, f12
 
 
 def layered_stokes_cases(taus, ssa, greek, albedos, mu0: float, mu, phi_deg, *,
