@@ -589,7 +589,8 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
                                   layer: ParticleLayer, mu0: float, mu, phi_deg, *,
                                   depolarization_ratio: float = 0.0,
                                   settings: EngineSettings = DEFAULT_SETTINGS,
-                                  multiple_scatter: bool = True) -> np.ndarray:
+                                  multiple_scatter: bool = True,
+                                  successive_orders: bool = False) -> np.ndarray:
     """Diffuse Stokes below a Rayleigh slab holding a particle layer, one engine call for
     several particle optical thicknesses (each case one "wavelength" of the engine).
 
@@ -618,6 +619,10 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     multiple_scatter : bool
         False: the engine's single scatter alone (its exact single-scatter source with the
         whole phase expansion; no multiple-scatter source).
+    successive_orders : bool
+        True: the multiple scatter from the engine's successive orders of scattering instead
+        of its discrete ordinates (an independent solver of the same atmosphere, for checks;
+        some ten times slower).
 
     Returns
     -------
@@ -638,6 +643,9 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     cfg, geometry, viewing = _engine_setup(sk, settings, mu0, mu, phi, altitudes)
     if not multiple_scatter:
         cfg.multiple_scatter_source = sk.MultipleScatterSource.NoSource
+    elif successive_orders:
+        cfg.multiple_scatter_source = sk.MultipleScatterSource.SuccessiveOrders
+        cfg.init_successive_orders_with_discrete_ordinates = False
     cfg.delta_m_scaling = True
     cfg.num_singlescatter_moments = n_moments
     atmosphere = sk.Atmosphere(geometry, cfg, numwavel=ptau.size, calculate_derivatives=False)
