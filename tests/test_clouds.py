@@ -158,26 +158,28 @@ def test_thick_cloud_follows_the_asymptotic_theory(optics, thick_layers):
 def test_overcast_agrees_with_the_successive_orders_solver():
     # The engine's discrete ordinates (16 streams; 32 and 64 streams change I by 0.3 % and
     # the DoP by 2e-3 here) against its successive orders of scattering, a different solver
-    # of the same atmosphere (cloud tau 1, 2, 5 in a Rayleigh slab of tau 0.1, sun at mu0
-    # 0.7, views 60-150 deg from the sun; about 30-60 s): radiance within 10 % at every
-    # thickness (measured ratio 0.92-1.03) and, under tau 5, DoP within 0.02 (measured
-    # 9e-3). Under tau 1-2 the successive orders' DoP is up to 0.028 and 0.042 lower where
-    # the transmitted sky is 0.23 and 0.44 polarized (10 % relative), and closer to the sun
-    # (20-40 deg) their radiance is up to 17 % lower at tau 5: their 110-direction
-    # quadrature does not resolve the truncated forward peak
+    # of the same atmosphere (cloud tau 1-20 in a Rayleigh slab of tau 0.1, sun at mu0 0.7,
+    # views 60-150 deg from the sun; about 40-80 s). Radiance within 10 % at tau 1-10
+    # (measured ratio 0.92-1.09); at tau 20 the successive orders give 8-15 % less, while the
+    # discrete ordinates follow the asymptotic theory within 2.1 % and the delta-Eddington
+    # flux within 1.1 % (test_thick_cloud_follows_the_asymptotic_theory): not asserted. DoP
+    # within 0.02 at tau 5-20 (measured 9e-3, 0.011, 0.018). Under tau 1-2 the successive
+    # orders' DoP is up to 0.028 and 0.042 lower where the transmitted sky is 0.23 and 0.44
+    # polarized (10 % relative), and closer to the sun (20-40 deg) their radiance is up to
+    # 17 % lower at tau 5: their 110-direction quadrature does not resolve the truncated
+    # forward peak
     from skysim.rt_sasktran import EngineSettings
     mu = np.array([0.9, 0.7, 0.5, 0.3, 0.7])
     phi = np.array([90.0, 90.0, 180.0, 180.0, 180.0])
     layer = CloudLayer(1.0).particle_layer()
+    taus = [1.0, 2.0, 5.0, 10.0, 20.0]
     kw = dict(settings=EngineSettings(n_streams=16))
-    do = layered_particle_stokes_cases(0.1, 0.0, [1.0, 2.0, 5.0], layer, 0.7, mu, phi, **kw)
-    so = layered_particle_stokes_cases(0.1, 0.0, [1.0, 2.0, 5.0], layer, 0.7, mu, phi,
+    do = layered_particle_stokes_cases(0.1, 0.0, taus, layer, 0.7, mu, phi, **kw)
+    so = layered_particle_stokes_cases(0.1, 0.0, taus, layer, 0.7, mu, phi,
                                        successive_orders=True, **kw)
-    print("I ratio", np.round(do[..., 0] / so[..., 0], 3))
-    np.testing.assert_allclose(do[..., 0], so[..., 0], rtol=0.10)
+    np.testing.assert_allclose(do[:4, :, 0], so[:4, :, 0], rtol=0.10)
     dop = [np.hypot(s[..., 1], s[..., 2]) / s[..., 0] for s in (do, so)]
-    print("DoP diff", np.round(dop[0] - dop[1], 4))
-    np.testing.assert_allclose(dop[0][2], dop[1][2], atol=0.02)
+    np.testing.assert_allclose(dop[0][2:], dop[1][2:], atol=0.02)
 
 
 def test_zero_cloud_is_the_clear_multiple_scattering_sky():
