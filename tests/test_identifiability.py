@@ -1,0 +1,105 @@
+"""Identifiability matrix of the gap diagnosis (calibration/diagnosis/identifiability.py).
+
+Goals, per instrument, over every default candidate simulated at two strengths and over clean
+data: each effect named or in the named group in >= 90 % of its cases; clean data ``none`` in
+all; with the true effect withheld, never a single (wrong) effect; the RMS of the parameter
+z-scores ``(fitted - true) / SE`` within 0.7-1.5 per candidate that reports standard errors
+(an RMS of 1 is a calibrated SE; 0.7-1.5 is what 6-30 z-scores of a calibrated SE reach
+with high probability: the RMS of n standard normals has a relative spread ~ 1/sqrt(2 n),
+0.29 at n = 6, and the cases share one session geometry).
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pandas as pd
+import pytest
+
+from calibration.diagnosis.identifiability import (
+    IdentifiabilityInputError,
+    matrix_markdown,
+    matrix_spec,
+    run_matrix,
+    score_matrix,
+)
+
+FOUND_MIN = 0.9
+Z_RMS_RANGE = (0.7, 1.5)
+
+
+def _goals(score: dict) -> list[str]:
+    """The goals a matrix misses (empty when it meets them all)."""
+    missed = []
+    if not score["found_rate"] >= FOUND_MIN:
+        missed.append(f"named or in group {score['found_rate']:.2f} "
+                      f"({score['found_rate_by_effect']})")
+    if score["clean_none_rate"] != 1.0:
+        missed.append(f"clean none {score['clean_none_rate']:.2f}")
+    if score["withheld_ok_rate"] != 1.0:
+        missed.append(f"withheld never a single effect {score['withheld_ok_rate']:.2f}")
+    missed += [f"z RMS {e} {r:.2f}" for e, r in score["z_rms"].items()
+               if not Z_RMS_RANGE[0] <= r <= Z_RMS_RANGE[1]]
+    return missed
+
+
+def test_score_counts_groups_clean_and_withheld_verdicts():
+    """The scoring on a hand-made table: a group holding the truth counts as found, a group
+    without it does not; a withheld verdict naming an effect fails; z RMS per effect."""
+    rows = pd.DataFrame([
+        dict(truth="none", strength="-", seed=1, verdict="none", group=[], gap_ratio=1.0,
+             found=True, withheld_verdict=None, withheld_group=[], withheld_ok=True, z={},
+             seconds=1.0, withheld_seconds=0.0),
+        dict(truth="tilt", strength="strong", seed=1, verdict="group", group=["tilt", "fov"],
+             gap_ratio=5.0, found=True, withheld_verdict="fov", withheld_group=[],
+             withheld_ok=False, z={"a": 1.0, "b": -3.0}, seconds=1.0, withheld_seconds=1.0),
+        dict(truth="fov", strength="strong", seed=1, verdict="group", group=["tilt", "x"],
+             gap_ratio=5.0, found=False, withheld_verdict="group", withheld_group=["tilt"],
+             withheld_ok=True, z={}, seconds=1.0, withheld_seconds=1.0)])
+    s = score_matrix(rows)
+    assert s["found_rate"] == 0.5 and s["clean_none_rate"] == 1.0
+    assert s["withheld_ok_rate"] == 0.5
+    assert s["z_rms"] == {"tilt": pytest.approx(np.sqrt(5.0))}
+    assert s["seconds"]["total"] == 5.0 and s["seconds"]["per_diagnosis"] == 1.0
+    assert "| tilt | strong | 5 | group(tilt+fov) | 1/1 | fov |" in matrix_markdown(s, "x")
+
+
+def test_unknown_instrument_and_empty_seeds_refused():
+    with pytest.raises(IdentifiabilityInputError, match="'dome'"):
+        matrix_spec("dome")
+    with pytest.raises(IdentifiabilityInputError, match="seeds"):
+        run_matrix(matrix_spec("three-pair"), seeds=())
+
+
+def test_three_pair_geometric_effects_named_and_clean_is_none():
+    """A cheap slice of the three-pair matrix (one seed, the effects that move the sun or
+    the heading): each named or in the group, clean data none, withheld never a wrong single
+    effect. Two z-scores per parameter cannot test an RMS; each must be within 3 (a
+    calibrated SE exceeds it with probability 0.3 %)."""
+    spec = matrix_spec("three-pair")
+    spec = replace(spec, strengths={e: spec.strengths[e] for e in ("sun_motion", "tilt")})
+    rows = run_matrix(spec, seeds=(11,))
+    s = score_matrix(rows)
+    assert [g for g in _goals(s) if not g.startswith("z RMS")] == []
+    z = [v for d in rows.z for v in d.values()]
+    assert len(z) == 6 and np.all(np.abs(z) < 3.0), z
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "measured on seeds 11-13: named or in group 72 % (dark_current 0/6 and multiple_scattering "
+    "0/6 'unexplained' though each removes 97-100 +- 1 % of the excess: the judge's "
+    "base-difference jackknife over 6 sweeps is wide when the effect's size varies by sweep; "
+    "extinction_ratio strong 0/3: a common eps is d_max, the lowest eps lands on its bound); "
+    "with clock_offset 600 s withheld, multiple_scattering is named once (tau 0.59)"))
+def test_three_pair_matrix_meets_the_goals():
+    s = score_matrix(run_matrix(matrix_spec("three-pair")))
+    assert _goals(s) == []
+
+
+@pytest.mark.slow
+def test_sky_field_matrix_meets_the_goals():
+    pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
+    s = score_matrix(run_matrix(matrix_spec("sky")))
+    assert _goals(s) == []
