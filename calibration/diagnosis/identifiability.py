@@ -307,7 +307,108 @@ def _sky() -> InstrumentMatrix:
                              "settings": settings, "n_grid": 5}, seeds=(21, 22))
 
 
-_BUILDERS = {"three-pair": _three_pair, "sky": _sky}
+CAMERA_SIZE = 128
+"""Frame side [px] of the simulated camera (a 64 x 64 super-pixel fisheye sky)."""
+CAMERA_DMAX = 0.7
+CAMERA_SITE = {"latitude_deg": 34.25, "longitude_deg": 108.9, "altitude_m": 400.0}
+CAMERA_TIME = "2024-05-22T02:30:00+00:00"
+"""UTC time of the simulated frames (the sun 58 deg high at the camera site)."""
+
+
+def camera_frame(seed: int, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None,
+                 extinction_ratio=np.inf, sky=None, yaw_deg: float = 30.0):
+    """A raw frame of the camera simulator (:class:`sensor.camera.PolarizationCamera`) with
+    the given injected errors, and the sidecar of the *nominal* camera, as a user's would be.
+
+    Parameters
+    ----------
+    seed : int
+        Shot-noise seed.
+    lens_shift : (dcx [px], dcy [px], focal scale)
+        The true lens against the nominal one.
+    angle_offsets : 4 values [deg], optional
+        Angle errors of the 2 x 2 polarizer layout, row by row.
+    extinction_ratio : float
+        Of every polarizer (inf: ideal).
+    sky : Sky, optional
+        Default: the Rayleigh sky of :data:`CAMERA_DMAX`.
+    yaw_deg : float
+    """
+    import datetime as dt
+
+    from sensor.camera import MosaicSensor, PolarizationCamera, camera_attitude
+    from sensor.camera.lens import FisheyeLens
+    from skysim.sky import make_sky
+    from skysim.sun import sun_position
+
+    from .camera import CameraFrame
+    n = CAMERA_SIZE
+    time = dt.datetime.fromisoformat(CAMERA_TIME)
+    nominal = PolarizationCamera.fisheye(n, n)
+    lens = FisheyeLens(nominal.lens.focal_px * lens_shift[2], nominal.lens.cx + lens_shift[0],
+                       nominal.lens.cy + lens_shift[1], nominal.lens.fov_deg)
+    kw = {"extinction_ratio": extinction_ratio}
+    if angle_offsets is not None:
+        kw["angle_error_deg"] = np.tile(np.reshape(angle_offsets, (2, 2)), (n // 2, n // 2))
+    true = PolarizationCamera(lens, MosaicSensor(n, n, **kw))
+    sun = sun_position([time], CAMERA_SITE["latitude_deg"], CAMERA_SITE["longitude_deg"],
+                       CAMERA_SITE["altitude_m"]).iloc[0]
+    sky = sky or make_sky("rayleigh", dmax=CAMERA_DMAX)
+    scene = true.scene(sky, camera_attitude(yaw_deg), float(sun["elevation_deg"]),
+                       float(sun["azimuth_deg"]))
+    exposure = true.auto_exposure_s(scene)
+    raw = true.capture(scene, exposure, np.random.default_rng(seed))
+    doc = {"schema": "skysim.dofp/1", "site": CAMERA_SITE, "time": time.isoformat(),
+           "attitude": {"yaw_deg": yaw_deg, "pitch_deg": 0.0, "roll_deg": 0.0,
+                        "yaw_known": True},
+           **nominal.describe(), "exposure": {"exposure_s": exposure},
+           "generator": {"sky": sky.describe(), "seed": seed}}
+    return CameraFrame(raw, doc, name=f"seed {seed}")
+
+
+def _camera() -> InstrumentMatrix:
+    from skysim.cloud_field import CloudField
+    from skysim.partly_cloudy import PartlyCloudySky
+    from skysim.sky import make_sky
+
+    from .camera import DEFAULT_CAMERA_CANDIDATES
+    offsets = ("offset_a00_deg", "offset_a01_deg", "offset_a10_deg", "offset_a11_deg")
+
+    def simulate(effect, truth, seed):
+        if effect is None:
+            return camera_frame(seed)
+        if effect == "lens":
+            return camera_frame(seed, lens_shift=(truth["dcx_px"], truth["dcy_px"],
+                                                  truth["focal_scale"]))
+        if effect == "polarizer_angles":
+            return camera_frame(seed, angle_offsets=[truth[k] for k in offsets])
+        if effect == "extinction_ratio":
+            return camera_frame(seed, extinction_ratio=1.0 / truth["inverse_extinction_ratio"])
+        if effect == "sky_dop":
+            return camera_frame(seed, sky=make_sky("berry", delta_deg=truth["delta_deg"],
+                                                   dmax=truth["d_max"]))
+        return camera_frame(seed, sky=PartlyCloudySky(
+            make_sky("rayleigh", dmax=truth["d_max"]),
+            CloudField(cover=1.0, tau=truth["cloud_tau"], thickness="uniform")))
+
+    d = CAMERA_DMAX
+    strengths = {
+        "lens": {"moderate": {"dcx_px": 1.5, "dcy_px": -1.0, "focal_scale": 1.0},
+                 "strong": {"dcx_px": 3.0, "dcy_px": -2.0, "focal_scale": 1.04}},
+        "polarizer_angles": {"moderate": dict(zip(offsets, (1.0, -0.8, 0.0, 0.5))),
+                             "strong": dict(zip(offsets, (2.0, -1.5, 0.0, 1.0)))},
+        "extinction_ratio": {"moderate": {"inverse_extinction_ratio": 1 / 50.0},
+                             "strong": {"inverse_extinction_ratio": 1 / 20.0}},
+        "sky_dop": {"moderate": {"delta_deg": 25.0, "d_max": d},
+                    "strong": {"delta_deg": 40.0, "d_max": d}},
+        "overcast": {"moderate": {"cloud_tau": 0.5, "d_max": d},
+                     "strong": {"cloud_tau": 2.0, "d_max": d}}}
+    return InstrumentMatrix("camera", tuple(DEFAULT_CAMERA_CANDIDATES),
+                            {e: strengths[e] for e in DEFAULT_CAMERA_CANDIDATES}, simulate,
+                            seeds=(50, 51))
+
+
+_BUILDERS = {"three-pair": _three_pair, "sky": _sky, "camera": _camera}
 
 
 def matrix_spec(instrument: str) -> InstrumentMatrix:
