@@ -408,7 +408,199 @@ def _camera() -> InstrumentMatrix:
                             seeds=(50, 51))
 
 
-_BUILDERS = {"three-pair": _three_pair, "sky": _sky, "camera": _camera}
+RING_SITE = (39.258648, 8.440184, 0.0)
+"""Latitude, longitude [deg] and altitude [m] of the simulated ring sessions (a Sardinian
+field site)."""
+RING_START = "2022-05-12T16:01:00+02:00"
+"""Start of the simulated ring sessions (afternoon sun, about 40 deg high)."""
+RING_DMAX = 0.6
+RING_CAP = (4, 8)
+"""Equal-area rings x directions per ring over which a unit's cone of view is averaged in
+the simulated field-of-view sessions (the candidate's fit uses six directions at the cone's
+RMS radius: the generator is not the fitter's quadrature)."""
+
+
+class _RingSky:
+    """A sky whose light the generator changes in a known way, wrapping ``base``:
+    ``occlusion`` (a sector of world azimuth where the polarized part falls by ``k`` and the
+    radiance by ``k / 2``, with logistic edges) or ``aureole`` (unpolarized light
+    ``A exp(-psi / psi_0)`` times the sky's radiance added at angular distance ``psi`` from
+    the sun)."""
+
+    def __new__(cls, base, kind: str, truth: dict):
+        from skysim.sky import Sky
+
+        class _Wrapped(Sky):
+            name = f"{base.name}+{kind}"
+
+            def _stokes(self, vel, vaz, sel, saz):
+                I, Q, U = base._stokes(vel, vaz, sel, saz)
+                if kind == "occlusion":
+                    d = np.abs((np.asarray(vaz) - truth["center_deg"] + 180.0) % 360.0 - 180.0)
+                    w = 1.0 / (1.0 + np.exp((d - 0.5 * truth["width_deg"])
+                                            / truth["edge_deg"]))
+                    k = truth["depolarization"] * w
+                    return I * (1.0 - 0.5 * k), Q * (1.0 - k) * (1.0 - 0.5 * k), \
+                        U * (1.0 - k) * (1.0 - 0.5 * k)
+                from skysim.geometry import direction_vector
+                cos_psi = np.sum(direction_vector(vel, vaz) * direction_vector(sel, saz),
+                                 axis=-1)
+                psi = np.degrees(np.arccos(np.clip(cos_psi, -1.0, 1.0)))
+                return I * (1.0 + truth["amplitude"] * np.exp(-psi / truth["scale_deg"])), Q, U
+
+            def describe(self):
+                return {"model": self.name, **truth}
+        return _Wrapped()
+
+
+def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
+                 per_sweep: int = 60, start: str = RING_START):
+    """A simulated relative-yaw, counter-clockwise ring session (eight units at 45 deg
+    elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
+
+    The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
+    with the effect made physically: a multiple-scattering or neutral-point sky, a cone of
+    view averaged over :data:`RING_CAP` directions, an occluded sector or a solar aureole
+    in the sky, sunlight scattered inside the instrument added to the readings, a tilted
+    platform, a clock or gyro error in the recorded times or yaw.
+
+    Parameters
+    ----------
+    effect : str, optional
+        A ring candidate's name, or None for clean data.
+    truth : dict
+        The effect's parameters, by the candidate's parameter names (``stray_light``:
+        ``S`` (one strength for every photodiode) and ``scale_deg``).
+    seed : int
+        Noise seed.
+    n_sweeps, per_sweep : int
+    start : str
+        ISO time of the first sample.
+
+    Returns
+    -------
+    PhotodiodeData
+    """
+    import pandas as pd
+
+    from sensor.compound_eye import (PhotodiodeModel, body_attitude, ring_configuration)
+    from sensor.photodiodes_io import PhotodiodeData
+    from skysim.sky import RayleighSky
+    from skysim.sun import Site, sun_vector
+    truth = truth or {}
+    site = Site(*RING_SITE)
+    rng = np.random.default_rng(seed)
+    sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
+    t0 = pd.Timestamp(start)
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
+                              for s in range(n_sweeps) for k in range(per_sweep)])
+    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
+    sweep = np.repeat(np.arange(n_sweeps), per_sweep)
+    sky = RayleighSky(RING_DMAX)
+    if effect == "multiple_scattering":
+        from skysim.multiple import MultipleScatteringSky
+        # 1-deg sun nodes (the engine's stated interpolation error is far below the noise):
+        # one engine run per node instead of one per sample
+        sky = MultipleScatteringSky(tau=truth["tau"], albedo=truth["albedo"],
+                                    sun_step_deg=1.0)
+    elif effect == "neutral_points":
+        from skysim.berry import BerrySky
+        sky = BerrySky(delta_deg=truth["separation_deg"], dmax=RING_DMAX)
+    elif effect in ("occlusion", "aureole"):
+        sky = _RingSky(sky, effect, truth)
+    pitch, roll = ((truth["pitch_deg"], truth["roll_deg"]) if effect == "tilt" else (0.0, 0.0))
+    data = sensor.sample(sky, site, times, yaw, pitch, roll, rng, yaw_reference="relative",
+                         yaw_offset_deg=35.0, include_truth=False, sweep=sweep)
+    t = data.table.drop(columns=["pitch_deg", "roll_deg"])
+    cols = list(data.columns)
+    if effect in ("fov", "stray_light"):
+        att = body_attitude(yaw, np.full(yaw.size, pitch), np.full(yaw.size, roll))
+        sun, _ = sun_vector(times, site)
+        pm = sensor.photodiode
+        R = t[cols].to_numpy(float)
+        if effect == "fov":
+            R = (pm.counts_per_radiance * _cone_readings(sensor, sky, att, sun,
+                                                         truth["alpha_deg"])
+                 + pm.noise_counts * rng.standard_normal(R.shape))
+        else:   # sunlight inside the instrument, on readings that carry their noise already
+            pd_unit = np.repeat(np.arange(sensor.n_units),
+                                [len(u.photodiodes_deg) for u in sensor.units])
+            psi = np.degrees(np.arccos(np.clip(np.einsum(
+                "nuk,nk->nu", _unit_views(sensor.observe(sky, att, sun)), sun),
+                -1.0, 1.0)))[:, pd_unit]
+            R = R + truth["S"] * np.median(R) * np.exp(-psi / truth["scale_deg"])
+        t[cols] = np.clip(np.round(R), 0.0, pm.saturation_value)
+    t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
+    if effect == "yaw_scale":   # the recorded change within each sweep, times the factor
+        y = t["yaw_deg"].to_numpy(float)
+        out = np.empty_like(y)
+        for s_ in np.unique(sweep):
+            m = sweep == s_
+            u = np.degrees(np.unwrap(np.radians(y[m])))
+            out[m] = u[0] + truth["factor"] * (u - u[0])
+        t["yaw_deg"] = ((out + 180.0) % 360.0) - 180.0
+    if effect == "clock_offset":
+        t["time"] = pd.to_datetime(t["time"]) - pd.to_timedelta(truth["clock_offset_s"],
+                                                                 unit="s")
+    side = dict(data.sidecar, yaw_sense="counterclockwise")
+    return PhotodiodeData(t, side)
+
+
+def _unit_views(obs) -> np.ndarray:
+    from skysim.geometry import direction_vector
+    return direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
+
+
+def _cone_readings(sensor, sky, att, sun, alpha_deg: float) -> np.ndarray:
+    """Noise-free mean readings [radiance units] (n, P) of photodiodes whose unit sees a
+    uniform cone of half-angle ``alpha_deg``: the readings of :data:`RING_CAP` equal-area
+    directions averaged (each direction a rotation of the unit about its own x/y axes)."""
+    from dataclasses import replace
+    K, M = RING_CAP
+    r = alpha_deg * np.sqrt((np.arange(K) + 0.5) / K)
+    b = 2.0 * np.pi * (np.arange(M) + 0.5 * (np.arange(K)[:, None] % 2)) / M
+    offs = np.stack([(r[:, None] * np.cos(b)).ravel(), (r[:, None] * np.sin(b)).ravel(),
+                     np.zeros(K * M)], axis=-1)
+    wide = replace(sensor, units=tuple(replace(u, installation_error_deg=tuple(o))
+                                       for u in sensor.units for o in offs))
+    obs = wide.observe(sky, att, sun)
+    out = []
+    for i, u in enumerate(sensor.units):
+        sl = slice(i * K * M, (i + 1) * K * M)
+        for a in u.photodiodes_deg:
+            chi = np.radians(obs.aop_unit_deg[:, sl] - a)
+            out.append(np.mean(obs.radiance[:, sl] * (1.0 + obs.dop[:, sl] * np.cos(2 * chi)),
+                               axis=1))
+    return np.stack(out, axis=1)
+
+
+def _ring() -> InstrumentMatrix:
+    from calibration.photodiode_diagnosis.effects import RING_EFFECT_NAMES
+    occl = {"width_deg": 90.0, "edge_deg": 5.0}
+    strengths = {
+        "multiple_scattering": {"moderate": {"tau": 0.1, "albedo": 0.1},
+                                "strong": {"tau": 0.25, "albedo": 0.1}},
+        "neutral_points": {"moderate": {"separation_deg": 20.0},
+                           "strong": {"separation_deg": 40.0}},
+        "fov": {"moderate": {"alpha_deg": 15.0}, "strong": {"alpha_deg": 28.0}},
+        "occlusion": {"moderate": {"center_deg": 100.0, **occl, "depolarization": 0.4},
+                      "strong": {"center_deg": 250.0, **occl, "depolarization": 0.8}},
+        "yaw_scale": {"moderate": {"factor": 1.02}, "strong": {"factor": 0.95}},
+        "clock_offset": {"moderate": {"clock_offset_s": 900.0},
+                         "strong": {"clock_offset_s": -3600.0}},
+        "tilt": {"moderate": {"pitch_deg": 1.0, "roll_deg": -0.5},
+                 "strong": {"pitch_deg": -2.5, "roll_deg": 2.0}},
+        "aureole": {"moderate": {"amplitude": 0.5, "scale_deg": 15.0},
+                    "strong": {"amplitude": 2.0, "scale_deg": 15.0}},
+        "stray_light": {"moderate": {"S": 0.02, "scale_deg": 20.0},
+                        "strong": {"S": 0.08, "scale_deg": 20.0}}}
+    return InstrumentMatrix("ring", tuple(RING_EFFECT_NAMES),
+                            {e: strengths[e] for e in RING_EFFECT_NAMES}, ring_session,
+                            seeds=(31,))
+
+
+_BUILDERS = {"three-pair": _three_pair, "sky": _sky, "camera": _camera,
+             "ring": _ring}
 
 
 def matrix_spec(instrument: str) -> InstrumentMatrix:
