@@ -34,8 +34,8 @@ import pandas as pd
 
 from .errors import DiagnosisError
 
-__all__ = ["INSTRUMENTS", "InstrumentMatrix", "matrix_markdown", "matrix_spec", "run_matrix",
-           "score_matrix"]
+__all__ = ["INSTRUMENTS", "IdentifiabilityInputError", "InstrumentMatrix", "matrix_markdown",
+           "matrix_spec", "ring_session", "run_matrix", "score_matrix", "write_matrix"]
 
 INSTRUMENTS = ("three-pair", "sky", "camera", "ring")
 """Instruments with an identifiability matrix."""
@@ -621,3 +621,42 @@ def matrix_spec(instrument: str) -> InstrumentMatrix:
 def rows_to_json(rows: pd.DataFrame) -> list:
     """The rows as plain JSON-ready dicts."""
     return json.loads(rows.to_json(orient="records"))
+
+
+def write_matrix(instrument: str, out, *, quick: bool = False) -> dict:
+    """Run the matrix of ``instrument`` and write ``identifiability.json`` (the score and
+    every case) and ``identifiability.md`` (the tables) into the folder ``out``, each
+    atomically.
+
+    Parameters
+    ----------
+    instrument : str
+        One of :data:`INSTRUMENTS`.
+    out : path
+        Output folder (created).
+    quick : bool
+        The first noise seed and the strong strength only.
+
+    Returns
+    -------
+    dict
+        :func:`score_matrix` of the run.
+    """
+    from dataclasses import replace
+    from pathlib import Path
+
+    from skysim.io import atomic_write, write_json_atomic
+    spec = matrix_spec(instrument)
+    if quick:
+        spec = replace(spec, seeds=spec.seeds[:1],
+                       strengths={e: {"strong": v["strong"]} for e, v in spec.strengths.items()})
+    rows = run_matrix(spec)
+    score = score_matrix(rows)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "identifiability.json",
+                      {"instrument": instrument, "seeds": list(spec.seeds), "quick": quick,
+                       "score": score, "cases": rows_to_json(rows)})
+    text = matrix_markdown(score, instrument)
+    atomic_write(out / "identifiability.md", lambda p: p.write_text(text))
+    return score
