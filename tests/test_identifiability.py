@@ -103,3 +103,33 @@ def test_sky_field_matrix_meets_the_goals():
     pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
     s = score_matrix(run_matrix(matrix_spec("sky")))
     assert _goals(s) == []
+
+
+@pytest.mark.slow
+def test_camera_matrix_meets_the_goals():
+    s = score_matrix(run_matrix(matrix_spec("camera")))
+    assert _goals(s) == []
+
+
+def test_ring_session_generator_injects_what_it_is_told():
+    """The ring generator against the simulator itself: clean data are the simulator's own
+    readings (same noise draw, exactly); a 900 s clock error moves only the recorded times,
+    by 900 s; a gyro scale of 1.05 makes the recorded turn of a sweep 5 % longer; a cone of
+    view of half-angle 20 deg changes the readings by about 2 % (the DoP of a Rayleigh sky
+    averaged over +-20 deg: a few 1e-2), far above the 0.4 % noise."""
+    from calibration.diagnosis.identifiability import ring_session
+    clean = ring_session(seed=3)
+    R0 = clean.table[clean.columns].to_numpy(float)
+    late = ring_session("clock_offset", {"clock_offset_s": 900.0}, seed=3)
+    np.testing.assert_array_equal(late.table[late.columns].to_numpy(float), R0)
+    dt = (pd.to_datetime(clean.table.time) - pd.to_datetime(late.table.time)).dt.total_seconds()
+    np.testing.assert_allclose(dt, 900.0, atol=1e-6)
+    scaled = ring_session("yaw_scale", {"factor": 1.05}, seed=3)
+
+    def turn(t):
+        y = t.yaw_deg.to_numpy(float)[:60]
+        return np.degrees(np.unwrap(np.radians(y)))[-1] - y[0]
+    assert turn(scaled.table) == pytest.approx(1.05 * turn(clean.table), rel=1e-9)
+    wide = ring_session("fov", {"alpha_deg": 20.0}, seed=3)
+    change = np.median(np.abs(wide.table[wide.columns].to_numpy(float) / R0 - 1.0))
+    assert 0.005 < change < 0.05, change
