@@ -405,7 +405,7 @@ def _camera() -> InstrumentMatrix:
                      "strong": {"cloud_tau": 2.0, "d_max": d}}}
     return InstrumentMatrix("camera", tuple(DEFAULT_CAMERA_CANDIDATES),
                             {e: strengths[e] for e in DEFAULT_CAMERA_CANDIDATES}, simulate,
-                            seeds=(50, 51))
+                            seeds=(50, 51, 52, 53, 54))
 
 
 RING_SITE = (39.258648, 8.440184, 0.0)
@@ -454,7 +454,7 @@ class _RingSky:
 
 
 def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
-                 per_sweep: int = 60, start: str = RING_START):
+                 per_sweep: int = 60, start: str = RING_START, sweep_spacing_s: float = 60.0):
     """A simulated relative-yaw, counter-clockwise ring session (eight units at 45 deg
     elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
 
@@ -476,6 +476,8 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     n_sweeps, per_sweep : int
     start : str
         ISO time of the first sample.
+    sweep_spacing_s : float
+        Time between the starts of successive sweeps [s].
 
     Returns
     -------
@@ -492,7 +494,7 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     rng = np.random.default_rng(seed)
     sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
     t0 = pd.Timestamp(start)
-    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + 0.1 * k)
                               for s in range(n_sweeps) for k in range(per_sweep)])
     yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
     sweep = np.repeat(np.arange(n_sweeps), per_sweep)
