@@ -85,19 +85,26 @@ def _verdict_row(rep) -> dict:
 
 def _z_scores(rep, effect: str, truth: dict) -> dict:
     """``parameter -> (fitted - true) / SE`` of the true effect's candidate row, when it is the
-    best-ranked one; parameters at a bound or without a positive finite SE are left out."""
+    best-ranked one; parameters at a bound or without a positive finite SE (``se``, or
+    ``uncertainty`` in the photodiode instruments' rows) are left out. A truth ``X`` stands
+    for every parameter ``X_...`` (one strength for all photodiodes); azimuths
+    (``center_deg``) are compared modulo 360 deg."""
     c = rep.candidate(effect)
     if c is None or not c.available or rep.verdict.best_candidate != effect:
         return {}
     z = {}
-    for name, true in truth.items():
-        p = c.params.get(name)
-        if p is None or name in (c.at_bound or []):
+    for name, p in (c.params or {}).items():
+        key = name if name in truth else next((t for t in truth if name.startswith(f"{t}_")),
+                                              None)
+        if key is None or name in (c.at_bound or []) or not isinstance(p, dict):
             continue
-        se = p.get("se")
+        se = p.get("se", p.get("uncertainty"))
         if se is None or not np.isfinite(se) or se <= 0:
             continue
-        z[name] = (float(p["value"]) - float(true)) / float(se)
+        d = float(p["value"]) - float(truth[key])
+        if name == "center_deg":
+            d = (d + 180.0) % 360.0 - 180.0
+        z[name] = d / float(se)
     return z
 
 
