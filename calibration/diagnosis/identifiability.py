@@ -222,6 +222,8 @@ def matrix_markdown(score: dict, instrument: str) -> str:
               "| candidate | z-scores | RMS of (fitted - true) / SE |", "|---|---|---|"]
     for e, r in score["z_rms"].items():
         lines.append(f"| {e} | {score['z_count'][e]} | {r:.2f} |")
+    if not score["z_rms"]:
+        lines.append("| (no candidate reported a parameter with a standard error) | 0 | - |")
     return "\n".join(lines) + "\n"
 
 
