@@ -138,3 +138,18 @@ def test_ring_session_generator_injects_what_it_is_told():
     wide = ring_session("fov", {"alpha_deg": 20.0}, seed=3)
     change = np.median(np.abs(wide.table[wide.columns].to_numpy(float) / R0 - 1.0))
     assert 0.005 < change < 0.05, change
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason=(
+    "measured on seed 31, strong strengths, three one-minute sweeps: the multiple-scattering "
+    "sky (tau 0.25, albedo 0.1) and a 28-deg cone of view give 'none' (held-out gap 1.06 x "
+    "the floor, as clean data: the base fit's gains, polarizer angles and pointing absorb "
+    "them); the neutral-point sky (40 deg) is 'unexplained' at 4.2 x the floor"))
+def test_ring_matrix_meets_the_goals():
+    """The strong strengths over one seed (each ring diagnosis takes 1-4 min here)."""
+    spec = matrix_spec("ring")
+    spec = replace(spec, strengths={e: {"strong": v["strong"]}
+                                    for e, v in spec.strengths.items()})
+    s = score_matrix(run_matrix(spec))
+    assert _goals(s) == []

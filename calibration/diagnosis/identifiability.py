@@ -187,7 +187,7 @@ def score_matrix(rows: pd.DataFrame) -> dict:
                       "found": int(g.found.sum()), "n": len(g),
                       "withheld": [_label(v, gr) for v, gr in
                                    zip(g.withheld_verdict, g.withheld_group)
-                                   if v is not None],
+                                   if isinstance(v, str)],
                       "gap_ratio": float(np.nanmedian(g.gap_ratio))})
     n_diag = len(rows) + int(rows.withheld_verdict.notna().sum())
     total = float(rows.seconds.sum() + rows.withheld_seconds.sum())
