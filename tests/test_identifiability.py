@@ -146,7 +146,9 @@ def test_ring_session_generator_injects_what_it_is_told():
     "measured on seed 31, strong strengths, three one-minute sweeps: the multiple-scattering "
     "sky (tau 0.25, albedo 0.1) and a 28-deg cone of view give 'none' (held-out gap 1.06 x "
     "the floor, as clean data: the base fit's gains, polarizer angles and pointing absorb "
-    "them); the neutral-point sky (40 deg) is 'unexplained' at 4.2 x the floor"))
+    "them), a platform tilt (-2.5, 2 deg) too (1.01 x); the neutral-point sky (40 deg) is "
+    "'unexplained' at 4.2 x the floor: named or in group 5/9; with stray_light withheld "
+    "the aureole is named alone (withheld never a single effect 8/9)"))
 def test_ring_matrix_meets_the_goals():
     """The strong strengths over one seed (each ring diagnosis takes 1-4 min here)."""
     spec = matrix_spec("ring")
