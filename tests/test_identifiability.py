@@ -156,3 +156,32 @@ def test_ring_matrix_meets_the_goals():
                                     for e, v in spec.strengths.items()})
     s = score_matrix(run_matrix(spec))
     assert _goals(s) == []
+
+
+def test_ring_generator_skies_against_closed_forms():
+    """The generator's occluded and aureole skies against their definitions on a Rayleigh
+    sky: inside the sector (10 and 20 deg from its centre of a 90-deg sector, edges 2 deg) the
+    DoP is (1 - k) times and the radiance (1 - k/2) times the clear sky's, outside unchanged;
+    the aureole divides the DoP by 1 + A exp(-psi / psi_0) (psi the view's distance from
+    the sun). Within 1e-5: the logistic edge leaves w = 1 - 4e-6 at 20 deg from the centre
+    (the aureole is exact up to float rounding)."""
+    from calibration.diagnosis.identifiability import _modified_sky
+    from skysim.sky import RayleighSky
+    base = RayleighSky(0.6)
+    el, az = np.array([40.0, 40.0, 60.0]), np.array([100.0, 280.0, 130.0])
+    sel, saz = np.full(3, 30.0), np.full(3, 200.0)
+    I0, Q0, U0 = base._stokes(el, az, sel, saz)
+    I, Q, U = _modified_sky(base, "occlusion", {"center_deg": 110.0, "width_deg": 90.0,
+                                                "edge_deg": 2.0, "depolarization": 0.7}
+                            )._stokes(el, az, sel, saz)
+    inside = np.array([True, False, True])
+    np.testing.assert_allclose(np.hypot(Q, U) / I, np.hypot(Q0, U0) / I0
+                               * np.where(inside, 0.3, 1.0), rtol=1e-5)
+    np.testing.assert_allclose(I, I0 * np.where(inside, 0.65, 1.0), rtol=1e-5)
+    I, Q, U = _modified_sky(base, "aureole", {"amplitude": 2.0, "scale_deg": 15.0}
+                            )._stokes(el, az, sel, saz)
+    from skysim.geometry import direction_vector
+    psi = np.degrees(np.arccos(np.sum(direction_vector(el, az) * direction_vector(sel, saz),
+                                      axis=-1)))
+    np.testing.assert_allclose(np.hypot(Q, U) / I, np.hypot(Q0, U0) / I0
+                               / (1.0 + 2.0 * np.exp(-psi / 15.0)), rtol=1e-12)

@@ -429,37 +429,34 @@ the simulated field-of-view sessions (the candidate's fit uses six directions at
 RMS radius: the generator is not the fitter's quadrature)."""
 
 
-class _RingSky:
-    """A sky whose light the generator changes in a known way, wrapping ``base``:
-    ``occlusion`` (a sector of world azimuth where the polarized part falls by ``k`` and the
-    radiance by ``k / 2``, with logistic edges) or ``aureole`` (unpolarized light
-    ``A exp(-psi / psi_0)`` times the sky's radiance added at angular distance ``psi`` from
-    the sun)."""
+def _modified_sky(base, kind: str, truth: dict):
+    """``base`` with its light changed in a known way: ``occlusion`` (a sector of world
+    azimuth where the polarized part falls by ``k`` and the radiance by ``k / 2``, with
+    logistic edges) or ``aureole`` (unpolarized light ``A exp(-psi / psi_0)`` times the sky's
+    radiance added at angular distance ``psi`` from the sun)."""
+    from skysim.sky import Sky
 
-    def __new__(cls, base, kind: str, truth: dict):
-        from skysim.sky import Sky
+    class _Wrapped(Sky):
+        name = f"{base.name}+{kind}"
 
-        class _Wrapped(Sky):
-            name = f"{base.name}+{kind}"
+        def _stokes(self, vel, vaz, sel, saz):
+            I, Q, U = base._stokes(vel, vaz, sel, saz)
+            if kind == "occlusion":
+                d = np.abs((np.asarray(vaz) - truth["center_deg"] + 180.0) % 360.0 - 180.0)
+                w = 1.0 / (1.0 + np.exp((d - 0.5 * truth["width_deg"])
+                                        / truth["edge_deg"]))
+                k = truth["depolarization"] * w
+                return I * (1.0 - 0.5 * k), Q * (1.0 - k) * (1.0 - 0.5 * k), \
+                    U * (1.0 - k) * (1.0 - 0.5 * k)
+            from skysim.geometry import direction_vector
+            cos_psi = np.sum(direction_vector(vel, vaz) * direction_vector(sel, saz),
+                             axis=-1)
+            psi = np.degrees(np.arccos(np.clip(cos_psi, -1.0, 1.0)))
+            return I * (1.0 + truth["amplitude"] * np.exp(-psi / truth["scale_deg"])), Q, U
 
-            def _stokes(self, vel, vaz, sel, saz):
-                I, Q, U = base._stokes(vel, vaz, sel, saz)
-                if kind == "occlusion":
-                    d = np.abs((np.asarray(vaz) - truth["center_deg"] + 180.0) % 360.0 - 180.0)
-                    w = 1.0 / (1.0 + np.exp((d - 0.5 * truth["width_deg"])
-                                            / truth["edge_deg"]))
-                    k = truth["depolarization"] * w
-                    return I * (1.0 - 0.5 * k), Q * (1.0 - k) * (1.0 - 0.5 * k), \
-                        U * (1.0 - k) * (1.0 - 0.5 * k)
-                from skysim.geometry import direction_vector
-                cos_psi = np.sum(direction_vector(vel, vaz) * direction_vector(sel, saz),
-                                 axis=-1)
-                psi = np.degrees(np.arccos(np.clip(cos_psi, -1.0, 1.0)))
-                return I * (1.0 + truth["amplitude"] * np.exp(-psi / truth["scale_deg"])), Q, U
-
-            def describe(self):
-                return {"model": self.name, **truth}
-        return _Wrapped()
+        def describe(self):
+            return {"model": self.name, **truth}
+    return _Wrapped()
 
 
 def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
@@ -518,7 +515,7 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
         from skysim.berry import BerrySky
         sky = BerrySky(delta_deg=truth["separation_deg"], dmax=RING_DMAX)
     elif effect in ("occlusion", "aureole"):
-        sky = _RingSky(sky, effect, truth)
+        sky = _modified_sky(sky, effect, truth)
     pitch, roll = ((truth["pitch_deg"], truth["roll_deg"]) if effect == "tilt" else (0.0, 0.0))
     data = sensor.sample(sky, site, times, yaw, pitch, roll, rng, yaw_reference="relative",
                          yaw_offset_deg=35.0, include_truth=False, sweep=sweep)
