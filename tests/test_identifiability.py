@@ -148,7 +148,8 @@ def test_ring_session_generator_injects_what_it_is_told():
     "the floor, as clean data: the base fit's gains, polarizer angles and pointing absorb "
     "them), a platform tilt (-2.5, 2 deg) too (1.01 x); the neutral-point sky (40 deg) is "
     "'unexplained' at 4.2 x the floor: named or in group 5/9; with stray_light withheld "
-    "the aureole is named alone (withheld never a single effect 8/9)"))
+    "the aureole is named alone (withheld never a single effect 8/9); z-scores: clock_offset "
+    "0.00 (uncertainty 78 s for a 0.1 s error), yaw_scale -12.5 and 8.1"))
 def test_ring_matrix_meets_the_goals():
     """The strong strengths over one seed (each ring diagnosis takes 1-4 min here)."""
     spec = matrix_spec("ring")
