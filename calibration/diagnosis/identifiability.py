@@ -242,9 +242,9 @@ def _three_pair() -> InstrumentMatrix:
     def periodic(a1, a2):
         return [a1 * np.cos(0.7), a1 * np.sin(0.7), a2 * np.cos(2.1), a2 * np.sin(2.1)]
 
-    # the moderate strength in the upper half of the documented range (below it the
-    # effects that act through the dark or extinction ratios leave gaps within the noise
-    # floor on this session, where no diagnosis can see them), the strong one near its top
+    # both strengths inside the documented ranges; the dark current's and the extinction
+    # ratio's in the upper half (below it their gaps stay within the noise floor on this
+    # session, where no diagnosis can see them)
     values = {
         "dark_current": (3e-2 * pattern, 5e-2 * pattern),
         "sun_motion": ([500.0], [1100.0]),
