@@ -101,6 +101,7 @@ def test_three_pair_matrix_meets_the_goals():
 
 @pytest.mark.slow
 def test_sky_field_matrix_meets_the_goals():
+    """The verdict goals (the sky candidates report no standard errors, so no z-scores)."""
     pytest.importorskip("sasktran2", reason="sasktran2 (extra skysim[rt]) not installed")
     s = score_matrix(run_matrix(matrix_spec("sky")))
     assert _goals(s) == []
@@ -118,9 +119,8 @@ def test_camera_matrix_meets_the_goals():
 
 
 def test_ring_session_generator_injects_what_it_is_told():
-    """The ring generator against the simulator itself: clean data are the simulator's own
-    readings (same noise draw, exactly); a 900 s clock error moves only the recorded times,
-    by 900 s; a gyro scale of 1.05 makes the recorded turn of a sweep 5 % longer; a cone of
+    """The ring generator's injections: a 900 s clock error leaves the readings exactly those
+    of clean data (same noise draw) and moves every recorded time by 900 s; a gyro scale of 1.05 makes the recorded turn of a sweep 5 % longer; a cone of
     view of half-angle 20 deg changes the readings by about 2 % (the DoP of a Rayleigh sky
     averaged over +-20 deg: a few 1e-2), far above the 0.4 % noise."""
     from calibration.diagnosis.identifiability import ring_session
