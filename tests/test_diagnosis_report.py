@@ -112,9 +112,14 @@ def test_verdict_rule_branches():
     # a significant share below one half: partly explained, with the share
     p = decide([_cand("a", 2.5, -50.0, share=0.3, share_se=0.05, d=0.0)], 3.0, floor, t)
     assert p.effect == "partly_explained" and p.share == 0.3 and "30 +- 5 %" in p.reason
-    # not better than the base model by 2 paired SE: unexplained
-    assert decide([_cand("a", 2.9, -5.0, base_d=1.0, base_se=1.0, d=0.0)], 3.0, floor,
-                  t).effect == "unexplained"
+    # not better than the base model by 2 paired SE, in its difference or in the share of
+    # the excess it removes: unexplained
+    assert decide([_cand("a", 2.9, -5.0, base_d=1.0, base_se=1.0, d=0.0, share=0.1,
+                         share_se=0.1)], 3.0, floor, t).effect == "unexplained"
+    # a difference within 2 SE (an effect whose size varies by block) but a share of the
+    # excess far above 0 in every block: it beats the base
+    assert decide([_cand("a", 1.0, -50.0, base_d=1.0, base_se=1.0, d=0.0, share=0.97,
+                         share_se=0.01)], 3.0, floor, t).effect == "a"
     # a parameter at its bound, or no convergence: not named, the reason says why
     bound = decide([_cand("a", 1.0, -50.0, d=0.0, at_bound=["tau"])], 3.0, floor, t)
     assert bound.effect == "unexplained" and "tau sits at a bound" in bound.reason

@@ -93,12 +93,27 @@ __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_rin
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
            "fit_engine_settings", "sun_side", "lagged_yaw"]
 
-RING_EFFECT_NAMES = ("multiple_scattering", "neutral_points", "fov", "occlusion", "yaw_scale",
-                     "clock_offset", "tilt", "aureole", "stray_light")
-"""The default candidates. ``aerosol`` is asked for by name (``--effects aerosol,...``): its
-engine runs (Mie phase matrices on a 25 x 37 table, per AOD and sun node) add minutes to a
-session, beyond the one-minute goal of a default diagnosis on this machine class."""
-OPTIONAL_EFFECT_NAMES = ("aerosol", "overcast", "side_glare", "read_lag")
+RING_EFFECT_NAMES = ("neutral_points", "fov", "occlusion", "yaw_scale", "clock_offset",
+                     "aureole", "stray_light")
+"""The default candidates: those that recover their own simulated effect on a ring
+(``skysim identifiability --instrument ring``, ``docs/diagnosis.md``). The others are asked
+for by name (``--effects multiple_scattering,...``):
+
+- ``aerosol``: its engine runs (Mie phase matrices on a 25 x 37 table, per AOD and sun node)
+  add minutes to a session, beyond the one-minute goal of a default diagnosis on this
+  machine class;
+- ``multiple_scattering``: a simulated ring under a multiple-scattering sky (tau 0.25,
+  albedo 0.1) keeps a held-out gap of 1.06 times the noise floor after the base fit, as
+  clean data do: the base model's gains, polarizer angles, unit pointing and DoP scale take
+  the sky's shape up, so the candidate cannot be told from the base on one session;
+- ``tilt``: a constant tilt of the instrument turns with it, so it is exactly a change of
+  every unit's pointing and polarizer angle, which the base model fits per unit: it can be
+  read only with the pointing calibrated on other sessions (``--pointing-from``);
+- ``overcast``, ``side_glare``, ``read_lag``: for the skies and instruments that call for
+  them (a cloud layer over the whole sky; glare stronger on one side of a unit; readings
+  lagging the yaw record, which needs standing samples beside turning ones)."""
+OPTIONAL_EFFECT_NAMES = ("aerosol", "multiple_scattering", "tilt", "overcast", "side_glare",
+                         "read_lag")
 
 
 class RingEffect:
@@ -181,6 +196,11 @@ class RingEffect:
         :meth:`available` says, or a sky the effect's model does not hold for."""
         return self.available()
 
+    def applicable_to(self, inst) -> str | None:
+        """None when the effect can be told apart on this instrument's session, else why not
+        (a parameter the base model already fits in another guise)."""
+        return None
+
 
 class ClockOffset(RingEffect):
     name = "clock_offset"
@@ -230,6 +250,18 @@ class Tilt(RingEffect):
 
     def attitude(self, pitch, roll, p):
         return pitch + p[0], roll + p[1]
+
+    def applicable_to(self, inst) -> str | None:
+        """A tilt in the body frame turns with the instrument: every unit's view and
+        polarizer are rotated by one fixed rotation, which is exactly a change of each unit's
+        pointing and polarizer angle. With the pointing fitted on the session the two cannot
+        be told apart; with it calibrated on other sessions they can."""
+        p = inst.pointing_deg
+        if p is None or not np.all(np.isfinite(p)):
+            return ("a constant tilt turns with the instrument, as a change of every unit's "
+                    "pointing and polarizer angle, which the base model fits on this session: "
+                    "calibrate the pointing on other sessions (--pointing-from) to fit it")
+        return None
 
 
 def fov_offsets_deg(alpha_deg: float) -> np.ndarray:

@@ -662,7 +662,8 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     s, silent = _fit_session(inst, sun, max_iter)
     if silent is not None:
         return _no_signal_report(inst, *silent, seed)
-    unavailable = {e.name: why for e in cand if (why := e.available_at(sun_el)) is not None}
+    unavailable = {e.name: why for e in cand
+                   if (why := e.available_at(sun_el) or e.applicable_to(s.work)) is not None}
     held = _cross_validate(s, cand, folds, unavailable)
     white, _ = core.noise_floor(held.residual["base"], held.usable, s.work.sweep)
     replica = _replica_gap(s, folds, white, seed)

@@ -572,12 +572,13 @@ def register(sub) -> None:
                         "a raw polarization-camera frame (.tif/.tiff/.png + sidecar)")
     d.add_argument("--effects", type=name_list, help="comma-separated candidates (default: all): "
                    + ",".join(EFFECT_NAMES) + "; for multi-unit photodiode instruments: "
-                   "multiple_scattering,neutral_points,fov,occlusion,yaw_scale,clock_offset,"
-                   "tilt,aureole,stray_light (default), aerosol (asked for by name: its "
-                   "engine runs take minutes), overcast (asked for by name: a cloud layer "
-                   "over the whole sky), side_glare (glare stronger on the side of a unit "
-                   "the sun is on) and read_lag (readings lagging the yaw record); for "
-                   "camera frames: lens,polarizer_angles,"
+                   "neutral_points,fov,occlusion,yaw_scale,clock_offset,aureole,stray_light "
+                   "(default); asked for by name: aerosol (its engine runs take minutes), "
+                   "multiple_scattering (the base fit takes its sky up on one session), "
+                   "tilt (with --pointing-from only: it turns with the units), overcast (a "
+                   "cloud layer over the whole sky), side_glare (glare stronger on the side "
+                   "of a unit the sun is on) and read_lag (readings lagging the yaw record); "
+                   "for camera frames: lens,polarizer_angles,"
                    "extinction_ratio,sky_dop,overcast (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
                    help="output folder (default: results/diagnose/<name>)")
