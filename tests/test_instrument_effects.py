@@ -202,3 +202,18 @@ def test_side_glare_named_over_stray_light_and_recovered():
     assert len(kept) >= 4, doc["faults"]
     fitted = np.array([v["params"][f"b_{cols[j]}"]["value"] for j in kept])
     np.testing.assert_array_less(np.abs(fitted - b[kept]), 0.3)
+
+
+def test_aerosol_candidate_takes_the_instruments_band(standing_ring):
+    """The aerosol candidate's sky is at the band the sidecar gives (a UV instrument at
+    350 nm), and at the default 500 nm without one."""
+    from calibration.photodiode_diagnosis.effects import GridAerosolSky
+    side = dict(standing_ring.sidecar, schema="skysim.photodiodes/2",
+                band={"wavelength_nm": 350.0, "fwhm_nm": 20.0})
+    e = get_ring_effect("aerosol")
+    e.bind(instrument_from_photodiodes(PhotodiodeData(standing_ring.table, side)))
+    assert e.wavelength_nm == 350.0
+    e.bind(instrument_from_photodiodes(standing_ring))
+    assert e.wavelength_nm == 500.0
+    grid = GridAerosolSky(2.0, wavelength_nm=350.0)
+    assert all(s.wavelength_nm == 350.0 for s in grid.skies)

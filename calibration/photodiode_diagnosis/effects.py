@@ -501,9 +501,10 @@ AEROSOL_PRESET = "continental_average"
 """Aerosol type of the ``aerosol`` candidate (:data:`skysim.aerosol_types.PRESETS`; OPAC
 continental average, Hess et al. 1998): the common type over land away from cities."""
 AEROSOL_WAVELENGTH_NM = 500.0
-"""Wavelength [nm] of the ``aerosol`` candidate's sky: a silicon photodiode behind polarizer
-film under daylight responds across the visible; the fitted AOD takes up the rest of the
-molecular-to-aerosol ratio."""
+"""Wavelength [nm] of the ``aerosol`` candidate's sky when the instrument's sidecar gives no
+band (or ``unknown``): a silicon photodiode behind polarizer film under daylight responds
+across the visible; the fitted AOD takes up the rest of the molecular-to-aerosol ratio. With
+a band, its effective wavelength (:attr:`sensor.photodiodes_io.PhotodiodeData.band_wavelength_nm`)."""
 AEROSOL_ALBEDO = 0.15
 """Lambertian ground albedo of the ``aerosol`` candidate (grass, dry soil and low vegetation:
 0.1-0.25 in the visible); the ring looks at the sky, where the albedo changes the DoP by a
@@ -525,10 +526,11 @@ class GridAerosolSky:
 
     AOD_NODES: ClassVar[np.ndarray] = np.array([0.03, 0.1, 0.3, 1.0])
 
-    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0):
+    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0,
+                 wavelength_nm: float = AEROSOL_WAVELENGTH_NM):
         from skysim.aerosol import AerosolSky
         self.skies = [AerosolSky(AEROSOL_PRESET, aod_550=float(a), albedo=AEROSOL_ALBEDO,
-                                 wavelength_nm=AEROSOL_WAVELENGTH_NM,
+                                 wavelength_nm=float(wavelength_nm),
                                  sun_step_deg=sun_step_deg, sun_node_origin_deg=sun_origin_deg,
                                  n_zenith=AEROSOL_GRID[0],
                                  n_azimuth=AEROSOL_GRID[1], settings=fit_engine_settings())
@@ -592,13 +594,23 @@ class Aerosol(RingEffect):
 
     def __init__(self):
         self._grid = None
+        self.wavelength_nm = AEROSOL_WAVELENGTH_NM
 
     available = MultipleScattering.available
     available_at = MultipleScattering.available_at
 
+    def bind(self, inst) -> None:
+        """The sky at the instrument's band (the sidecar's ``band``; without one, or
+        ``unknown``, :data:`AEROSOL_WAVELENGTH_NM`)."""
+        band = (inst.source or {}).get("band_wavelength_nm")
+        wavelength = AEROSOL_WAVELENGTH_NM if band is None else float(band)
+        if wavelength != self.wavelength_nm:
+            self.wavelength_nm, self._grid = wavelength, None
+
     def sky(self, p, base_sky, sun_enu):
         if self._grid is None:
-            self._grid = GridAerosolSky(*MultipleScattering._session_nodes(sun_enu))
+            self._grid = GridAerosolSky(*MultipleScattering._session_nodes(sun_enu),
+                                        wavelength_nm=self.wavelength_nm)
         return self._grid.at(float(p[0]))
 
 

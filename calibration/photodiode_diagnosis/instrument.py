@@ -338,6 +338,7 @@ def instrument_from_photodiodes(data: PhotodiodeData, where: str = "photodiode d
         source={"path": where, "schema": data.sidecar["schema"],
                 "readings": data.reading_unit, "readings_kind": data.readings_kind,
                 "heading_ambiguity_deg": data.heading_ambiguity_deg,
+                "band_wavelength_nm": data.band_wavelength_nm,
                 "samples": int(len(table)),
                 "photodiodes": len(data.columns), "units": sensor.n_units,
                 "sweeps": int(np.unique(sweep).size),
