@@ -67,7 +67,8 @@ import pandas as pd
 from .instrument import Instrument
 
 __all__ = ["DISTANCE_BINS_DEG", "GAIN_IDENTIFIABLE_RATIO", "GAIN_MIN_SUN_DISTANCE_DEG", "GLARE_NEAR_DEG", "MIN_SAMPLES", "MOTION_FACTOR", "SIDE_FAMILY_ALPHA",
-           "InstrumentChecks", "check_instrument", "null_combinations", "sum_rule_gains",
+           "InstrumentChecks", "check_instrument", "motion_faults", "null_combinations",
+           "sum_rule_gains",
            "sum_rule_residual", "sun_geometry"]
 
 DISTANCE_BINS_DEG = (0.0, 20.0, 35.0, 50.0, 70.0, 90.0, 180.0)
@@ -453,4 +454,37 @@ def _motion(df: pd.DataFrame, n_units: int) -> pd.DataFrame:
     above_units = out.rms_turning > MOTION_FACTOR * typical
     above_self = (out.ratio > MOTION_FACTOR) | ~np.isfinite(out.rms_standing)
     out["fails_in_motion"] = (above_units & above_self).fillna(False).astype(bool)
+    return out
+
+
+def motion_faults(checks: dict) -> list:
+    """Fault-list entries of the units that fail only in motion.
+
+    Parameters
+    ----------
+    checks : dict
+        :meth:`InstrumentChecks.to_dict` of a session.
+
+    Returns
+    -------
+    list of dict
+        ``{"channel": "u<k>", "kind": "fails_in_motion", "evidence": {...}}`` per unit of
+        ``units_failing_in_motion``: its sum-rule residual RMS turning and standing (at the
+        turning samples' sun distances), their ratio, the units' median turning RMS, the
+        factor both must exceed (:data:`MOTION_FACTOR`) and ``excluded: False``. The unit's
+        readings stay in every fit: standing they obey the rule, and a lag or read order
+        that spoils them while turning is what the diagnosis's candidates are for.
+    """
+    rows = {int(r["unit"]): r for r in checks.get("motion", [])}
+    turning = [r["rms_turning"] for r in rows.values() if r.get("rms_turning") is not None]
+    typical = float(np.median(turning)) if turning else None
+    out = []
+    for u in checks.get("units_failing_in_motion", []):
+        r = rows.get(int(u), {})
+        out.append({"channel": f"u{int(u)}", "kind": "fails_in_motion", "evidence": {
+            "sum_rule_rms_turning": r.get("rms_turning"),
+            "sum_rule_rms_standing": r.get("rms_standing"),
+            "turning_over_standing": r.get("ratio"),
+            "units_median_rms_turning": typical, "factor": MOTION_FACTOR,
+            "excluded": False}})
     return out

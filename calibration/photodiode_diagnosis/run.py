@@ -28,6 +28,7 @@ from ..diagnosis import core, judge
 from ..diagnosis.core import Thresholds
 from ..diagnosis.errors import DiagnosisError, InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
+from .checks import motion_faults
 from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
                          search_clock)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
@@ -664,9 +665,8 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
         return _no_signal_report(inst, *silent, seed)
     unavailable = {e.name: why for e in cand if (why := e.available_at(sun_el)) is not None}
     held = _cross_validate(s, cand, folds, unavailable)
-    white, _ = core.noise_floor(held.residual["base"], held.usable, s.work.sweep)
-    replica = _replica_gap(s, folds, white, seed)
-    floor = max(white, replica)
+    noise = _noise_floor(s, held, folds, seed)
+    floor = noise.value
     n_cal = int(held.usable.sum() * (1 - 1 / np.unique(folds).size))
     _continue_stopped(held, cand, floor, n_cal, s.sigma)
     rows = _candidate_rows(s, held, cand, floor, n_cal)
@@ -689,15 +689,16 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     names = ["base"] + held.available([e.name for e in cand])
     ranked, verdict = judge.verdict([Candidate.from_dict(r) for r in rows],
                                     {k: held.held(k) for k in names}, s.work.sweep, floor,
-                                    RING_THRESHOLDS, np.random.default_rng(seed))
-    return _report(s, held, ranked, verdict, (floor, white, replica), n_folds, sun_el, seed)
+                                    RING_THRESHOLDS, np.random.default_rng(seed),
+                                    floor_note=noise.floor.note)
+    return _report(s, held, ranked, verdict, noise, n_folds, sun_el, seed)
 
 
-def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, n_folds: int,
-            sun_el, seed: int) -> DiagnosisReport:
+def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _Noise,
+            n_folds: int, sun_el, seed: int) -> DiagnosisReport:
     """The report: where the base model's held-out gap lies, the heading error of the base
     model and of a named effect, the base fit and the model-free checks."""
-    floor, white, replica = floors
+    floor = noise.value
     work, L = s.work, s.layout
     output = instrument_output(work)
     named = verdict.best_candidate is not None and verdict.effect == verdict.best_candidate
@@ -735,9 +736,10 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, 
                  "best_deg": heading_error.get(best) if best in heading_error else None},
              "base_fit": _base_fit_report(s.theta, L, s.base, work, s.sign),
              "instrument_checks": _instrument_checks(work, s.theta, L, s.base, s.sun),
-             "noise_floor_parts": {"white_noise_rms": white, "replica_held_out_gap": replica}}
-    return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None, floor,
-                           NOISE_FLOOR_METHOD, s.screen.faults, data,
+             "noise_floor_parts": noise.parts()}
+    faults = list(s.screen.faults) + motion_faults(extra["instrument_checks"])
+    return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None,
+                           noise.rms, noise.method, faults, data,
                            RING_THRESHOLDS.to_dict(), seed, extra)
 
 
@@ -1019,6 +1021,70 @@ NOISE_FLOOR_METHOD = ("the larger of the white-noise RMS (second differences alo
                       "of the session (its fit plus white noise at that RMS, split and fitted "
                       "as the data)")
 
+NOISE_FLOOR_STANDING = ("; the floor is the larger of that standing RMS and the held-out gap "
+                        "of the base model on a noise-only replica of the session (its fit "
+                        "plus white noise at that RMS, split and fitted as the data)")
+"""Said after :data:`calibration.diagnosis.core.STANDING_METHOD` of a ring's floor."""
+
+
+@dataclass(frozen=True)
+class _Noise:
+    """The ring's noise floor: the whiteness-checked estimate (:func:`.core.checked_floor`)
+    and the replicas' held-out gap (None when the floor is unknown)."""
+
+    floor: core.Floor
+    replica: float | None
+
+    @property
+    def rms(self) -> float | None:
+        if self.floor.rms is None:
+            return None
+        return max(self.floor.rms, self.replica)
+
+    @property
+    def value(self) -> float:
+        """The floor the verdict measures against (0 when unknown: the whole gap)."""
+        return 0.0 if self.rms is None else self.rms
+
+    @property
+    def method(self) -> str:
+        if self.floor.rms is None or self.floor.standing_dof == 0:
+            return self.floor.method
+        return self.floor.method + NOISE_FLOOR_STANDING
+
+    def parts(self) -> dict:
+        return dict(self.floor.parts(), replica_held_out_gap=self.replica)
+
+
+def standing_stretches(inst: Instrument) -> np.ndarray:
+    """Standing stretch of every sample: one id per run of consecutive samples of one sweep
+    that are not rotating (:attr:`Instrument.rotating`), -1 for rotating samples."""
+    standing = ~np.asarray(inst.rotating, bool)
+    sweep = np.asarray(inst.sweep)
+    new = standing & np.r_[True, ~standing[:-1] | (sweep[1:] != sweep[:-1])]
+    return np.where(standing, np.cumsum(new) - 1, -1)
+
+
+def _noise_floor(s: _Session, held: judge.HeldOut, folds, seed: int) -> _Noise:
+    """The session's noise floor from the base model's held-out residuals.
+
+    Whiteness is tested on the held-out residuals of the model that fits best (the base or
+    a candidate: :func:`.core.checked_floor`). Where they are white along each sweep,
+    :data:`NOISE_FLOOR_METHOD`. Where they are not
+    (smoothed or pre-filtered readings: their second differences read below the noise),
+    the noise RMS from the scatter of the standing stretches' readings
+    (:func:`standing_stretches`) in its place, with the replicas' gap on top; without
+    standing readings the floor is unknown and the verdict measures against a zero floor.
+    """
+    models = ["base"] + held.available(list(held.fits))
+    best = min(models, key=lambda k: core.rms(held.held(k)))
+    floor = core.checked_floor(held.residual["base"], held.usable, s.work.sweep,
+                               NOISE_FLOOR_METHOD, standing_stretches(s.work),
+                               block_name="sweep", tested=held.residual[best])
+    if floor.rms is None:
+        return _Noise(floor, None)
+    return _Noise(floor, _replica_gap(s, folds, floor.rms, seed))
+
 
 def _replica_gap(s: _Session, folds, white: float, seed: int) -> float:
     """Held-out gap [relative] the base model reaches on a noise-only replica of the session.
@@ -1295,7 +1361,7 @@ def result_dict(report: DiagnosisReport) -> dict:
     split = data.pop("split", None)
     if split is not None:
         split["held_out_readings"] = split.pop("held_out_values")
-    floor = None if report.noise_floor is None else {
+    floor = None if report.noise_floor is None and not report.noise_floor_method else {
         "rms": report.noise_floor, "method": report.noise_floor_method, **parts}
     return {"schema": LEGACY_SCHEMA, "instrument": report.instrument, "verdict": verdict,
             "thresholds": d["thresholds"], "candidates": d["candidates"], "where": d["where"],
