@@ -585,6 +585,7 @@ class Floor:
         out = {"white_noise_rms": float(self.white_rms),
                "whiteness": self.whiteness.to_dict()}
         if self.standing_dof:
+            out["standing_rms"] = float(self.rms)
             out["standing_dof"] = int(self.standing_dof)
         return out
 
