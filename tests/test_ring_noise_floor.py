@@ -9,23 +9,25 @@ from ring_sessions import SITE, ring_session
 
 from calibration.diagnosis.core import FLOOR_UNKNOWN_NOTE
 from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
-from calibration.photodiode_diagnosis.run import (NOISE_FLOOR_METHOD, diagnose_photodiodes,
+from calibration.photodiode_diagnosis.run import (NOISE_FLOOR_METHOD, diagnose_instrument,
+                                                  diagnose_photodiodes, result_dict,
                                                   standing_stretches)
 from sensor.compound_eye import PhotodiodeModel, ring_configuration
 from sensor.photodiodes_io import PhotodiodeData
 from skysim.sky import RayleighSky
 
 
-def stop_and_go(n_sweeps=3, stand=30, turn=90, seed=1):
+def stop_and_go(n_sweeps=3, stand=30, turn=90, seed=1, stops=(0.0,)):
     """A relative-yaw ring session (as :func:`ring_sessions.ring_session`) whose every sweep
-    stands ``stand`` samples at one heading, then turns once in ``turn`` samples."""
+    stands ``stand`` samples at each yaw of ``stops`` [deg], then turns once in ``turn``
+    samples."""
     rng = np.random.default_rng(seed)
     sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
     t0 = pd.Timestamp("2022-05-12T10:00:00+02:00")
-    per = stand + turn
+    per = stand * len(stops) + turn
     times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=60 * s + 0.1 * k)
                               for s in range(n_sweeps) for k in range(per)])
-    one = np.r_[np.zeros(stand), np.linspace(0.0, 360.0, turn, endpoint=False)]
+    one = np.r_[np.repeat(stops, stand), np.linspace(0.0, 360.0, turn, endpoint=False)]
     yaw = np.tile(one, n_sweeps) + 20.0
     data = sensor.sample(RayleighSky(0.6), SITE, times, yaw, 0.0, 0.0, rng,
                          yaw_reference="relative", yaw_offset_deg=35.0, include_truth=False,
@@ -111,3 +113,77 @@ def test_smoothed_ring_with_standing_readings_measures_the_noise(stop_and_go_doc
     assert nf["white_noise_rms"] > 5 * noise
     assert smooth["verdict"]["effect"] != "none"
     assert not smooth["verdict"]["reason"].startswith(FLOOR_UNKNOWN_NOTE)
+
+
+def late_while_turning(frac=1.0):
+    """The session of ``tests/test_instrument_checks.py`` (8 sweeps, each standing at four
+    headings and then turning) with unit 4's 45 and 90 deg photodiodes reading ``frac`` of
+    a sample late while the ring turns (as that test plants it, 1 a whole sample)."""
+    from test_instrument_checks import _session
+    inst, _ = _session()
+    r = inst.readings.copy()
+    cols = [17, 18]
+    late = (1 - frac) * r[:, cols] + frac * np.roll(r[:, cols], 1, axis=0)
+    r[:, cols] = np.where(inst.rotating[:, None], late, r[:, cols])
+    return inst.with_readings(r)
+
+
+@pytest.fixture(scope="module")
+def late_unit_doc():
+    return result_dict(diagnose_instrument(late_while_turning(), ("yaw_scale",), n_folds=3))
+
+
+@pytest.mark.parametrize("frac", [1.0, 0.25])
+def test_unit_failing_in_motion_is_a_fault(frac, late_unit_doc):
+    """Unit 4's photodiodes read late while the ring turns: off Malus's law then, so the
+    fault screen excludes them (``not_malus``: it does so down to 3 % of a sample) and the
+    checks of the screened readings no longer see the unit; the checks of the readings
+    before the screen name it as failing only in motion (turning over standing sum-rule RMS
+    measured 159 for a whole sample, 37 for a quarter), and the report's faults list it,
+    kind ``fails_in_motion``, with that evidence and the screen's exclusions. The fault
+    itself excludes nothing: the screen's faults are listed unchanged before it."""
+    doc = late_unit_doc if frac == 1.0 else result_dict(
+        diagnose_instrument(late_while_turning(frac), ("yaw_scale",), n_folds=3))
+    motion = [f for f in doc["faults"] if f["kind"] == "fails_in_motion"]
+    assert [f["channel"] for f in motion] == ["u4"]
+    assert doc["faults"][-1] is motion[0]
+    ev = motion[0]["evidence"]
+    assert ev["readings"] == "unscreened" and "not_malus" in ev["excluded_by_screen"]
+    assert ev["turning_over_standing"] > 10 * ev["factor"]
+    assert ev["sum_rule_rms_turning"] > 10 * ev["factor"] * ev["units_median_rms_turning"]
+    assert doc["instrument_checks"]["units_failing_in_motion"] == []
+
+
+def test_motion_faults_from_screened_checks_exclude_nothing():
+    """A unit the screened checks name is listed from them (``readings: screened``, nothing
+    excluded by the screen); the unscreened checks add only units the screen excluded."""
+    from calibration.photodiode_diagnosis.checks import motion_faults
+    motion = [{"unit": u, "rms_standing": 1e-3, "rms_turning": t, "ratio": t / 1e-3,
+               "fails_in_motion": u == 2} for u, t in enumerate([1e-3, 1.2e-3, 9e-3])]
+    checks = {"motion": motion, "units_failing_in_motion": [2]}
+    unscreened = {"motion": motion, "units_failing_in_motion": [1, 2]}
+    out = motion_faults(checks, unscreened, [{"channel": "u1_p045", "kind": "dead"}])
+    assert [(f["channel"], f["evidence"]["readings"]) for f in out] == [
+        ("u1", "unscreened"), ("u2", "screened")]
+    assert out[1]["evidence"]["excluded_by_screen"] == []
+    assert out[1]["evidence"]["turning_over_standing"] == pytest.approx(9.0)
+    assert out[1]["evidence"]["units_median_rms_turning"] == pytest.approx(1.2e-3)
+    assert motion_faults(checks) == out[1:]
+
+
+def test_where_crosses_motion_with_sun_distance(late_unit_doc):
+    """``motion_sun_distance`` splits the held-out readings four ways (rotating/standing x
+    within/beyond 50 deg of the sun, with those bounds), a partition of the readings of the
+    ``motion`` dimension whose shares add to 1."""
+    doc = late_unit_doc
+    rows = [w for w in doc["where"] if w["dimension"] == "motion_sun_distance"]
+    assert sorted(w["label"] for w in rows) == sorted(
+        f"{m}, {n} 50 deg of the sun" for m in ("rotating", "standing")
+        for n in ("within", "beyond"))
+    for w in rows:
+        assert (w["lo_deg"], w["hi_deg"]) == ((0.0, 50.0) if "within" in w["label"]
+                                              else (50.0, 180.0))
+    assert sum(w["share"] for w in rows) == pytest.approx(1.0, abs=1e-9)
+    motion = {w["label"]: w["n"] for w in doc["where"] if w["dimension"] == "motion"}
+    for m in ("rotating", "standing"):
+        assert sum(w["n"] for w in rows if w["label"].startswith(m)) == motion[m]

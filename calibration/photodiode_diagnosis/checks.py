@@ -457,34 +457,58 @@ def _motion(df: pd.DataFrame, n_units: int) -> pd.DataFrame:
     return out
 
 
-def motion_faults(checks: dict) -> list:
+def motion_faults(checks: dict, unscreened: dict | None = None, screen_faults=()) -> list:
     """Fault-list entries of the units that fail only in motion.
 
     Parameters
     ----------
     checks : dict
-        :meth:`InstrumentChecks.to_dict` of a session.
+        :meth:`InstrumentChecks.to_dict` of a session's screened readings.
+    unscreened : dict, optional
+        The same checks of the readings before the fault screen: they name a unit whose
+        photodiodes the screen excluded (their readings off Malus's law while the ring
+        turns), which the screened checks no longer see.
+    screen_faults : sequence of dict
+        The screen's faults (``channel``, ``kind``), to tell which units it excluded.
 
     Returns
     -------
     list of dict
-        ``{"channel": "u<k>", "kind": "fails_in_motion", "evidence": {...}}`` per unit of
-        ``units_failing_in_motion``: its sum-rule residual RMS turning and standing (at the
-        turning samples' sun distances), their ratio, the units' median turning RMS, the
-        factor both must exceed (:data:`MOTION_FACTOR`) and ``excluded: False``. The unit's
-        readings stay in every fit: standing they obey the rule, and a lag or read order
-        that spoils them while turning is what the diagnosis's candidates are for.
+        ``{"channel": "u<k>", "kind": "fails_in_motion", "evidence": {...}}`` per unit named
+        by the screened checks, or by the unscreened ones among the units the screen
+        excluded: its sum-rule residual RMS turning and standing (at the turning samples'
+        sun distances), their ratio, the units' median turning RMS, the factor both must
+        exceed (:data:`MOTION_FACTOR`), which checks named it (``readings``: ``screened``
+        or ``unscreened``) and ``excluded_by_screen`` (the screen's fault kinds of its
+        photodiodes, empty when none). This fault excludes nothing: standing, the unit obeys
+        the rule, and a lag or read order that spoils it while turning is what the
+        diagnosis's candidates are for.
     """
-    rows = {int(r["unit"]): r for r in checks.get("motion", [])}
-    turning = [r["rms_turning"] for r in rows.values() if r.get("rms_turning") is not None]
-    typical = float(np.median(turning)) if turning else None
+    def unit_of(channel: str) -> int | None:
+        head = str(channel).split("_")[0]
+        return int(head[1:]) if head.startswith("u") and head[1:].isdigit() else None
+
+    excluded: dict = {}
+    for f in screen_faults:
+        u = unit_of(f.get("channel", ""))
+        if u is not None:
+            excluded.setdefault(u, set()).add(str(f.get("kind")))
+    named = [(int(u), checks, "screened") for u in checks.get("units_failing_in_motion", [])]
+    if unscreened is not None:
+        seen = {u for u, _, _ in named}
+        named += [(int(u), unscreened, "unscreened")
+                  for u in unscreened.get("units_failing_in_motion", [])
+                  if int(u) in excluded and int(u) not in seen]
     out = []
-    for u in checks.get("units_failing_in_motion", []):
-        r = rows.get(int(u), {})
-        out.append({"channel": f"u{int(u)}", "kind": "fails_in_motion", "evidence": {
+    for u, source, which in sorted(named, key=lambda x: x[0]):
+        rows = {int(r["unit"]): r for r in source.get("motion", [])}
+        turning = [r["rms_turning"] for r in rows.values() if r.get("rms_turning") is not None]
+        r = rows.get(u, {})
+        out.append({"channel": f"u{u}", "kind": "fails_in_motion", "evidence": {
             "sum_rule_rms_turning": r.get("rms_turning"),
             "sum_rule_rms_standing": r.get("rms_standing"),
             "turning_over_standing": r.get("ratio"),
-            "units_median_rms_turning": typical, "factor": MOTION_FACTOR,
-            "excluded": False}})
+            "units_median_rms_turning": float(np.median(turning)) if turning else None,
+            "factor": MOTION_FACTOR, "readings": which,
+            "excluded_by_screen": sorted(excluded.get(u, ()))}})
     return out

@@ -28,7 +28,7 @@ from ..diagnosis import core, judge
 from ..diagnosis.core import Thresholds
 from ..diagnosis.errors import DiagnosisError, InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
-from .checks import motion_faults
+from .checks import GLARE_NEAR_DEG, motion_faults
 from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
                          search_clock)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
@@ -423,7 +423,11 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
     """Held-out base residuals by slice (:func:`calibration.diagnosis.core.partition_slices`:
     each dimension partitions the readings, a slice's share is its part of the dimension's
-    excess variance ``sum(r^2) - n floor^2``), as dicts sorted by share."""
+    excess variance ``sum(r^2) - n floor^2``), sorted by share: by unit, photodiode, sweep,
+    sky azimuth, sun distance, motion, motion crossed with the sun's distance
+    (``motion_sun_distance``: rotating or standing, within or beyond
+    :data:`.checks.GLARE_NEAR_DEG` of the sun; its slices carry that distance range as
+    bounds) and, when it varies, sun elevation."""
     obs = fwd.observe(theta_ho)
     n, P = r.shape
     u = inst.pd_unit
@@ -449,6 +453,16 @@ def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
                      [(lo, lo + width) for lo in lows]))
     dims.append(("motion", [inst.rotating[:, None] & full, ~inst.rotating[:, None] & full],
                  ["rotating", "standing"], None))
+    # motion crossed with the sun's distance: whether the moving samples' gap sits near the
+    # sun (glare seen while turning) or everywhere (a lag, a read order)
+    near = sun_dist < GLARE_NEAR_DEG
+    crossed = [(m, n) for m in ("rotating", "standing") for n in (True, False)]
+    dims.append(("motion_sun_distance",
+                 [(inst.rotating if m == "rotating" else ~inst.rotating)[:, None]
+                  & (near if n else ~near) for m, n in crossed],
+                 [f"{m}, {'within' if n else 'beyond'} {GLARE_NEAR_DEG:g} deg of the sun"
+                  for m, n in crossed],
+                 [(0.0, GLARE_NEAR_DEG) if n else (GLARE_NEAR_DEG, 180.0) for _, n in crossed]))
     if np.ptp(sun_el) > 2.0:
         edges = np.quantile(sun_el, [0, 1 / 3, 2 / 3, 1])
         pairs = list(zip(edges[:-1], edges[1:]))
@@ -737,7 +751,11 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
              "base_fit": _base_fit_report(s.theta, L, s.base, work, s.sign),
              "instrument_checks": _instrument_checks(work, s.theta, L, s.base, s.sun),
              "noise_floor_parts": noise.parts()}
-    faults = list(s.screen.faults) + motion_faults(extra["instrument_checks"])
+    # a unit the screen excluded is still checked for failing only in motion, on its
+    # readings before the screen
+    faults = list(s.screen.faults) + motion_faults(
+        extra["instrument_checks"], _instrument_checks(s.inst, s.theta, L, s.base, s.sun),
+        s.screen.faults)
     return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None,
                            noise.rms, noise.method, faults, data,
                            RING_THRESHOLDS.to_dict(), seed, extra)
