@@ -1082,8 +1082,8 @@ def standing_stretches(inst: Instrument) -> np.ndarray:
     The ends are left out because a filter or a lag of the record carries the turn into
     them: a 5-point moving average puts readings 8-16 deg of turn away into the two samples
     next to a turn, and the rotating flag itself is read over a 5-sample window. On a
-    smoothed simulated ring with 30-sample stands, the whole runs read 16 times the noise,
-    their middle halves 0.9 of it.
+    smoothed simulated ring with 30-sample stands the floor from whole runs came out 23 times
+    the noise; the middle halves' standing RMS reads 0.92 of it.
     """
     standing = ~np.asarray(inst.rotating, bool)
     sweep = np.asarray(inst.sweep)
