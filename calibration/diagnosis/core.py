@@ -413,8 +413,9 @@ def whiteness(residual, usable, block, *, alpha: float = WHITENESS_ALPHA,
     (a) and (b) fires on white noise with probability ``alpha`` (0.1 %); ``min_shift``
     keeps a large session's statistical power from calling a misfit of a few per cent of
     the variance non-white. Measured in ``tests/test_noise_whiteness.py``: on white noise of
-    3-8 blocks of 10-130 samples and 1-32 channels the rule fired in none of 3,000
-    sessions each; a 3-, 5- or 9-point moving average is caught in every session of 3
+    3-8 blocks of 10-130 samples and 1-32 channels the rule fired in 0-3 of 3,000
+    sessions each (at most 0.1 %; the second-difference test alone in up to 0.33 %, its
+    estimate skewed on a single short channel); a 3-, 5- or 9-point moving average is caught in every session of 3
     blocks of 90 samples and 32 channels (a ring); with one channel of 3 x 300 samples in
     86, 60 and 63 % (fourth differences need many pairs to see a 0.05 shift).
 
