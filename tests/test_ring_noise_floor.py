@@ -162,13 +162,17 @@ def test_motion_faults_from_screened_checks_exclude_nothing():
                "fails_in_motion": u == 2} for u, t in enumerate([1e-3, 1.2e-3, 9e-3])]
     checks = {"motion": motion, "units_failing_in_motion": [2]}
     unscreened = {"motion": motion, "units_failing_in_motion": [1, 2]}
-    out = motion_faults(checks, unscreened, [{"channel": "u1_p045", "kind": "dead"}])
+    out = motion_faults(checks, unscreened, [{"channel": "u1_p045", "kind": "not_malus"},
+                                             {"channel": "u1", "kind": "too_few"}])
     assert [(f["channel"], f["evidence"]["readings"]) for f in out] == [
         ("u1", "unscreened"), ("u2", "screened")]
     assert out[1]["evidence"]["excluded_by_screen"] == []
     assert out[1]["evidence"]["turning_over_standing"] == pytest.approx(9.0)
     assert out[1]["evidence"]["units_median_rms_turning"] == pytest.approx(1.2e-3)
     assert motion_faults(checks) == out[1:]
+    # a unit the screen excluded for a dead photodiode is no motion failure
+    stuck = motion_faults(checks, unscreened, [{"channel": "u1_p045", "kind": "stuck"}])
+    assert [f["channel"] for f in stuck] == ["u2"]
 
 
 def test_where_crosses_motion_with_sun_distance(late_unit_doc):

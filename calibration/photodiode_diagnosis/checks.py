@@ -66,10 +66,10 @@ import pandas as pd
 
 from .instrument import Instrument
 
-__all__ = ["DISTANCE_BINS_DEG", "GAIN_IDENTIFIABLE_RATIO", "GAIN_MIN_SUN_DISTANCE_DEG", "GLARE_NEAR_DEG", "MIN_SAMPLES", "MOTION_FACTOR", "SIDE_FAMILY_ALPHA",
-           "InstrumentChecks", "check_instrument", "motion_faults", "null_combinations",
-           "sum_rule_gains",
-           "sum_rule_residual", "sun_geometry"]
+__all__ = ["DISTANCE_BINS_DEG", "GAIN_IDENTIFIABLE_RATIO", "GAIN_MIN_SUN_DISTANCE_DEG",
+           "GLARE_NEAR_DEG", "MIN_SAMPLES", "MOTION_FACTOR", "MOTION_SCREEN_KINDS",
+           "SIDE_FAMILY_ALPHA", "InstrumentChecks", "check_instrument", "motion_faults",
+           "null_combinations", "sum_rule_gains", "sum_rule_residual", "sun_geometry"]
 
 DISTANCE_BINS_DEG = (0.0, 20.0, 35.0, 50.0, 70.0, 90.0, 180.0)
 """Edges of the sun-distance bins [deg] of the sum-rule table."""
@@ -457,6 +457,12 @@ def _motion(df: pd.DataFrame, n_units: int) -> pd.DataFrame:
     return out
 
 
+MOTION_SCREEN_KINDS = frozenset({"not_malus", "too_few"})
+"""Fault kinds of the screen that a unit failing only in motion draws (its photodiodes off
+Malus's law while turning, and then too few left): the units so excluded are checked for
+motion on their readings before the screen (:func:`motion_faults`)."""
+
+
 def motion_faults(checks: dict, unscreened: dict | None = None, screen_faults=()) -> list:
     """Fault-list entries of the units that fail only in motion.
 
@@ -466,8 +472,10 @@ def motion_faults(checks: dict, unscreened: dict | None = None, screen_faults=()
         :meth:`InstrumentChecks.to_dict` of a session's screened readings.
     unscreened : dict, optional
         The same checks of the readings before the fault screen: they name a unit whose
-        photodiodes the screen excluded (their readings off Malus's law while the ring
-        turns), which the screened checks no longer see.
+        photodiodes the screen excluded for leaving Malus's law only
+        (:data:`MOTION_SCREEN_KINDS`: their readings off it while the ring turns), which the
+        screened checks no longer see; a unit with a dead, stuck, zero, saturated or
+        duplicated photodiode is not named from them.
     screen_faults : sequence of dict
         The screen's faults (``channel``, ``kind``), to tell which units it excluded.
 
@@ -498,7 +506,8 @@ def motion_faults(checks: dict, unscreened: dict | None = None, screen_faults=()
         seen = {u for u, _, _ in named}
         named += [(int(u), unscreened, "unscreened")
                   for u in unscreened.get("units_failing_in_motion", [])
-                  if int(u) in excluded and int(u) not in seen]
+                  if int(u) in excluded and int(u) not in seen
+                  and excluded[int(u)] <= MOTION_SCREEN_KINDS]
     out = []
     for u, source, which in sorted(named, key=lambda x: x[0]):
         rows = {int(r["unit"]): r for r in source.get("motion", [])}
