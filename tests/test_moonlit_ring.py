@@ -71,7 +71,9 @@ def test_moonlit_session_diagnosed_with_the_moon_as_the_light():
     residual than 60-120 deg."""
     rep = diagnose(moonlit_session(), ("fov",), light="moon")
     assert rep.extra["heading_error"]["base_deg"] < 0.1
-    assert rep.verdict.gap_before > 2 * rep.noise_floor
+    # against the second-difference RMS: the glow near the Moon leaves residuals that are
+    # not white reading to reading, so the report's floor may be unknown
+    assert rep.verdict.gap_before > 2 * rep.extra["noise_floor_parts"]["white_noise_rms"]
     rms = {w.label: w.rms for w in rep.where if w.dimension == "sun_distance_deg"}
     assert rms["30-60"] > max(rms["60-90"], rms["90-120"])
 

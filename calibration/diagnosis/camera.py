@@ -45,7 +45,9 @@ sky misses raw frames, and which camera or sky effect explains it.
    folds are scored.
 5. **Noise floor.** :func:`calibration.diagnosis.core.noise_floor` of the base model's
    held-out residuals, second differences along each row of super-pixels (never across two
-   rows or frames).
+   rows or frames), where they are white (:func:`calibration.diagnosis.core.checked_floor`);
+   else unknown (a frame holds no repeated readings of one pixel), and the verdict measures
+   against the whole gap.
 6. **Candidates** (each fitted with ``d_max`` when that is free, by
    :func:`scipy.optimize.least_squares` on the calibration folds, all rendered by the camera
    simulator with the candidate's parameters): ``lens`` (principal-point offset ``dcx,
@@ -211,6 +213,11 @@ class CameraFrames:
                 raise CameraInputError(f"masks: give one {frames[0].raw.shape} bool array per "
                                        f"frame ({len(frames)})")
             object.__setattr__(self, "masks", masks)
+
+
+CAMERA_NOISE_METHOD = ("second differences of the base model's held-out residuals along rows "
+                       "of super-pixels")
+"""How the camera's noise floor is measured where the residuals are white."""
 
 
 def load_frames(paths) -> CameraFrames:
@@ -610,7 +617,9 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
     ok0 = all(f.converged for f in cv.fits["base"]) and fit0.converged
     res0 = residual("base")
     line = np.concatenate([i * 100000 + p.geometry["row"] for i, p in enumerate(prepared)])
-    floor, _ = core.noise_floor(res0, np.repeat(use[:, None], 4, 1), line)
+    noise = core.checked_floor(res0, np.repeat(use[:, None], 4, 1), line, CAMERA_NOISE_METHOD,
+                               block_name="row of super-pixels")
+    floor = noise.value
     G0 = core.rms(res0, use[:, None] & np.ones((1, 4), bool))
     n_sp = int(use.sum())
     N = 3 * n_sp                                     # the four y_k sum to zero
@@ -641,7 +650,8 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
             at_bound=core.at_bound(P[:, :eff.k], eff.bounds[0], eff.bounds[1],
                                    eff.parameter_names, null=eff.null),
             details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
-    rows, dec = core.judge(rows, {"base": res0, **residuals}, block, floor, thresholds)
+    rows, dec = core.judge(rows, {"base": res0, **residuals}, block, floor, thresholds,
+                           floor_note=noise.note)
     effect = dec.effect
     best = next((r.effect for r in rows if r.available), None)
     named = best is not None and effect == best
@@ -665,9 +675,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
         instrument="camera", metric=METRIC, unit="1", verdict=verdict, candidates=rows,
         where=_slices(geom, r2, floor, margin), where_after=_slices(geom, r2_after, floor,
                                                                     margin),
-        noise_floor=floor,
-        noise_floor_method="second differences of the base model's held-out residuals along "
-                           "rows of super-pixels",
+        noise_floor=noise.rms, noise_floor_method=noise.method,
         data={"frames": [f.name for f in data.frames], "usable_superpixels": n_sp,
               "flagged_superpixels": int((~use).sum()),
               "masked_pixels": int(sum(m.sum() for m in masks if m is not None)),
@@ -676,7 +684,8 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                                    " super-pixels") + ", round-robin into folds",
                         "folds": folds, "held_out_values": N, "calibration_values": n_cal}},
         thresholds=thresholds.to_dict(), seed=seed,
-        extra={"base": {"d_max": d0, "d_max_fitted": dmax_known is None,
+        extra={"noise_floor_whiteness": noise.whiteness.to_dict(),
+               "base": {"d_max": d0, "d_max_fitted": dmax_known is None,
                         "d_max_se": d0_se,
                         "converged": ok0},
                "sun": [{"elevation_deg": p.sun_el, "azimuth_deg": p.sun_az}

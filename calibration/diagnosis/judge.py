@@ -157,7 +157,7 @@ def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int) -> 
 
 def verdict(rows, held: dict, block, floor: float, thresholds: core.Thresholds,
             rng: np.random.Generator, *, base: str = "base",
-            scale: float = 1.0) -> tuple[list, Verdict]:
+            scale: float = 1.0, floor_note: str | None = None) -> tuple[list, Verdict]:
     """Rank, judge paired, decide and measure the shrink (module doc, step 3).
 
     Parameters
@@ -176,6 +176,9 @@ def verdict(rows, held: dict, block, floor: float, thresholds: core.Thresholds,
         Of the block bootstrap of the shrink.
     scale : float
         Report unit per residual unit.
+    floor_note : str, optional
+        Said first in the verdict's reason: a floor unknown and given as 0
+        (:attr:`.core.Floor.note`).
 
     Returns
     -------
@@ -187,7 +190,7 @@ def verdict(rows, held: dict, block, floor: float, thresholds: core.Thresholds,
         block); the parameters of a named effect.
     """
     ranked, decision = core.judge(list(rows), held, block, floor, thresholds, base=base,
-                                  scale=scale)
+                                  scale=scale, floor_note=floor_note)
     avail = [c for c in ranked if c.available]
     best = avail[0] if avail else None
     named = best is not None and decision.effect == best.effect

@@ -4,7 +4,9 @@
    the LSM's mounting errors, transmittance terms and ``d_max``) is fitted on calibration
    folds of whole sweeps and predicts the held-out sweeps (:func:`.core.assign_folds`); the
    gap is the held-out RMS of the channel residuals [mV].
-2. **Noise floor.** :func:`.core.noise_floor` of the base-fit residuals along each sweep.
+2. **Noise floor.** :func:`.core.noise_floor` of the base-fit residuals along each sweep,
+   where they are white (:func:`.core.checked_floor`); else unknown (the sensor's tables
+   hold no repeated standing readings), and the verdict measures against the whole gap.
 3. **Where.** Held-out base residuals by channel, sweep, illuminance and sun elevation
    (:func:`.core.partition_slices`), and the amplitudes of the harmonics of ``2 phi`` and of
    the turntable angle (``extra["harmonics"]``).
@@ -222,8 +224,9 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
     cands = [e for e in cands if e.name not in unavailable]
     full_base = fit_model(ctx, data.U, data.valid, sigma_V=5e-4)
     r_full = predict(ctx, full_base, None) - data.U
-    floor, floor_c = core.noise_floor(r_full, data.valid, ctx.block)
-    sigma = max(floor, 1e-5)
+    noise = core.checked_floor(r_full, data.valid, ctx.block, NOISE_METHOD, block_name="sweep")
+    floor, floor_c = noise.value, core.noise_floor(r_full, data.valid, ctx.block)[1]
+    sigma = max(noise.white_rms, 1e-5)
     res, fold_fits, failed = cross_validate(data, fold_of, cands, sigma)
     unavailable.update(failed)
     tried = [e for e in cands if e.name not in failed]
@@ -257,7 +260,8 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
             rows[0].details["all_data_fit"] = why
     rows += [Candidate.unavailable(name, msg) for name, msg in unavailable.items()]
     rows, verdict = judge.verdict(rows, res, ctx.block, 1e3 * floor, thresholds,
-                                  np.random.default_rng(seed), scale=1e3)
+                                  np.random.default_rng(seed), scale=1e3,
+                                  floor_note=noise.note)
     best = rows[0] if rows and rows[0].available else None
     after = best.effect if best is not None else "base"
     phi, _ = geometry(ctx)
@@ -270,8 +274,9 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
                    if best is not None else None)
     return DiagnosisReport(
         instrument="three_pair", metric=METRIC, unit="mV", verdict=verdict,
-        candidates=rows, where=where, where_after=where_after, noise_floor=1e3 * floor,
-        noise_floor_method=NOISE_METHOD, faults=[],
+        candidates=rows, where=where, where_after=where_after,
+        noise_floor=None if noise.rms is None else 1e3 * floor,
+        noise_floor_method=noise.method, faults=[],
         data={**data.source, "samples": int(ctx.n), "readings_used": int(data.valid.sum()),
               "cleaning": data.cleaning,
               "split": {"method": "whole sweeps/time blocks, round-robin in time order",
@@ -280,6 +285,7 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
                         "calibration_values": n_cal}},
         thresholds=thresholds.to_dict(), seed=seed,
         extra={"noise_floor_per_channel_mV": (1e3 * floor_c).tolist(),
+               "noise_floor_whiteness": noise.whiteness.to_dict(),
                "harmonics": harmonics(data, res["base"], phi),
                "base_fit": {"parameters": base_parameters(full_base),
                             "converged": full_base.converged},

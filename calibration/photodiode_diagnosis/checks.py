@@ -66,9 +66,10 @@ import pandas as pd
 
 from .instrument import Instrument
 
-__all__ = ["DISTANCE_BINS_DEG", "GAIN_IDENTIFIABLE_RATIO", "GAIN_MIN_SUN_DISTANCE_DEG", "GLARE_NEAR_DEG", "MIN_SAMPLES", "MOTION_FACTOR", "SIDE_FAMILY_ALPHA",
-           "InstrumentChecks", "check_instrument", "null_combinations", "sum_rule_gains",
-           "sum_rule_residual", "sun_geometry"]
+__all__ = ["DISTANCE_BINS_DEG", "GAIN_IDENTIFIABLE_RATIO", "GAIN_MIN_SUN_DISTANCE_DEG",
+           "GLARE_NEAR_DEG", "MIN_SAMPLES", "MOTION_FACTOR", "MOTION_SCREEN_KINDS",
+           "SIDE_FAMILY_ALPHA", "InstrumentChecks", "check_instrument", "motion_faults",
+           "null_combinations", "sum_rule_gains", "sum_rule_residual", "sun_geometry"]
 
 DISTANCE_BINS_DEG = (0.0, 20.0, 35.0, 50.0, 70.0, 90.0, 180.0)
 """Edges of the sun-distance bins [deg] of the sum-rule table."""
@@ -453,4 +454,70 @@ def _motion(df: pd.DataFrame, n_units: int) -> pd.DataFrame:
     above_units = out.rms_turning > MOTION_FACTOR * typical
     above_self = (out.ratio > MOTION_FACTOR) | ~np.isfinite(out.rms_standing)
     out["fails_in_motion"] = (above_units & above_self).fillna(False).astype(bool)
+    return out
+
+
+MOTION_SCREEN_KINDS = frozenset({"not_malus", "too_few"})
+"""Fault kinds of the screen that a unit failing only in motion draws (its photodiodes off
+Malus's law while turning, and then too few left): the units so excluded are checked for
+motion on their readings before the screen (:func:`motion_faults`)."""
+
+
+def motion_faults(checks: dict, unscreened: dict | None = None, screen_faults=()) -> list:
+    """Fault-list entries of the units that fail only in motion.
+
+    Parameters
+    ----------
+    checks : dict
+        :meth:`InstrumentChecks.to_dict` of a session's screened readings.
+    unscreened : dict, optional
+        The same checks of the readings before the fault screen: they name a unit whose
+        photodiodes the screen excluded for leaving Malus's law only
+        (:data:`MOTION_SCREEN_KINDS`: their readings off it while the ring turns), which the
+        screened checks no longer see; a unit with a dead, stuck, zero, saturated or
+        duplicated photodiode is not named from them.
+    screen_faults : sequence of dict
+        The screen's faults (``channel``, ``kind``), to tell which units it excluded.
+
+    Returns
+    -------
+    list of dict
+        ``{"channel": "u<k>", "kind": "fails_in_motion", "evidence": {...}}`` per unit named
+        by the screened checks, or by the unscreened ones among the units the screen
+        excluded: its sum-rule residual RMS turning and standing (at the turning samples'
+        sun distances), their ratio, the units' median turning RMS, the factor both must
+        exceed (:data:`MOTION_FACTOR`), which checks named it (``readings``: ``screened``
+        or ``unscreened``) and ``excluded_by_screen`` (the screen's fault kinds of its
+        photodiodes, empty when none). This fault excludes nothing: standing, the unit obeys
+        the rule, and a lag or read order that spoils it while turning is what the
+        diagnosis's candidates are for.
+    """
+    def unit_of(channel: str) -> int | None:
+        head = str(channel).split("_")[0]
+        return int(head[1:]) if head.startswith("u") and head[1:].isdigit() else None
+
+    excluded: dict = {}
+    for f in screen_faults:
+        u = unit_of(f.get("channel", ""))
+        if u is not None:
+            excluded.setdefault(u, set()).add(str(f.get("kind")))
+    named = [(int(u), checks, "screened") for u in checks.get("units_failing_in_motion", [])]
+    if unscreened is not None:
+        seen = {u for u, _, _ in named}
+        named += [(int(u), unscreened, "unscreened")
+                  for u in unscreened.get("units_failing_in_motion", [])
+                  if int(u) in excluded and int(u) not in seen
+                  and excluded[int(u)] <= MOTION_SCREEN_KINDS]
+    out = []
+    for u, source, which in sorted(named, key=lambda x: x[0]):
+        rows = {int(r["unit"]): r for r in source.get("motion", [])}
+        turning = [r["rms_turning"] for r in rows.values() if r.get("rms_turning") is not None]
+        r = rows.get(u, {})
+        out.append({"channel": f"u{u}", "kind": "fails_in_motion", "evidence": {
+            "sum_rule_rms_turning": r.get("rms_turning"),
+            "sum_rule_rms_standing": r.get("rms_standing"),
+            "turning_over_standing": r.get("ratio"),
+            "units_median_rms_turning": float(np.median(turning)) if turning else None,
+            "factor": MOTION_FACTOR, "readings": which,
+            "excluded_by_screen": sorted(excluded.get(u, ()))}})
     return out

@@ -28,6 +28,7 @@ from ..diagnosis import core, judge
 from ..diagnosis.core import Thresholds
 from ..diagnosis.errors import DiagnosisError, InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
+from .checks import GLARE_NEAR_DEG, motion_faults
 from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
                          search_clock)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
@@ -422,7 +423,11 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
 def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
     """Held-out base residuals by slice (:func:`calibration.diagnosis.core.partition_slices`:
     each dimension partitions the readings, a slice's share is its part of the dimension's
-    excess variance ``sum(r^2) - n floor^2``), as dicts sorted by share."""
+    excess variance ``sum(r^2) - n floor^2``), sorted by share: by unit, photodiode, sweep,
+    sky azimuth, sun distance, motion, motion crossed with the sun's distance
+    (``motion_sun_distance``: rotating or standing, within or beyond
+    :data:`.checks.GLARE_NEAR_DEG` of the sun; its slices carry that distance range as
+    bounds) and, when it varies, sun elevation."""
     obs = fwd.observe(theta_ho)
     n, P = r.shape
     u = inst.pd_unit
@@ -448,6 +453,16 @@ def _slices(inst: Instrument, fwd: Forward, theta_ho, r, w, floor):
                      [(lo, lo + width) for lo in lows]))
     dims.append(("motion", [inst.rotating[:, None] & full, ~inst.rotating[:, None] & full],
                  ["rotating", "standing"], None))
+    # motion crossed with the sun's distance: whether the moving samples' gap sits near the
+    # sun (glare seen while turning) or everywhere (a lag, a read order)
+    near = sun_dist < GLARE_NEAR_DEG
+    crossed = [(m, n) for m in ("rotating", "standing") for n in (True, False)]
+    dims.append(("motion_sun_distance",
+                 [(inst.rotating if m == "rotating" else ~inst.rotating)[:, None]
+                  & (near if n else ~near) for m, n in crossed],
+                 [f"{m}, {'within' if n else 'beyond'} {GLARE_NEAR_DEG:g} deg of the sun"
+                  for m, n in crossed],
+                 [(0.0, GLARE_NEAR_DEG) if n else (GLARE_NEAR_DEG, 180.0) for _, n in crossed]))
     if np.ptp(sun_el) > 2.0:
         edges = np.quantile(sun_el, [0, 1 / 3, 2 / 3, 1])
         pairs = list(zip(edges[:-1], edges[1:]))
@@ -665,9 +680,8 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     unavailable = {e.name: why for e in cand
                    if (why := e.available_at(sun_el) or e.applicable_to(s.work)) is not None}
     held = _cross_validate(s, cand, folds, unavailable)
-    white, _ = core.noise_floor(held.residual["base"], held.usable, s.work.sweep)
-    replica = _replica_gap(s, folds, white, seed)
-    floor = max(white, replica)
+    noise = _noise_floor(s, held, folds, seed)
+    floor = noise.value
     n_cal = int(held.usable.sum() * (1 - 1 / np.unique(folds).size))
     _continue_stopped(held, cand, floor, n_cal, s.sigma)
     rows = _candidate_rows(s, held, cand, floor, n_cal)
@@ -690,15 +704,16 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     names = ["base"] + held.available([e.name for e in cand])
     ranked, verdict = judge.verdict([Candidate.from_dict(r) for r in rows],
                                     {k: held.held(k) for k in names}, s.work.sweep, floor,
-                                    RING_THRESHOLDS, np.random.default_rng(seed))
-    return _report(s, held, ranked, verdict, (floor, white, replica), n_folds, sun_el, seed)
+                                    RING_THRESHOLDS, np.random.default_rng(seed),
+                                    floor_note=noise.floor.note)
+    return _report(s, held, ranked, verdict, noise, n_folds, sun_el, seed)
 
 
-def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, n_folds: int,
-            sun_el, seed: int) -> DiagnosisReport:
+def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _Noise,
+            n_folds: int, sun_el, seed: int) -> DiagnosisReport:
     """The report: where the base model's held-out gap lies, the heading error of the base
     model and of a named effect, the base fit and the model-free checks."""
-    floor, white, replica = floors
+    floor = noise.value
     work, L = s.work, s.layout
     output = instrument_output(work)
     named = verdict.best_candidate is not None and verdict.effect == verdict.best_candidate
@@ -736,9 +751,14 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, 
                  "best_deg": heading_error.get(best) if best in heading_error else None},
              "base_fit": _base_fit_report(s.theta, L, s.base, work, s.sign),
              "instrument_checks": _instrument_checks(work, s.theta, L, s.base, s.sun),
-             "noise_floor_parts": {"white_noise_rms": white, "replica_held_out_gap": replica}}
-    return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None, floor,
-                           NOISE_FLOOR_METHOD, s.screen.faults, data,
+             "noise_floor_parts": noise.parts()}
+    # a unit the screen excluded is still checked for failing only in motion, on its
+    # readings before the screen
+    faults = list(s.screen.faults) + motion_faults(
+        extra["instrument_checks"], _instrument_checks(s.inst, s.theta, L, s.base, s.sun),
+        s.screen.faults)
+    return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None,
+                           noise.rms, noise.method, faults, data,
                            RING_THRESHOLDS.to_dict(), seed, extra)
 
 
@@ -1029,6 +1049,90 @@ NOISE_FLOOR_METHOD = ("the larger of the white-noise RMS (second differences alo
                       "of the session (its fit plus white noise at that RMS, split and fitted "
                       "as the data)")
 
+NOISE_FLOOR_STANDING = ("; the floor is the larger of that standing RMS and the held-out gap "
+                        "of the base model on a noise-only replica of the session (its fit "
+                        "plus white noise at that RMS, split and fitted as the data)")
+"""Said after :data:`calibration.diagnosis.core.STANDING_METHOD` of a ring's floor."""
+
+
+@dataclass(frozen=True)
+class _Noise:
+    """The ring's noise floor: the whiteness-checked estimate (:func:`.core.checked_floor`)
+    and the replicas' held-out gap (None when the floor is unknown)."""
+
+    floor: core.Floor
+    replica: float | None
+
+    @property
+    def rms(self) -> float | None:
+        if self.floor.rms is None:
+            return None
+        return max(self.floor.rms, self.replica)
+
+    @property
+    def value(self) -> float:
+        """The floor the verdict measures against (0 when unknown: the whole gap)."""
+        return 0.0 if self.rms is None else self.rms
+
+    @property
+    def method(self) -> str:
+        if self.floor.rms is None or self.floor.standing_dof == 0:
+            return self.floor.method
+        return self.floor.method + NOISE_FLOOR_STANDING
+
+    def parts(self) -> dict:
+        return dict(self.floor.parts(), replica_held_out_gap=self.replica)
+
+
+def standing_stretches(inst: Instrument) -> np.ndarray:
+    """Standing stretch of every sample: one id per run of consecutive samples of one sweep
+    that are not rotating (:attr:`Instrument.rotating`), -1 for rotating samples and for the
+    first and last quarter of each run.
+
+    The ends are left out because a filter or a lag of the record carries the turn into
+    them: a 5-point moving average puts readings 8-16 deg of turn away into the two samples
+    next to a turn, and the rotating flag itself is read over a 5-sample window. On a
+    smoothed simulated ring with 30-sample stands the floor from whole runs came out 23 times
+    the noise; the middle halves' standing RMS reads 0.92 of it.
+    """
+    standing = ~np.asarray(inst.rotating, bool)
+    sweep = np.asarray(inst.sweep)
+    new = standing & np.r_[True, ~standing[:-1] | (sweep[1:] != sweep[:-1])]
+    run_id = np.where(standing, np.cumsum(new) - 1, -1)
+    if not standing.any():
+        return run_id
+    idx = np.flatnonzero(standing)
+    ids = run_id[idx]
+    length = np.bincount(ids)
+    first = np.r_[0, np.flatnonzero(np.diff(ids)) + 1]
+    pos = np.arange(idx.size) - np.repeat(first, length[length > 0])
+    quarter = length[ids] // 4
+    keep = (pos >= quarter) & (pos < length[ids] - quarter)
+    out = np.full(run_id.shape, -1)
+    out[idx[keep]] = ids[keep]
+    return out
+
+
+def _noise_floor(s: _Session, held: judge.HeldOut, folds, seed: int) -> _Noise:
+    """The session's noise floor from the base model's held-out residuals.
+
+    Whiteness is tested on the held-out residuals of the model that fits best (the base or
+    a candidate: :func:`.core.checked_floor`). Where they are white along each sweep,
+    :data:`NOISE_FLOOR_METHOD`. Where they are not
+    (smoothed or pre-filtered readings: their second differences read below the noise),
+    the noise RMS from the scatter of the standing stretches' readings
+    (:func:`standing_stretches`) in its place, with the replicas' gap on top; without
+    standing readings the floor is unknown and the verdict measures against a zero floor.
+    """
+    models = ["base"] + held.available(list(held.fits))
+    best = min(models, key=lambda k: core.rms(held.held(k)))
+    floor = core.checked_floor(held.residual["base"], held.usable, s.work.sweep,
+                               NOISE_FLOOR_METHOD, standing_stretches(s.work),
+                               block_name="sweep", tested=held.residual[best])
+    if floor.rms is None:
+        return _Noise(floor, None)
+    return _Noise(floor, _replica_gap(s, folds, floor.rms, seed))
+
 
 def _replica_gap(s: _Session, folds, white: float, seed: int) -> float:
     """Held-out gap [relative] the base model reaches on a noise-only replica of the session.
@@ -1305,7 +1409,7 @@ def result_dict(report: DiagnosisReport) -> dict:
     split = data.pop("split", None)
     if split is not None:
         split["held_out_readings"] = split.pop("held_out_values")
-    floor = None if report.noise_floor is None else {
+    floor = None if report.noise_floor is None and not report.noise_floor_method else {
         "rms": report.noise_floor, "method": report.noise_floor_method, **parts}
     return {"schema": LEGACY_SCHEMA, "instrument": report.instrument, "verdict": verdict,
             "thresholds": d["thresholds"], "candidates": d["candidates"], "where": d["where"],

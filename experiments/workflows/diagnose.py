@@ -476,8 +476,10 @@ def _diagnose_cmd(args) -> int:
     print(f"verdict: {v.effect} ({v.reason})")
     if v.gap_before is not None:
         se = "" if v.shrink_se is None else f" +- {100 * v.shrink_se:.1f}"
+        floor = ("unknown" if report.noise_floor is None
+                 else f"{report.noise_floor:.4g}{su}")
         print(f"gap {v.gap_before:.4g} -> {v.gap_after:.4g}{su} (noise floor "
-              f"{report.noise_floor:.4g}{su}), shrink {100 * v.shrink:.1f}{se} %")
+              f"{floor}), shrink {100 * v.shrink:.1f}{se} %")
     print(f"| effect | held-out gap [{u}] | score | explains |")
     for c in report.candidates:
         if c.available:
