@@ -489,13 +489,25 @@ class _Session:
     max_iter: int
 
 
+_FEWER = {1: "no unit", 2: "fewer than two units"}
+
+
+def _units_needed(inst: Instrument) -> int:
+    """Working units a session needs: one when an analyser turns (one unit sweeps every
+    polarizer angle, and the sky's angle of polarization at one view fixes the heading
+    modulo 180 deg), else two (fixed units each read one angle per photodiode; two views
+    are what tell the sky's pattern from the instrument's polarizer offsets)."""
+    return 1 if inst.pd_angle_row_deg is not None else 2
+
+
 def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
     """Screen the faults and fit the base model: ``(session, None)``, or ``(None, (screen,
     why))`` when fewer than two units read a usable sky."""
     scr = screen(inst)
-    if scr.unit_ok.sum() < 2:
-        return None, (scr, f"fewer than two units keep three working photodiodes "
-                           f"({len(scr.faults)} faults)")
+    need = _units_needed(inst)
+    if scr.unit_ok.sum() < need:
+        return None, (scr, f"{_FEWER[need]} keep{'s' if need == 1 else ''} enough working "
+                           f"photodiodes ({len(scr.faults)} faults)")
     work = replace(inst, flagged=~scr.reading_ok)
     base = Forward(_thin(work), sun=sun)
     L = base.layout
@@ -513,8 +525,8 @@ def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
     outliers = malus_outliers(inst, scr, full.residual(plain.theta), full.usable)
     if outliers is not scr:
         scr = outliers
-        if scr.unit_ok.sum() < 2:
-            return None, (scr, "fewer than two units follow Malus's law")
+        if scr.unit_ok.sum() < need:
+            return None, (scr, f"{_FEWER[need]} follow{'s' if need == 1 else ''} Malus's law")
         work, base, plain, full = _refit(inst, scr, plain.theta, sun, sign, max_iter)
     start = plain.theta.copy()
     start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
