@@ -227,6 +227,16 @@ class Forward:
             held[self.layout.scale] = True
         return held
 
+    def absorbed_by_profile(self) -> np.ndarray:
+        """Parameters (size,) bool that the profiled radiance absorbs whatever the readings
+        are: the gains of photodiodes profiled each on their own (normalised readings of a
+        rotating analyser, where each photodiode's radiance and polarized radiance per
+        half-turn take up its gain). Held in every fit and not reported as fitted."""
+        out = np.zeros(self.layout.size, bool)
+        if self._profile_member is not self.member:
+            out[self.layout.lam] = True
+        return out
+
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
         """True headings [deg, clockwise from north] of every sample."""

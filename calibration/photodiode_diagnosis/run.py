@@ -726,6 +726,10 @@ candidate's angle of polarization with the base sky's."""
 def _unreadable(inst: Instrument, cand, sun: SunTrack, skip) -> dict:
     """``{name: "not applicable: <reason>"}`` of the candidates the readings cannot tell.
 
+    A candidate that acts on the yaw alone (a yaw scale, which stretches the turn within a
+    sweep) is not applicable when a probe of its parameters (5 % of the way from its null
+    to its upper bound) leaves every recorded yaw as it is: no sweep turns.
+
     Normalised readings keep no degree of polarization (:meth:`Forward.held_by_readings`):
     their fit reads the angle of polarization alone. A candidate that changes the degree of
     polarization (or the radiance) the units see but not their angle of polarization (a
@@ -737,14 +741,22 @@ def _unreadable(inst: Instrument, cand, sun: SunTrack, skip) -> dict:
     (round-off of the Stokes arithmetic is below 1e-9 deg) is none. Candidates with a sky of
     their own (they change the angle near the neutral points) and geometric or output-stage
     ones (they act on the headings, the times or the readings) are not tested."""
+    out = {}
+    for e in cand:
+        if e.name in skip or not _acts_on_yaw_only(e):
+            continue
+        p = np.asarray(e.null, float)
+        p = p + 0.05 * np.where(np.isfinite(e.upper), np.asarray(e.upper, float) - p, 1.0)
+        if np.array_equal(e.yaw(inst, p), inst.yaw_deg):
+            out[e.name] = (f"not applicable: {e.name} acts on the yaw turned within a sweep, "
+                           "and no sweep turns (the recorded yaw is constant within each)")
     if inst.readings_kind != "normalised":
-        return {}
+        return out
     rows = np.unique(np.linspace(0, inst.n - 1, min(UNREADABLE_SAMPLES, inst.n)).astype(int))
     sub = inst.subset(rows)
-    out = {}
     base = None
     for e in cand:
-        if e.name in skip or e.geometric or e.output_only or _has_sky(e):
+        if e.name in skip or e.name in out or e.geometric or e.output_only or _has_sky(e):
             continue
         fe = Forward(sub, e, sun=sun)
         if base is None:
@@ -765,6 +777,17 @@ def _unreadable(inst: Instrument, cand, sun: SunTrack, skip) -> dict:
                            "polarization the units see, not their angle of polarization "
                            f"(at most {change:.1g} deg over its starts)")
     return out
+
+
+def _acts_on_yaw_only(effect) -> bool:
+    """True for a candidate whose model changes the recorded yaw alone (neither the times,
+    the attitude, the sky nor the readings)."""
+    kind = type(effect)
+    return (kind.yaw is not RingEffect.yaw and kind.time_shift_s is RingEffect.time_shift_s
+            and kind.attitude is RingEffect.attitude and not _has_sky(effect)
+            and kind.modify is RingEffect.modify and kind.observe is RingEffect.observe
+            and kind.additive is RingEffect.additive
+            and not effect.output_only)
 
 
 def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, floors, n_folds: int,
@@ -1318,14 +1341,15 @@ def _instrument_checks(inst: Instrument, theta, L, fwd, sun) -> dict:
 def _base_fit_report(theta, L, fwd, inst, sign):
     """The base fit's parameters by unit and photodiode; ``None`` for those the screen
     excluded (they were never fitted) and for those the readings cannot inform
-    (:meth:`Forward.held_by_readings`: held, never fitted), with what the data cannot
+    (:meth:`Forward.held_by_readings`, :meth:`Forward.absorbed_by_profile`: held, never
+    fitted), with what the data cannot
     recover (``not_recoverable``, :attr:`Instrument.unrecoverable`) and the fitted
     parameters that ended at a bound of the fit (``at_bound``: a bound that binds is a
     parameter taking up a misfit of the model, not a measurement)."""
     pd_fitted = fwd.usable.any(axis=0)
     unit_fitted = np.zeros(L.n_units, bool)
     unit_fitted[inst.pd_unit[pd_fitted]] = True
-    held = fwd.held_by_readings()
+    held = fwd.held_by_readings() | fwd.absorbed_by_profile()
 
     def per_unit(values):
         return {f"u{u}": float(d) if unit_fitted[u] else None for u, d in enumerate(values)}
@@ -1345,7 +1369,7 @@ def _base_fit_report(theta, L, fwd, inst, sign):
             "elevation_offset_mean_deg": (float(np.mean(el[unit_fitted])) if unit_fitted.any()
                                           else None),
             "azimuth_offset_deg": per_unit(point[L.n_units:]),
-            "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g))),
+            "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g)), held[L.lam]),
             "offset": per_pd(theta[L.off], lambda o: float(o * fwd.level), held[L.off]),
             "heading_offset_deg": [float(h) for h in theta[L.heading]],
             "at_bound": _base_at_bound(theta, L, fwd, inst, held),
