@@ -149,6 +149,7 @@ def test_a_turning_crossed_pair_is_one_working_unit():
     assert scr.faults[0]["kind"] == "too_few"
     assert scr.faults[0]["evidence"]["needed"] == "3 at distinct polarizer angles"
     assert _units_needed(fixed) == 2
+    assert _units_needed(inst, np.array([False])) == 2     # no working unit turns
 
 
 def test_parameters_the_readings_cannot_inform_stay_held():

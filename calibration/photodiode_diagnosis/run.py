@@ -32,7 +32,7 @@ from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, c
                          search_clock)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
 from .errors import InstrumentDataError, PointingCalibrationError, SunTooLowError
-from .faults import bright_glare, malus_outliers, screen
+from .faults import bright_glare, malus_outliers, rotating_units, screen
 from .fit import FIT_SAMPLES, fit, fit_headings, fit_pinned, orient
 from .fit import thin as _thin
 from .forward import Forward, SunTrack
@@ -504,19 +504,21 @@ class _Session:
 _FEWER = {1: "no unit", 2: "fewer than two units"}
 
 
-def _units_needed(inst: Instrument) -> int:
-    """Working units a session needs: one when an analyser turns (one unit sweeps every
-    polarizer angle, and the sky's angle of polarization at one view fixes the heading
+def _units_needed(inst: Instrument, unit_ok=None) -> int:
+    """Working units a session needs: one when a working unit's analyser turns (it sweeps
+    every polarizer angle, and the sky's angle of polarization at one view fixes the heading
     modulo 180 deg), else two (fixed units each read one angle per photodiode; two views
-    are what tell the sky's pattern from the instrument's polarizer offsets)."""
-    return 1 if inst.pd_angle_row_deg is not None else 2
+    are what tell the sky's pattern from the instrument's polarizer offsets). ``unit_ok``
+    (U,) bool: the working units (default: all)."""
+    turning = rotating_units(inst)
+    return 1 if turning[slice(None) if unit_ok is None else unit_ok].any() else 2
 
 
 def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
     """Screen the faults and fit the base model: ``(session, None)``, or ``(None, (screen,
     why))`` when fewer than two units read a usable sky."""
     scr = screen(inst)
-    need = _units_needed(inst)
+    need = _units_needed(inst, scr.unit_ok)
     if scr.unit_ok.sum() < need:
         return None, (scr, f"{_FEWER[need]} keep{'s' if need == 1 else ''} enough working "
                            f"photodiodes ({len(scr.faults)} faults)")
