@@ -7,27 +7,36 @@ is treated as a plane-parallel layer of its own (the independent pixel approxima
 Cahalan et al. [1]_). Below it, looking up at a zenith-angle cosine ``mu``, in the unit of
 :mod:`skysim.multiple` (incident solar flux ``pi`` per unit area normal to the beam):
 
-- **Single scattering** by the droplets ([2]_, sect. 3). A droplet much larger than the
-  wavelength (size parameter 114 here) puts half of the light it scatters into its narrow
-  diffraction lobe (the extinction paradox, van de Hulst [3]_, sect. 8.22; in the droplets'
-  phase function half of the scattering lies within 6.7 deg of the forward direction,
-  tested). Light scattered into the lobe keeps going with the beam, so the beam weakens as
-  ``exp(-tau'/mu0)``, ``tau' = (1 - f) tau``, ``f = 1/2`` (:data:`DIFFRACTION_SHARE`; the
-  scaling of Joseph et al. [4]_ with the lobe as the truncated part), and
-  ``I_1 = P11(Theta) s``, ``(Q_1, U_1) = P12(Theta) s (cos 2chi, sin 2chi)`` with
+- **The forward lobe**: three quarters of what these droplets scatter stays within 27 deg
+  of the forward direction, half within 6.7 deg (their diffraction peak: the extinction
+  paradox, van de Hulst [3]_, sect. 8.22; tested). The phase function is split into that
+  lobe, ``f = 0.64`` of the scattering (the diffraction peak, tapering off by 30 deg), and a
+  wide part (:mod:`skysim.forward_lobe`).
+- **Single scattering** by the droplets ([2]_, sect. 3), ``I_1 = P11(Theta) s``,
+  ``(Q_1, U_1) = P12(Theta) s_p (cos 2chi, sin 2chi)``, ``Theta`` the scattering angle and
+  ``chi`` the AoP of the direction perpendicular to the scattering plane. Through the wide
+  part, the beam weakens only by what the wide part takes from it (the lobe's light keeps
+  going with it, the delta-function scaling of Potter and of Joseph et al. [4]_):
   ``s = w h' / (4 (1 - f))`` (:func:`single_scatter_factor`),
-  ``h' = mu0 (exp(-tau'/mu0) - exp(-tau'/mu)) / (mu0 - mu)``
-  (:func:`skysim.rayleigh.slab_transmission`; ``tau P11 / (4 mu)`` for a thin cloud),
-  ``Theta`` the scattering angle and ``chi`` the AoP of the direction perpendicular to the
-  scattering plane. ``P11`` and ``P12`` are the Mie phase matrix of the default droplets of
+  ``h' = mu0 (exp(-tau'/mu0) - exp(-tau'/mu)) / (mu0 - mu)``, ``tau' = (1 - f) tau``
+  (:func:`skysim.rayleigh.slab_transmission`; ``tau P11 / (4 mu)`` for a thin cloud);
+  through the lobe, by every scattering, ``s = w h(tau) / 4``; in between, weighted by the
+  lobe's taper. The polarized part ``s_p`` counts, for the wide part, only the beam still
+  within the diffraction peak (``f = 1/2`` in ``s``: light the lobe has turned by tens of
+  degrees is scattered in planes spread around the sun, and its polarization cancels).
+  ``P11`` and ``P12`` are the Mie phase matrix of the default droplets of
   :mod:`skysim.clouds` (:func:`droplet_phase`, a table built with sasktran2's Mie code and
   checked against miepython). ``P12 > 0`` polarizes perpendicular to the scattering plane,
   as the clear sky; at 20-70 deg from the sun ``P12 < 0``: the 90-deg turned AoP of some
-  clouds seen by Pust & Shaw [5]_. This part holds the cloud's aureole and its polarization.
-- **Multiple scattering**, unpolarized (:func:`diffuse_radiance`): the two-stream
-  source-function method of Toon et al. [6]_ on the delta-Eddington solution for
-  conservative scattering (Joseph et al. [4]_; its flux is eq. (24) of Meador & Weaver [7]_,
-  :func:`two_stream_transmittance`).
+  clouds seen by Pust & Shaw [5]_.
+- **Multiple scattering through the lobe**, unpolarized: the small-angle approximation of
+  Zege, Ivanov & Katsev [8]_ (:func:`skysim.forward_lobe.lobe_multiple_radiance`), the
+  bright, wide aureole of a thin cloud.
+- **Multiple scattering through the wide part**, unpolarized (:func:`diffuse_radiance`):
+  the two-stream source-function method of Toon et al. [6]_ on the Eddington solution for
+  conservative scattering, delta-scaled with the lobe as the peak ([4]_; its flux is
+  eq. (24) of Meador & Weaver [7]_, :func:`two_stream_transmittance` for the
+  delta-Eddington scaling).
 - **Light behind the cloud** (the sky above it, or the sunbeam for the air below it) comes
   through as a pattern: in the small-angle approximation of multiple forward scattering a
   cloud of slant optical thickness ``tau / mu`` multiplies the ``l``-th angular harmonic of
@@ -71,6 +80,7 @@ from pathlib import Path
 
 import numpy as np
 
+from .forward_lobe import forward_lobe, lobe_multiple_radiance
 from .rayleigh import slab_transmission
 from .slab_single_scatter import perpendicular_stokes
 from .validation import check_in_range
@@ -83,8 +93,10 @@ PHASE_FILE = Path(__file__).with_name("data") / "water_cloud_phase_550nm.csv"
 """The droplets' phase matrix (builder ``skysim/data/build_water_cloud_phase.py``)."""
 
 DIFFRACTION_SHARE = 0.5
-"""Share ``f`` of the droplets' scattering in their diffraction lobe (van de Hulst [3]_,
-sect. 8.22), which keeps going with the beam (module docstring)."""
+"""Share of the droplets' scattering in their diffraction peak (van de Hulst [3]_,
+sect. 8.22): the forward lobe is whole out to the angle that holds it
+(:mod:`skysim.forward_lobe`), and the beam that carries the single scatter's polarization
+keeps it (module docstring)."""
 
 
 @dataclass(frozen=True)
@@ -157,29 +169,33 @@ def two_stream_transmittance(tau, mu0, g: float | None = None) -> np.ndarray:
     return 1.0 - r
 
 
-def single_scatter_factor(tau, mu, mu0) -> np.ndarray:
-    """``s = w h' / (4 (1 - f))`` (module docstring): the droplets' singly scattered light is
-    ``I_1 = P11 s`` and polarized ``P12 s`` perpendicular to the scattering plane
+def single_scatter_factor(tau, mu, mu0, share: float | None = None) -> np.ndarray:
+    """``s = w h' / (4 (1 - f))`` (module docstring): the light the droplets' wide part
+    scatters once out of a beam that keeps the share ``f`` of their scattering (default:
+    the forward lobe's, :func:`skysim.forward_lobe.forward_lobe`) is ``P11 s``
     (broadcast)."""
-    f = DIFFRACTION_SHARE
+    f = forward_lobe().share if share is None else float(share)
     w = droplet_phase().single_scattering_albedo
     return 0.25 * w / (1.0 - f) * slab_transmission((1.0 - f) * np.asarray(tau, float), mu,
                                                     mu0)
 
 
 def diffuse_radiance(tau, mu, mu0) -> np.ndarray:
-    """Multiply scattered radiance leaving the cloud base along ``mu`` [flux-``pi`` unit],
-    unpolarized: the two-stream source-function method ([6]_) on the delta-Eddington
-    solution for conservative scattering ([4]_).
+    """Multiply scattered radiance leaving the cloud base along ``mu`` [flux-``pi`` unit] of
+    light scattered at least once through the droplets' wide part, unpolarized: the
+    two-stream source-function method ([6]_) on the Eddington solution for conservative
+    scattering, delta-scaled with the forward lobe as the peak (Potter 1970, Joseph et al.
+    [4]_; :mod:`skysim.forward_lobe`).
 
-    With ``tau' = (1 - g^2) tau``, ``g' = g / (1 + g)``, ``a = 3 mu0 / 4`` (``F0 = pi``) the
+    With ``tau' = (1 - f) tau`` and ``g'`` the wide part's asymmetry parameter
+    (:func:`skysim.forward_lobe.forward_lobe`), ``a = 3 mu0 / 4`` (``F0 = pi``) the
     diffuse field is ``I(t, mu) = I0(t) + mu I1(t)`` with ``I1 = a e^(-t/mu0) + C1``,
     ``I0 = C0 + (1 - g') C1 t - a mu0 e^(-t/mu0)``; no diffuse light entering at the top and
     none coming up from a black ground (Marshak's conditions) give
     ``C1 = -a (mu0 (1 - e') + 2/3 (1 + e')) / (4/3 + (1 - g') tau')`` (``e' = e^(-tau'/mu0)``)
-    and ``C0 = a mu0 + 2a/3 + 2 C1 / 3`` (its transmitted flux is
-    :func:`two_stream_transmittance`, tested). The diffuse field scattered once more, the
-    source ``I0(t) - g' mu I1(t)``, integrated along the ray to the base:
+    and ``C0 = a mu0 + 2a/3 + 2 C1 / 3`` (with ``f = g^2``, ``g' = g / (1 + g)`` its flux is
+    the delta-Eddington :func:`two_stream_transmittance`). The diffuse field scattered once
+    more, the source ``I0(t) - g' mu I1(t)``, integrated along the ray to the base:
 
     ``I_m = (C0 - g' mu C1) E + (1 - g') C1 (tau' - mu E) - a (mu0 + g' mu) h'``,
     ``E = 1 - e^(-tau'/mu)``, ``h' = slab_transmission(tau', mu, mu0)``.
@@ -187,10 +203,10 @@ def diffuse_radiance(tau, mu, mu0) -> np.ndarray:
     Of second order in a thin cloud; in a thick one it tends to the Eddington law of
     darkening ``~ (2 + 3 mu)``. Broadcast; ``mu, mu0`` in (0, 1].
     """
-    g = droplet_phase().asymmetry_parameter
+    lobe = forward_lobe()
     tau, mu, mu0 = np.broadcast_arrays(*(np.asarray(x, float) for x in (tau, mu, mu0)))
-    gp = g / (1.0 + g)
-    ts = (1.0 - g * g) * tau
+    gp = lobe.wide_asymmetry
+    ts = (1.0 - lobe.share) * tau
     a = 0.75 * mu0
     e = np.exp(-ts / mu0)
     c1 = -a * (mu0 * (1.0 - e) + 2.0 / 3.0 * (1.0 + e)) / (4.0 / 3.0 + (1.0 - gp) * ts)
@@ -224,5 +240,14 @@ def cloud_stokes(tau, mu, mu0, cos_scattering, a, b):
     theta = np.degrees(np.arccos(np.clip(cos_scattering, -1.0, 1.0)))
     p11 = np.interp(theta, ph.angle_deg, ph.p11)
     p12 = np.interp(theta, ph.angle_deg, ph.p12)
-    s = single_scatter_factor(tau, mu, mu0)
-    return perpendicular_stokes(s * p11 + diffuse_radiance(tau, mu, mu0), s * p12, a, b)
+    lobe = forward_lobe().taper_at(theta)
+    # once scattered: through the wide part out of the beam that keeps its lobe light, or
+    # through the lobe out of the beam itself (every scattering removes from it)
+    lobe_once = lobe * 0.25 * ph.single_scattering_albedo * slab_transmission(tau, mu, mu0)
+    once = (1.0 - lobe) * single_scatter_factor(tau, mu, mu0) + lobe_once
+    # polarized: only out of the beam still within its diffraction peak of the sun; light
+    # turned by the lobe's wider angles comes from all around the sun, and its scattering
+    # planes, hence its polarization, spread out
+    polarized = (1.0 - lobe) * single_scatter_factor(tau, mu, mu0, DIFFRACTION_SHARE) + lobe_once
+    return perpendicular_stokes(once * p11 + lobe_multiple_radiance(tau, mu0, theta)
+                                + diffuse_radiance(tau, mu, mu0), polarized * p12, a, b)

@@ -37,18 +37,19 @@ def test_no_cloud_is_the_clear_sky_exactly(clear, cover, tau):
 
 
 def test_thin_cloud_light_is_the_closed_form_single_scattering():
-    # A cloud of optical thickness 1e-3: its light is single scattering,
+    # A cloud of optical thickness 1e-4: its light is single scattering,
     # I = w P11 tau / (4 mu) and polarized P12 tau / (4 mu) perpendicular to the scattering
     # plane (Hansen & Travis 1974 sect. 3, flux-pi unit); within 5e-3 relative: terms of
     # order tau / mu and the second-order diffuse light, relatively largest where P11 is
-    # smallest (0.03 at 90-120 deg: measured 2.4e-3)
+    # smallest (0.03 at 90-120 deg; at tau 1e-3 the second order alone, of the size the
+    # two-stream gives it with the forward lobe split off, is 6.7e-3 there; measured 6.7e-4)
     ph = droplet_phase()
     el, az = np.meshgrid([20.0, 45.0, 70.0, 88.0], [0.0, 60.0, 120.0, 180.0], indexing="ij")
     sun_el, sun_az = 40.0, 30.0
     mu = np.sin(np.radians(el))
     a, b = rayleigh.meridian_components(el, az, sun_el, sun_az)
     gam = rayleigh.scattering_angle_deg(el, az, sun_el, sun_az)
-    tau = 1e-3
+    tau = 1e-4
     I, Q, U = cloud_stokes(tau, mu, np.sin(np.radians(sun_el)), np.cos(np.radians(gam)), a, b)
     ref = ph.single_scattering_albedo * tau / (4.0 * mu)
     p11 = np.interp(gam, ph.angle_deg, ph.p11)
@@ -164,20 +165,54 @@ def overcast_reference():
 def test_overcast_polarization_follows_the_radiative_transfer(overcast_reference):
     # Where the radiative transfer's DoP exceeds 0.02 the AoP of at least 90 % of the
     # directions agrees within 10 deg (measured 98-100 %; the rest lie where the droplets'
-    # parallel and the air's perpendicular polarization cancel) and the DoP within 0.1 RMS
-    # (measured 0.028-0.048), the sun's side included. Beyond 45 deg from the sun the
-    # radiance is low by 20-60 % (measured ratio 0.37-0.79: the light scattered more than
-    # once through the droplets' forward lobe is missing, docs/clouds.md); closer, the
-    # model's single scatter, attenuated by half the cloud's optical thickness where the
-    # engine's is attenuated by its delta-M-scaled one, lifts the ratio up to 1.4
+    # parallel and the air's perpendicular polarization cancel) and the DoP within 0.06 RMS
+    # (measured 0.042-0.052: the model's multiply scattered light is unpolarized, the
+    # radiative transfer's keeps some polarization, its DoP reaching 0.20-0.23 where the
+    # model's reaches 0.10-0.12), the sun's side included. The radiance: within 0.5-1.5
+    # times the radiative transfer's everywhere, with the median within 0.85-1.10 (measured
+    # 0.65-1.39, medians 1.00 and 1.02; with the forward lobe's multiple scattering left
+    # out, medians 0.6-0.7). Bounds of ours: the two-stream and the small-angle
+    # approximation are good to some tens of percent for such layers (Meador & Weaver 1980;
+    # Zege et al. 1991)
     for (sun, tau), (E, A, rt, model) in overcast_reference.items():
-        far = rayleigh.scattering_angle_deg(E, A, sun, 0.0) > 45.0
         measurable = rt.dop > 0.02
         assert measurable.sum() > 40
         assert np.mean(_aop_diff(model.aop_deg, rt.aop_deg)[measurable] < 10.0) >= 0.90
-        assert np.sqrt(np.mean((model.dop - rt.dop) ** 2)) < 0.10
-        ratio = (model.I / rt.I)[far]
-        assert 0.3 < ratio.min() and ratio.max() < 1.0
+        assert np.sqrt(np.mean((model.dop - rt.dop) ** 2)) < 0.06
+        ratio = model.I / rt.I
+        assert 0.5 < ratio.min() and ratio.max() < 1.5
+        assert 0.85 < np.median(ratio) < 1.10
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("sun,tau", [(30.0, 10.0), (50.0, 20.0)])
+def test_thick_overcast_follows_the_radiative_transfer(sun, tau):
+    # Stratocumulus (cloud tau 10 and 20) against the radiative transfer (CloudySky, whose
+    # transmittance agrees with the delta-Eddington and the asymptotic theory of thick
+    # layers within 2.3 %, tests/test_clouds.py), 156 directions 5-85 deg elevation: the
+    # radiance within 10 % in the median (measured 0.97-1.02 over suns 30 and 50 deg and
+    # tau 10 and 20) and within 0.8-1.2 everywhere (measured 0.82-1.18 at tau 10, 0.91-1.01
+    # at 20): the model's diffuse light follows Eddington's law of darkening 2 + 3 mu, whose
+    # shape differs from the exact escape function's 1 + 2 mu (van de Hulst 1980) by 17 %
+    # between horizon and zenith; the DoP within 0.02 RMS (measured 0.004-0.010: both skies
+    # are nearly unpolarized, the radiative transfer's DoP at most 0.026)
+    pytest.importorskip("sasktran2", reason="the radiative transfer needs the 'rt' extra")
+    from skysim.clouds import CloudLayer, CloudySky
+    from skysim.multiple import MultipleScatteringSky, zenith_nodes_deg
+    from skysim.rt_sasktran import MU_MAX, MU_MIN
+    theta = np.degrees(np.arccos(np.clip(np.cos(np.radians(zenith_nodes_deg(17))), MU_MIN,
+                                         MU_MAX)))
+    el = 90.0 - theta
+    el = el[(el > 5.0) & (el < 85.0)]
+    E, A = np.meshgrid(el, np.arange(0.0, 181.0, 15.0), indexing="ij")
+    clear = MultipleScatteringSky(tau=0.1, albedo=0.1)
+    rt = CloudySky(CloudLayer(tau, 1000.0, 2000.0), tau=0.1, albedo=0.1).field(E, A, sun, 0.0)
+    model = PartlyCloudySky(clear, CloudField(1.0, tau, 0, base_m=1000.0)).field(E, A, sun,
+                                                                                 0.0)
+    ratio = model.I / rt.I
+    assert 0.9 < np.median(ratio) < 1.1
+    assert 0.8 < ratio.min() and ratio.max() < 1.2
+    assert np.sqrt(np.mean((model.dop - rt.dop) ** 2)) < 0.02
 
 
 @pytest.mark.parametrize("clear_name", ["rayleigh", "multiple"])

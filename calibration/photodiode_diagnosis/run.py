@@ -33,7 +33,7 @@ from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, c
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
 from .errors import InstrumentDataError, PointingCalibrationError, SunTooLowError
 from .faults import bright_glare, malus_outliers, rotating_units, screen
-from .fit import FIT_SAMPLES, fit, fit_headings, fit_pinned, orient
+from .fit import FIT_SAMPLES, fit, fit_headings, fit_pinned, geometry_mask, orient
 from .fit import thin as _thin
 from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
@@ -632,7 +632,7 @@ def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOu
             stopped = not fr.converged and not _has_sky(e)   # a sky's was continued above
             fits[e.name] = judge.FoldFit(
                 r_effect, p, bool(fr.converged),
-                None if fr_aop is None else _effect_sd(fr_aop, fe.layout),
+                _effect_sd(fe, fr, fr_aop, sigma),
                 _FoldState(e, theta_held, effect_held.headings(theta_held), aop_sky,
                            (fe, (fr, fr_aop), effect_held) if stopped else None))
         return base_held.usable, fits
@@ -1073,9 +1073,18 @@ best-ranked candidate's by more than this fraction: three times the largest chan
 held-out gap by a continuation on a real ring session (a stray light's, 3.3 %)."""
 
 
-def _effect_sd(fr_aop, layout) -> list:
-    """Posterior SD of each effect parameter of an AoP fit."""
-    return [fr_aop.sd(i) for i in range(layout.effect.start, layout.effect.stop)]
+def _effect_sd(fe: Forward, fr, fr_aop, sigma: float) -> list:
+    """Posterior SD of each effect parameter: from the AoP fit of a geometric effect (which
+    has its covariance), else from the full model's posterior covariance at the fit, the
+    held pointing profiled (:func:`.fit.fit`, ``profiled``): the trade of an effect's
+    parameters with the DoP scale, the gains and the offsets is in it (an overcast's
+    thickness and the DoP scale correlate at 0.998 on a simulated ring)."""
+    L = fe.layout
+    if fr_aop is None or fr_aop.cov is None:
+        held = geometry_mask(fe)
+        fr_aop = fit(fe, fr.theta, ~held, sigma=sigma, max_iter=0, covariance=True,
+                     profiled=held)
+    return [fr_aop.sd(i) for i in range(L.effect.start, L.effect.stop)]
 
 
 def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma: float) -> None:
@@ -1121,7 +1130,7 @@ def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma
             if why is not None:
                 held.unavailable[e.name] = why
                 break
-            sd = f.sd if fr_aop is None else _effect_sd(fr_aop, fe.layout)
+            sd = _effect_sd(fe, fr, fr_aop, sigma)
             state = _FoldState(e, theta_held, effect_held.headings(theta_held), f.state.aop_sky)
             held.put(e.name, ho, judge.FoldFit(r_effect, fr.theta[fe.layout.effect],
                                                bool(fr.converged), sd, state), index=i)
@@ -1182,9 +1191,9 @@ def _at_null(effect, P) -> bool:
 
 
 def _fold_params(effect, P, sds) -> dict:
-    """Mean over folds of each effect parameter, its spread over folds and, for a geometric
-    effect fitted with a covariance, its uncertainty: the root sum of squares of the mean
-    posterior SD of the folds' AoP fits and the spread between folds."""
+    """Mean over folds of each effect parameter, its spread over folds and its uncertainty:
+    the root sum of squares of the mean posterior SD of the folds' fits (:func:`_effect_sd`)
+    and the spread between folds."""
     out = {}
     for j, (n, un) in enumerate(zip(effect.parameter_names, effect.units)):
         out[n] = {"value": float(np.mean(P[:, j])), "fold_spread": float(np.std(P[:, j])),
