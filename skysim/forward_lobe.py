@@ -7,7 +7,7 @@ is scattered several times through this lobe keeps going roughly with the sunbea
 spreads around the sun by tens of degrees; a two-stream (delta-Eddington) treatment counts
 it as unscattered and shows it nowhere. Here the phase function is split,
 ``P = f P_F + (1 - f) P_W``, into a forward lobe ``f P_F = s(Theta) P`` and a wide part,
-with the taper ``s = 1`` out to the angle holding :data:`skysim.cloud_light.DIFFRACTION_SHARE`
+with the taper ``s = 1`` out to the angle holding :data:`skysim.droplet_phase.DIFFRACTION_SHARE`
 of the scattering (the diffraction peak), ``cos^2`` down to 0 at :data:`LOBE_EDGE_DEG` (the
 small-angle approximation's ``sin Theta ~ Theta`` holds there within 5 %).
 
@@ -42,6 +42,8 @@ import functools
 from dataclasses import dataclass
 
 import numpy as np
+
+from .droplet_phase import DIFFRACTION_SHARE, droplet_phase
 
 __all__ = ["LOBE_EDGE_DEG", "ForwardLobe", "forward_lobe", "lobe_multiple_radiance"]
 
@@ -92,8 +94,7 @@ def _second_and_higher(x):
 
 @functools.lru_cache(maxsize=1)
 def forward_lobe() -> ForwardLobe:
-    """The split of :func:`skysim.cloud_light.droplet_phase` (cached; about 0.5 s)."""
-    from .cloud_light import DIFFRACTION_SHARE, droplet_phase
+    """The split of :func:`skysim.droplet_phase.droplet_phase` (cached; about 0.5 s)."""
     ph = droplet_phase()
     a = ph.angle_deg
     t = np.radians(a)

@@ -353,7 +353,7 @@ BAD = [
     ({"adc_full_scale": "4095"}, "'adc_full_scale' must be a positive number; got '4095'"),
     ({"time_uncertainty_s": -1}, "'time_uncertainty_s' must be a number >= 0.*got -1"),
     ({"time_uncertainty_s": "30 s"}, "'time_uncertainty_s'.*got '30 s'"),
-    ({"band": "UV"}, "'band' is 'UV'; valid: a band name .B, V, R, I."),
+    ({"band": "UV"}, "'band' is 'UV'; valid: a band name .U, B, V, R, I."),
     ({"band": {"wavelength_nm": 50.0}}, "band 'wavelength_nm' must be a number in "
                                         r"\[200, 2500\] nm; got 50.0"),
     ({"band": {"fwhm_nm": 30.0}}, "gives no 'wavelength_nm'"),

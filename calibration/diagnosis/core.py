@@ -423,9 +423,19 @@ def decide(candidates, gap_before: float, floor: float,
 
 
 def _beats_base(c, k: float) -> bool:
-    """True when candidate row ``c`` beats the base model by more than ``k`` paired SE."""
+    """True when candidate row ``c`` beats the base model by more than ``k`` paired SE: its
+    paired difference from the base, or the share of the base's excess it removes (the same
+    paired sums over the same blocks, jackknifed as a ratio, :func:`explained_share`), is
+    above zero by ``k`` of its SEs. Where an effect's size varies from block to block, the
+    difference's SE takes in that spread, while the share, removed in proportion to each
+    block's excess, does not: a dark current removing 97-100 +- 1 % of the excess on every
+    one of six sweeps had a difference of fewer than two SEs."""
     d = c.details.get("base_difference")
-    return d is not None and d > k * c.details.get("base_difference_se", np.inf)
+    if d is not None and d > k * c.details.get("base_difference_se", np.inf):
+        return True
+    share, se = c.explained_share, c.explained_share_se
+    return (share is not None and se is not None and np.isfinite(se)
+            and share - k * se > 0)
 
 
 def _beaten(c, k: float) -> bool:

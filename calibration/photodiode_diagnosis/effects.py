@@ -708,35 +708,34 @@ def sun_side(obs: SkySample, sun_enu) -> np.ndarray:
     return np.where(sin_psi > 1e-9, np.clip(left / np.maximum(sin_psi, 1e-9), -1.0, 1.0), 0.0)
 
 
-class SideGlare(RingEffect):
+class SideGlare(StrayLight):
     """Unpolarized glare per photodiode, falling off with the sun's distance from the unit's
-    axis and stronger on one side of the unit (module docstring)."""
+    axis and stronger on one side of the unit (module docstring): ``stray_light`` with a
+    side fraction ``b_p`` per photodiode after the strengths."""
 
     name = "side_glare"
-    output_only = True
-
-    def __init__(self):
-        self.parameter_names, self.units = ("scale_deg",), ("deg",)
-        self.null, self.lower, self.upper = (15.0,), (2.0,), (90.0,)
-        self.prior_sd, self.fd_step = (np.inf,), (0.05,)
 
     def bind(self, inst) -> None:
-        P = len(inst.columns)
+        super().bind(inst)
+        P = self.per_photodiode
         self.per_photodiode = 2 * P
-        self.parameter_names = (tuple(f"S_{c}" for c in inst.columns)
-                      + tuple(f"b_{c}" for c in inst.columns) + ("scale_deg",))
-        self.units = ("1",) * (2 * P) + ("deg",)
-        self.null = (0.0,) * (2 * P) + (15.0,)
-        self.lower = (0.0,) * P + (-1.0,) * P + (2.0,)
-        self.upper = (20.0,) * P + (1.0,) * P + (90.0,)
-        # the side fraction is weakly bound by the prior (1 sd at the bounds' half-width):
-        # it is only defined where S > 0
-        self.prior_sd = (5.0,) * P + (0.5,) * P + (np.inf,)
-        self.fd_step = (1e-4,) * P + (1e-3,) * P + (0.05,)
+
+        def with_side(values, side):      # strengths, side fractions, fall-off
+            return tuple(values[:P]) + tuple(side) + tuple(values[P:])
+        self.parameter_names = with_side(self.parameter_names,
+                                         (f"b_{c}" for c in inst.columns))
+        self.units = with_side(self.units, ("1",) * P)
+        self.null = with_side(self.null, (0.0,) * P)
+        self.lower = with_side(self.lower, (-1.0,) * P)
+        self.upper = with_side(self.upper, (1.0,) * P)
+        # a side fraction is defined only where S > 0: weakly bound by its prior (1 SD at
+        # half its range)
+        self.prior_sd = with_side(self.prior_sd, (0.5,) * P)
+        self.fd_step = with_side(self.fd_step, (1e-3,) * P)
 
     def starts(self, ctx) -> list:
         P = self.per_photodiode // 2
-        return [np.r_[np.full(P, 0.05), np.zeros(P), s] for s in (5.0, 15.0, 30.0)]
+        return [np.r_[s[:P], np.zeros(P), s[P:]] for s in super().starts(ctx)]
 
     def additive(self, p, obs, sun_enu, pd_unit):
         P = self.per_photodiode // 2

@@ -1080,7 +1080,7 @@ def _effect_sd(fe: Forward, fr, fr_aop, sigma: float) -> list:
     parameters with the DoP scale, the gains and the offsets is in it (an overcast's
     thickness and the DoP scale correlate at 0.998 on a simulated ring)."""
     L = fe.layout
-    if fr_aop is None or fr_aop.cov is None:
+    if fr_aop is None or fr_aop.covariance is None:
         held = geometry_mask(fe)
         fr_aop = fit(fe, fr.theta, ~held, sigma=sigma, max_iter=0, covariance=True,
                      profiled=held)

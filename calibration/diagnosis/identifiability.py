@@ -1,0 +1,670 @@
+"""Identifiability matrix: can the diagnosis tell its candidate effects apart, and are the
+uncertainties it reports calibrated?
+
+For one instrument, each candidate effect of its default set is simulated at two strengths
+(a moderate and a strong magnitude inside the effect's documented range), and clean data
+(no effect) are simulated too, over a few noise seeds. Every data set is diagnosed
+
+1. with all default candidates: the verdict must name the true effect or list it in the named
+   ``group`` (``found``), and be ``none`` on clean data;
+2. with the true effect withheld: the verdict must never be a single (necessarily wrong)
+   effect (``withheld_ok``; ``group``, ``partly_explained``, ``unexplained`` or ``none`` are
+   honest answers).
+
+Where the true effect is the best-ranked candidate and its parameters come with standard
+errors, each parameter's z-score ``(fitted - true) / SE`` is recorded; their RMS per
+candidate should be near 1 when the uncertainties are calibrated (a parameter at a bound of
+its range, or with a zero SE, is left out: its SE does not describe a Gaussian error).
+
+The generators are the instruments' simulators (the three-pair benchmark's
+:func:`experiments.workflows.diagnose.simulate_session`, the sky engines, the camera and ring
+simulators of :mod:`sensor`): they share only the physics library with the diagnoses, which
+are never told the truth.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+import pandas as pd
+
+from .errors import DiagnosisError
+
+__all__ = ["INSTRUMENTS", "IdentifiabilityInputError", "InstrumentMatrix", "matrix_markdown",
+           "matrix_spec", "ring_session", "run_matrix", "score_matrix", "write_matrix"]
+
+INSTRUMENTS = ("three-pair", "sky", "camera", "ring")
+"""Instruments with an identifiability matrix."""
+_HONEST = ("none", "group", "partly_explained", "unexplained")
+"""Verdicts that attribute the gap to no single effect."""
+
+
+class IdentifiabilityInputError(DiagnosisError, ValueError):
+    """Unknown instrument, empty seed list or another unusable option of the matrix."""
+
+
+@dataclass(frozen=True)
+class InstrumentMatrix:
+    """What the matrix needs of one instrument.
+
+    Attributes
+    ----------
+    name : str
+    candidates : tuple of str
+        The default candidate set the diagnoses run with.
+    strengths : dict
+        ``effect -> {"moderate": truth, "strong": truth}``, each truth a dict
+        ``parameter name -> true value`` in the units of the diagnosis's parameters.
+    simulate : callable
+        ``simulate(effect or None, truth or None, seed) -> data`` for
+        :func:`calibration.diagnosis.diagnose`.
+    options : dict
+        Further keyword arguments of :func:`calibration.diagnosis.diagnose`.
+    seeds : tuple of int
+        Noise seeds of the full matrix (the quick one uses the first).
+    """
+
+    name: str
+    candidates: tuple
+    strengths: dict
+    simulate: Callable
+    options: dict = field(default_factory=dict)
+    seeds: tuple = (1, 2, 3)
+
+
+def _verdict_row(rep) -> dict:
+    v = rep.verdict
+    return {"verdict": v.effect, "group": list(v.group), "best": v.best_candidate,
+            "gap_ratio": (v.gap_before / rep.noise_floor
+                          if v.gap_before is not None and rep.noise_floor else float("nan"))}
+
+
+def _z_scores(rep, effect: str, truth: dict) -> dict:
+    """``parameter -> (fitted - true) / SE`` of the true effect's candidate row, when it is the
+    best-ranked one; parameters at a bound or without a positive finite SE (``se``, or
+    ``uncertainty`` in the photodiode instruments' rows) are left out. A truth ``X`` stands
+    for every parameter ``X_...`` (one strength for all photodiodes); azimuths
+    (``center_deg``) are compared modulo 360 deg."""
+    c = rep.candidate(effect)
+    if c is None or not c.available or rep.verdict.best_candidate != effect:
+        return {}
+    z = {}
+    for name, p in (c.params or {}).items():
+        key = name if name in truth else next((t for t in truth if name.startswith(f"{t}_")),
+                                              None)
+        if key is None or name in (c.at_bound or []) or not isinstance(p, dict):
+            continue
+        se = p.get("se", p.get("uncertainty"))
+        if se is None or not np.isfinite(se) or se <= 0:
+            continue
+        d = float(p["value"]) - float(truth[key])
+        if name == "center_deg":
+            d = (d + 180.0) % 360.0 - 180.0
+        z[name] = d / float(se)
+    return z
+
+
+def run_matrix(spec: InstrumentMatrix, seeds=None, *, progress: Callable | None = None
+               ) -> pd.DataFrame:
+    """Simulate and diagnose every case of ``spec``; one row per data set.
+
+    Parameters
+    ----------
+    spec : InstrumentMatrix
+    seeds : sequence of int, optional
+        Noise seeds (default ``spec.seeds``).
+    progress : callable, optional
+        Called with each finished row (dict).
+
+    Returns
+    -------
+    DataFrame
+        Columns ``instrument, truth, strength, seed, verdict, group, best, gap_ratio,
+        found, withheld_verdict, withheld_group, withheld_ok, z, seconds,
+        withheld_seconds`` (``z`` a JSON dict ``parameter -> z-score``).
+    """
+    from .api import diagnose
+    seeds = tuple(spec.seeds if seeds is None else seeds)
+    if not seeds:
+        raise IdentifiabilityInputError("seeds is empty: give at least one noise seed")
+    cases = [(None, None, None)] + [(e, s, truth) for e, by in spec.strengths.items()
+                                    for s, truth in by.items()]
+    rows = []
+    for seed in seeds:
+        for effect, strength, truth in cases:
+            data = spec.simulate(effect, truth, seed)
+            t0 = time.perf_counter()
+            rep = diagnose(data, spec.candidates, seed=0, **spec.options)
+            t1 = time.perf_counter()
+            row = {"instrument": spec.name, "truth": effect or "none",
+                   "strength": strength or "-", "seed": seed, **_verdict_row(rep)}
+            row["found"] = (row["verdict"] == row["truth"]
+                            or (row["verdict"] == "group" and row["truth"] in row["group"]))
+            row["z"] = _z_scores(rep, effect, truth) if effect else {}
+            row["seconds"] = t1 - t0
+            if effect is None:
+                row.update(withheld_verdict=None, withheld_group=[], withheld_ok=True,
+                           withheld_seconds=0.0)
+            else:
+                others = tuple(c for c in spec.candidates if c != effect)
+                w = diagnose(data, others, seed=0, **spec.options).verdict
+                row.update(withheld_verdict=w.effect, withheld_group=list(w.group),
+                           withheld_ok=w.effect in _HONEST,
+                           withheld_seconds=time.perf_counter() - t1)
+            rows.append(row)
+            if progress is not None:
+                progress(row)
+    return pd.DataFrame(rows)
+
+
+def score_matrix(rows: pd.DataFrame) -> dict:
+    """Goals of the matrix from :func:`run_matrix`'s rows.
+
+    Returns
+    -------
+    dict
+        ``found_rate`` (effect cases named or in the named group), ``found_rate_by_effect``,
+        ``clean_none_rate``, ``withheld_ok_rate``, ``z_rms`` (``effect -> RMS of its
+        parameters' z-scores`` with ``z_count``), ``cells`` (one line per effect and
+        strength: the verdicts over seeds), ``seconds`` (total, and mean per diagnosis).
+    """
+    eff = rows[rows.truth != "none"]
+    clean = rows[rows.truth == "none"]
+    z_rms, z_n = {}, {}
+    for effect, g in eff.groupby("truth"):
+        z = np.array([v for d in g.z for v in d.values()], float)
+        if z.size:
+            z_rms[effect] = float(np.sqrt(np.mean(z ** 2)))
+            z_n[effect] = int(z.size)
+    cells = []
+    for (effect, strength), g in rows.groupby(["truth", "strength"], sort=False):
+        cells.append({"effect": effect, "strength": strength,
+                      "verdicts": [_label(v, gr) for v, gr in zip(g.verdict, g.group)],
+                      "found": int(g.found.sum()), "n": len(g),
+                      "withheld": [_label(v, gr) for v, gr in
+                                   zip(g.withheld_verdict, g.withheld_group)
+                                   if isinstance(v, str)],
+                      "gap_ratio": float(np.nanmedian(g.gap_ratio))})
+    n_diag = len(rows) + int(rows.withheld_verdict.notna().sum())
+    total = float(rows.seconds.sum() + rows.withheld_seconds.sum())
+    return {"found_rate": float(eff.found.mean()) if len(eff) else float("nan"),
+            "found_rate_by_effect": {e: float(g.found.mean()) for e, g in eff.groupby("truth")},
+            "clean_none_rate": float((clean.verdict == "none").mean()) if len(clean)
+            else float("nan"),
+            "withheld_ok_rate": float(eff.withheld_ok.mean()) if len(eff) else float("nan"),
+            "z_rms": z_rms, "z_count": z_n, "cells": cells,
+            "seconds": {"total": total, "per_diagnosis": total / max(n_diag, 1)}}
+
+
+def _label(verdict, group) -> str:
+    return f"group({'+'.join(group)})" if verdict == "group" else str(verdict)
+
+
+def matrix_markdown(score: dict, instrument: str) -> str:
+    """The matrix as a Markdown table (effect x strength -> verdicts over seeds), the rates
+    and the z-score RMS per candidate."""
+    lines = [f"### {instrument}", "",
+             "| effect | strength | gap / floor | verdicts (all candidates) | named or in group "
+             "| verdicts (true effect withheld) |", "|---|---|---|---|---|---|"]
+    for c in score["cells"]:
+        lines.append(f"| {c['effect']} | {c['strength']} | {c['gap_ratio']:.3g} | "
+                     f"{', '.join(c['verdicts'])} | {c['found']}/{c['n']} | "
+                     f"{', '.join(c['withheld']) or '-'} |")
+    lines += ["", f"- named or in the named group: {score['found_rate']:.0%}; clean data "
+              f"`none`: {score['clean_none_rate']:.0%}; true effect withheld, no single "
+              f"effect named: {score['withheld_ok_rate']:.0%}",
+              f"- run time {score['seconds']['total']:.0f} s "
+              f"({score['seconds']['per_diagnosis']:.1f} s per diagnosis)", "",
+              "| candidate | z-scores | RMS of (fitted - true) / SE |", "|---|---|---|"]
+    for e, r in score["z_rms"].items():
+        lines.append(f"| {e} | {score['z_count'][e]} | {r:.2f} |")
+    if not score["z_rms"]:
+        lines.append("| (no candidate reported a parameter with a standard error) | 0 | - |")
+    return "\n".join(lines) + "\n"
+
+
+# ----------------------------------------------------------------------- the instruments
+def _three_pair() -> InstrumentMatrix:
+    from calibration.effects import get_effect
+    from experiments.workflows.diagnose import simulate_session
+
+    from .three_pair import DEFAULT_CANDIDATES
+    pattern = np.array([1.2, 0.7, 1.0, 1.4, 0.6, 1.1])   # spread of the six photodiodes
+
+    def tilt(beta, gamma_deg):
+        g = np.radians(gamma_deg)
+        return [beta * np.cos(g), beta * np.sin(g)]
+
+    def periodic(a1, a2):
+        return [a1 * np.cos(0.7), a1 * np.sin(0.7), a2 * np.cos(2.1), a2 * np.sin(2.1)]
+
+    # both strengths inside the documented ranges; the dark current's and the extinction
+    # ratio's in the upper half (below it their gaps stay within the noise floor on this
+    # session, where no diagnosis can see them)
+    values = {
+        "dark_current": (3e-2 * pattern, 5e-2 * pattern),
+        "sun_motion": ([500.0], [1100.0]),
+        "clock_offset": ([600.0], [3600.0]),
+        "tilt": (tilt(0.8, 30.0), tilt(2.5, 200.0)),
+        "turntable_periodic": (periodic(0.2, 0.15), periodic(0.3, 0.25)),
+        "extinction_ratio": (2e-2 * pattern, 6e-2 * pattern),
+        "thermal_drift": ([2e-3, 0.05, -0.1, 0.08], [-3.3e-3, 0.15, -0.15, 0.1]),
+        "multiple_scattering": ([0.12, 0.1], [0.35, 0.3]),
+        "overcast": ([0.6], [2.5]),
+    }
+    strengths = {}
+    for name in DEFAULT_CANDIDATES:
+        e = get_effect(name)
+        if e.available() is not None:
+            continue
+        strengths[name] = {s: dict(zip(e.parameter_names, map(float, v)))
+                           for s, v in zip(("moderate", "strong"), values[name])}
+
+    def simulate(effect, truth, seed):
+        params = None if truth is None else np.array(list(truth.values()))
+        return simulate_session(effect, np.random.default_rng(seed), params=params)["data"]
+
+    return InstrumentMatrix("three-pair", tuple(DEFAULT_CANDIDATES), strengths, simulate,
+                            seeds=(11, 12, 13))
+
+
+SKY_NOISE = 1e-3
+"""Gaussian noise per Stokes component (q, u) of the simulated sky fields: a good
+polarimeter's repeatability."""
+SKY_SUNS_DEG = (25.0, 50.0)
+"""Sun elevations of the sky fields' two cases: the first calibrates, the second is withheld."""
+
+
+def _sky() -> InstrumentMatrix:
+    from skysim.multiple import MultipleScatteringSky
+    from skysim.rt_sasktran import EngineSettings
+    from skysim.sky import RayleighSky
+
+    from .sky import SKY_CANDIDATES, SkyCases
+    # 8 streams: data and fits share the engine set-up, so the stream count changes the cost
+    # (0.1-0.3 s per call instead of ~1 s at 32), not the closed loop's consistency
+    settings = EngineSettings(n_streams=8)
+    el, az = np.meshgrid(np.arange(8.0, 90.0, 9.0), np.arange(0.0, 360.0, 30.0), indexing="ij")
+    el, az = el.ravel(), az.ravel()
+    m = len(SKY_SUNS_DEG)
+    E, A = np.tile(el, m), np.tile(az, m)
+    S = np.repeat(np.asarray(SKY_SUNS_DEG, float), el.size)
+    case = np.repeat(np.arange(m), el.size)
+
+    def simulate(effect, truth, seed):
+        if effect is None:
+            sky = RayleighSky(dmax=0.7)
+        else:
+            sky = MultipleScatteringSky(tau=truth["tau"], albedo=truth.get("albedo", 0.0),
+                                        settings=settings)
+        f = sky.field(E, A, S, 0.0)
+        rng = np.random.default_rng(seed)
+        q = f.Q / f.I + rng.normal(0.0, SKY_NOISE, S.size)
+        u = f.U / f.I + rng.normal(0.0, SKY_NOISE, S.size)
+        return SkyCases(case, E, A, S, np.zeros_like(S), q, u)
+
+    strengths = {"multiple_scattering": {"moderate": {"tau": 0.1}, "strong": {"tau": 0.35}},
+                 "ground_albedo": {"moderate": {"tau": 0.1, "albedo": 0.15},
+                                   "strong": {"tau": 0.3, "albedo": 0.4}}}
+    # the noise floor of |(dq, du)| for that noise: what a perfect model leaves
+    return InstrumentMatrix("sky", SKY_CANDIDATES, strengths, simulate,
+                            {"noise_floor": SKY_NOISE * np.sqrt(2), "calibration_cases": [0],
+                             "settings": settings, "n_grid": 5}, seeds=(21, 22))
+
+
+CAMERA_SIZE = 128
+"""Frame side [px] of the simulated camera (a 64 x 64 super-pixel fisheye sky)."""
+CAMERA_DMAX = 0.7
+CAMERA_SITE = {"latitude_deg": 34.25, "longitude_deg": 108.9, "altitude_m": 400.0}
+CAMERA_TIME = "2024-05-22T02:30:00+00:00"
+"""UTC time of the simulated frames (the sun 58 deg high at the camera site)."""
+
+
+def camera_frame(seed: int, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None,
+                 extinction_ratio=np.inf, sky=None, yaw_deg: float = 30.0):
+    """A raw frame of the camera simulator (:class:`sensor.camera.PolarizationCamera`) with
+    the given injected errors, and the sidecar of the *nominal* camera, as a user's would be.
+
+    Parameters
+    ----------
+    seed : int
+        Shot-noise seed.
+    lens_shift : (dcx [px], dcy [px], focal scale)
+        The true lens against the nominal one.
+    angle_offsets : 4 values [deg], optional
+        Angle errors of the 2 x 2 polarizer layout, row by row.
+    extinction_ratio : float
+        Of every polarizer (inf: ideal).
+    sky : Sky, optional
+        Default: the Rayleigh sky of :data:`CAMERA_DMAX`.
+    yaw_deg : float
+    """
+    import datetime as dt
+
+    from sensor.camera import MosaicSensor, PolarizationCamera, camera_attitude
+    from sensor.camera.lens import FisheyeLens
+    from skysim.sky import make_sky
+    from skysim.sun import sun_position
+
+    from .camera import CameraFrame
+    n = CAMERA_SIZE
+    time = dt.datetime.fromisoformat(CAMERA_TIME)
+    nominal = PolarizationCamera.fisheye(n, n)
+    lens = FisheyeLens(nominal.lens.focal_px * lens_shift[2], nominal.lens.cx + lens_shift[0],
+                       nominal.lens.cy + lens_shift[1], nominal.lens.fov_deg)
+    kw = {"extinction_ratio": extinction_ratio}
+    if angle_offsets is not None:
+        kw["angle_error_deg"] = np.tile(np.reshape(angle_offsets, (2, 2)), (n // 2, n // 2))
+    true = PolarizationCamera(lens, MosaicSensor(n, n, **kw))
+    sun = sun_position([time], CAMERA_SITE["latitude_deg"], CAMERA_SITE["longitude_deg"],
+                       CAMERA_SITE["altitude_m"]).iloc[0]
+    sky = sky or make_sky("rayleigh", dmax=CAMERA_DMAX)
+    scene = true.scene(sky, camera_attitude(yaw_deg), float(sun["elevation_deg"]),
+                       float(sun["azimuth_deg"]))
+    exposure = true.auto_exposure_s(scene)
+    raw = true.capture(scene, exposure, np.random.default_rng(seed))
+    doc = {"schema": "skysim.dofp/1", "site": CAMERA_SITE, "time": time.isoformat(),
+           "attitude": {"yaw_deg": yaw_deg, "pitch_deg": 0.0, "roll_deg": 0.0,
+                        "yaw_known": True},
+           **nominal.describe(), "exposure": {"exposure_s": exposure},
+           "generator": {"sky": sky.describe(), "seed": seed}}
+    return CameraFrame(raw, doc, name=f"seed {seed}")
+
+
+def _camera() -> InstrumentMatrix:
+    from skysim.cloud_field import CloudField
+    from skysim.partly_cloudy import PartlyCloudySky
+    from skysim.sky import make_sky
+
+    from .camera import DEFAULT_CAMERA_CANDIDATES
+    offsets = ("offset_a00_deg", "offset_a01_deg", "offset_a10_deg", "offset_a11_deg")
+
+    def simulate(effect, truth, seed):
+        if effect is None:
+            return camera_frame(seed)
+        if effect == "lens":
+            return camera_frame(seed, lens_shift=(truth["dcx_px"], truth["dcy_px"],
+                                                  truth["focal_scale"]))
+        if effect == "polarizer_angles":
+            return camera_frame(seed, angle_offsets=[truth[k] for k in offsets])
+        if effect == "extinction_ratio":
+            return camera_frame(seed, extinction_ratio=1.0 / truth["inverse_extinction_ratio"])
+        if effect == "sky_dop":
+            return camera_frame(seed, sky=make_sky("berry", delta_deg=truth["delta_deg"],
+                                                   dmax=truth["d_max"]))
+        return camera_frame(seed, sky=PartlyCloudySky(
+            make_sky("rayleigh", dmax=truth["d_max"]),
+            CloudField(cover=1.0, tau=truth["cloud_tau"], thickness="uniform")))
+
+    d = CAMERA_DMAX
+    strengths = {
+        "lens": {"moderate": {"dcx_px": 1.5, "dcy_px": -1.0, "focal_scale": 1.0},
+                 "strong": {"dcx_px": 3.0, "dcy_px": -2.0, "focal_scale": 1.04}},
+        "polarizer_angles": {"moderate": dict(zip(offsets, (1.0, -0.8, 0.0, 0.5))),
+                             "strong": dict(zip(offsets, (2.0, -1.5, 0.0, 1.0)))},
+        "extinction_ratio": {"moderate": {"inverse_extinction_ratio": 1 / 50.0},
+                             "strong": {"inverse_extinction_ratio": 1 / 20.0}},
+        "sky_dop": {"moderate": {"delta_deg": 25.0, "d_max": d},
+                    "strong": {"delta_deg": 40.0, "d_max": d}},
+        "overcast": {"moderate": {"cloud_tau": 0.5, "d_max": d},
+                     "strong": {"cloud_tau": 2.0, "d_max": d}}}
+    return InstrumentMatrix("camera", tuple(DEFAULT_CAMERA_CANDIDATES),
+                            {e: strengths[e] for e in DEFAULT_CAMERA_CANDIDATES}, simulate,
+                            seeds=(50, 51, 52, 53, 54))
+
+
+RING_SITE = (39.258648, 8.440184, 0.0)
+"""Latitude, longitude [deg] and altitude [m] of the simulated ring sessions (a Sardinian
+field site)."""
+RING_START = "2022-05-12T16:01:00+02:00"
+"""Start of the simulated ring sessions (afternoon sun, about 40 deg high)."""
+RING_DMAX = 0.6
+RING_CAP = (4, 8)
+"""Equal-area rings x directions per ring over which a unit's cone of view is averaged in
+the simulated field-of-view sessions (the candidate's fit uses six directions at the cone's
+RMS radius: the generator is not the fitter's quadrature)."""
+
+
+def _modified_sky(base, kind: str, truth: dict):
+    """``base`` with its light changed in a known way: ``occlusion`` (a sector of world
+    azimuth where the polarized part falls by ``k`` and the radiance by ``k / 2``, with
+    logistic edges) or ``aureole`` (unpolarized light ``A exp(-psi / psi_0)`` times the sky's
+    radiance added at angular distance ``psi`` from the sun)."""
+    from skysim.sky import Sky
+
+    class _Wrapped(Sky):
+        name = f"{base.name}+{kind}"
+
+        def _stokes(self, vel, vaz, sel, saz):
+            I, Q, U = base._stokes(vel, vaz, sel, saz)
+            if kind == "occlusion":
+                d = np.abs((np.asarray(vaz) - truth["center_deg"] + 180.0) % 360.0 - 180.0)
+                w = 1.0 / (1.0 + np.exp((d - 0.5 * truth["width_deg"])
+                                        / truth["edge_deg"]))
+                k = truth["depolarization"] * w
+                return I * (1.0 - 0.5 * k), Q * (1.0 - k) * (1.0 - 0.5 * k), \
+                    U * (1.0 - k) * (1.0 - 0.5 * k)
+            from skysim.geometry import direction_vector
+            cos_psi = np.sum(direction_vector(vel, vaz) * direction_vector(sel, saz),
+                             axis=-1)
+            psi = np.degrees(np.arccos(np.clip(cos_psi, -1.0, 1.0)))
+            return I * (1.0 + truth["amplitude"] * np.exp(-psi / truth["scale_deg"])), Q, U
+
+        def describe(self):
+            return {"model": self.name, **truth}
+    return _Wrapped()
+
+
+def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
+                 per_sweep: int = 60, start: str = RING_START, sweep_spacing_s: float = 60.0):
+    """A simulated relative-yaw, counter-clockwise ring session (eight units at 45 deg
+    elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
+
+    The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
+    with the effect made physically: a multiple-scattering or neutral-point sky, a cone of
+    view averaged over :data:`RING_CAP` directions, an occluded sector or a solar aureole
+    in the sky, sunlight scattered inside the instrument added to the readings, a tilted
+    platform, a clock or gyro error in the recorded times or yaw.
+
+    Parameters
+    ----------
+    effect : str, optional
+        A ring candidate's name, or None for clean data.
+    truth : dict
+        The effect's parameters, by the candidate's parameter names (``stray_light``:
+        ``S`` (one strength for every photodiode) and ``scale_deg``).
+    seed : int
+        Noise seed.
+    n_sweeps, per_sweep : int
+    start : str
+        ISO time of the first sample.
+    sweep_spacing_s : float
+        Time between the starts of successive sweeps [s].
+
+    Returns
+    -------
+    PhotodiodeData
+    """
+    import pandas as pd
+
+    from sensor.compound_eye import (PhotodiodeModel, body_attitude, ring_configuration)
+    from sensor.photodiodes_io import PhotodiodeData
+    from skysim.sky import RayleighSky
+    from skysim.sun import Site, sun_vector
+    truth = truth or {}
+    site = Site(*RING_SITE)
+    rng = np.random.default_rng(seed)
+    sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
+    t0 = pd.Timestamp(start)
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + 0.1 * k)
+                              for s in range(n_sweeps) for k in range(per_sweep)])
+    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
+    sweep = np.repeat(np.arange(n_sweeps), per_sweep)
+    sky = RayleighSky(RING_DMAX)
+    if effect == "multiple_scattering":
+        from skysim.multiple import MultipleScatteringSky
+        # 1-deg sun nodes (the engine's stated interpolation error is far below the noise):
+        # one engine run per node instead of one per sample
+        sky = MultipleScatteringSky(tau=truth["tau"], albedo=truth["albedo"],
+                                    sun_step_deg=1.0)
+    elif effect == "neutral_points":
+        from skysim.berry import BerrySky
+        sky = BerrySky(delta_deg=truth["separation_deg"], dmax=RING_DMAX)
+    elif effect in ("occlusion", "aureole"):
+        sky = _modified_sky(sky, effect, truth)
+    pitch, roll = ((truth["pitch_deg"], truth["roll_deg"]) if effect == "tilt" else (0.0, 0.0))
+    data = sensor.sample(sky, site, times, yaw, pitch, roll, rng, yaw_reference="relative",
+                         yaw_offset_deg=35.0, include_truth=False, sweep=sweep)
+    t = data.table.drop(columns=["pitch_deg", "roll_deg"])
+    cols = list(data.columns)
+    if effect in ("fov", "stray_light"):
+        att = body_attitude(yaw, np.full(yaw.size, pitch), np.full(yaw.size, roll))
+        sun, _ = sun_vector(times, site)
+        pm = sensor.photodiode
+        R = t[cols].to_numpy(float)
+        if effect == "fov":
+            R = (pm.counts_per_radiance * _cone_readings(sensor, sky, att, sun,
+                                                         truth["alpha_deg"])
+                 + pm.noise_counts * rng.standard_normal(R.shape))
+        else:   # sunlight inside the instrument, on readings that carry their noise already
+            pd_unit = np.repeat(np.arange(sensor.n_units),
+                                [len(u.photodiodes_deg) for u in sensor.units])
+            psi = np.degrees(np.arccos(np.clip(np.einsum(
+                "nuk,nk->nu", _unit_views(sensor.observe(sky, att, sun)), sun),
+                -1.0, 1.0)))[:, pd_unit]
+            R = R + truth["S"] * np.median(R) * np.exp(-psi / truth["scale_deg"])
+        t[cols] = np.clip(np.round(R), 0.0, pm.saturation_value)
+    t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
+    if effect == "yaw_scale":   # the recorded change within each sweep, times the factor
+        y = t["yaw_deg"].to_numpy(float)
+        out = np.empty_like(y)
+        for s_ in np.unique(sweep):
+            m = sweep == s_
+            u = np.degrees(np.unwrap(np.radians(y[m])))
+            out[m] = u[0] + truth["factor"] * (u - u[0])
+        t["yaw_deg"] = ((out + 180.0) % 360.0) - 180.0
+    if effect == "clock_offset":
+        t["time"] = pd.to_datetime(t["time"]) - pd.to_timedelta(truth["clock_offset_s"],
+                                                                 unit="s")
+    side = dict(data.sidecar, yaw_sense="counterclockwise")
+    return PhotodiodeData(t, side)
+
+
+def _unit_views(obs) -> np.ndarray:
+    from skysim.geometry import direction_vector
+    return direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
+
+
+def _cone_readings(sensor, sky, att, sun, alpha_deg: float) -> np.ndarray:
+    """Noise-free mean readings [radiance units] (n, P) of photodiodes whose unit sees a
+    uniform cone of half-angle ``alpha_deg``: the readings of :data:`RING_CAP` equal-area
+    directions averaged (each direction a rotation of the unit about its own x/y axes)."""
+    from dataclasses import replace
+    K, M = RING_CAP
+    r = alpha_deg * np.sqrt((np.arange(K) + 0.5) / K)
+    b = 2.0 * np.pi * (np.arange(M) + 0.5 * (np.arange(K)[:, None] % 2)) / M
+    offs = np.stack([(r[:, None] * np.cos(b)).ravel(), (r[:, None] * np.sin(b)).ravel(),
+                     np.zeros(K * M)], axis=-1)
+    wide = replace(sensor, units=tuple(replace(u, installation_error_deg=tuple(o))
+                                       for u in sensor.units for o in offs))
+    obs = wide.observe(sky, att, sun)
+    out = []
+    for i, u in enumerate(sensor.units):
+        sl = slice(i * K * M, (i + 1) * K * M)
+        for a in u.photodiodes_deg:
+            chi = np.radians(obs.aop_unit_deg[:, sl] - a)
+            out.append(np.mean(obs.radiance[:, sl] * (1.0 + obs.dop[:, sl] * np.cos(2 * chi)),
+                               axis=1))
+    return np.stack(out, axis=1)
+
+
+def _ring() -> InstrumentMatrix:
+    from calibration.photodiode_diagnosis.effects import RING_EFFECT_NAMES
+    occl = {"width_deg": 90.0, "edge_deg": 5.0}
+    strengths = {
+        "multiple_scattering": {"moderate": {"tau": 0.1, "albedo": 0.1},
+                                "strong": {"tau": 0.25, "albedo": 0.1}},
+        "neutral_points": {"moderate": {"separation_deg": 20.0},
+                           "strong": {"separation_deg": 40.0}},
+        "fov": {"moderate": {"alpha_deg": 15.0}, "strong": {"alpha_deg": 28.0}},
+        "occlusion": {"moderate": {"center_deg": 100.0, **occl, "depolarization": 0.4},
+                      "strong": {"center_deg": 250.0, **occl, "depolarization": 0.8}},
+        "yaw_scale": {"moderate": {"factor": 1.02}, "strong": {"factor": 0.95}},
+        "clock_offset": {"moderate": {"clock_offset_s": 900.0},
+                         "strong": {"clock_offset_s": -3600.0}},
+        "tilt": {"moderate": {"pitch_deg": 1.0, "roll_deg": -0.5},
+                 "strong": {"pitch_deg": -2.5, "roll_deg": 2.0}},
+        "aureole": {"moderate": {"amplitude": 0.5, "scale_deg": 15.0},
+                    "strong": {"amplitude": 2.0, "scale_deg": 15.0}},
+        "stray_light": {"moderate": {"S": 0.02, "scale_deg": 20.0},
+                        "strong": {"S": 0.08, "scale_deg": 20.0}}}
+    return InstrumentMatrix("ring", tuple(RING_EFFECT_NAMES),
+                            {e: strengths[e] for e in RING_EFFECT_NAMES}, ring_session,
+                            seeds=(31,))
+
+
+_BUILDERS = {"three-pair": _three_pair, "sky": _sky, "camera": _camera,
+             "ring": _ring}
+
+
+def matrix_spec(instrument: str) -> InstrumentMatrix:
+    """The :class:`InstrumentMatrix` of ``instrument`` (one of :data:`INSTRUMENTS`).
+
+    Raises
+    ------
+    IdentifiabilityInputError
+        For another name.
+    """
+    if instrument not in _BUILDERS:
+        raise IdentifiabilityInputError(
+            f"no identifiability matrix for instrument {instrument!r}; choose one of "
+            f"{', '.join(_BUILDERS)}")
+    return _BUILDERS[instrument]()
+
+
+def rows_to_json(rows: pd.DataFrame) -> list:
+    """The rows as plain JSON-ready dicts."""
+    return json.loads(rows.to_json(orient="records"))
+
+
+def write_matrix(instrument: str, out, *, quick: bool = False) -> dict:
+    """Run the matrix of ``instrument`` and write ``identifiability.json`` (the score and
+    every case) and ``identifiability.md`` (the tables) into the folder ``out``, each
+    atomically.
+
+    Parameters
+    ----------
+    instrument : str
+        One of :data:`INSTRUMENTS`.
+    out : path
+        Output folder (created).
+    quick : bool
+        The first noise seed and the strong strength only.
+
+    Returns
+    -------
+    dict
+        :func:`score_matrix` of the run.
+    """
+    from dataclasses import replace
+    from pathlib import Path
+
+    from skysim.io import atomic_write, write_json_atomic
+    spec = matrix_spec(instrument)
+    if quick:
+        spec = replace(spec, seeds=spec.seeds[:1],
+                       strengths={e: {"strong": v["strong"]} for e, v in spec.strengths.items()})
+    rows = run_matrix(spec)
+    score = score_matrix(rows)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json_atomic(out / "identifiability.json",
+                      {"instrument": instrument, "seeds": list(spec.seeds), "quick": quick,
+                       "score": score, "cases": rows_to_json(rows)})
+    text = matrix_markdown(score, instrument)
+    atomic_write(out / "identifiability.md", lambda p: p.write_text(text))
+    return score
