@@ -59,7 +59,9 @@ def report_markdown(r) -> str:
     he = r.extra.get("heading_error") or {}
     if he.get("base_deg") is not None:
         lines.append(f"- heading error (RMS): base {he['base_deg']:.2f} deg"
-                     + (f", best {he['best_deg']:.2f} deg" if he.get("best_deg") else ""))
+                     + (f", best {he['best_deg']:.2f} deg" if he.get("best_deg") else "")
+                     + (f" (modulo {he['ambiguity_deg']:g} deg: {he['ambiguity']})"
+                        if he.get("ambiguity_deg", 360.0) != 360.0 else ""))
     lines.append("")
     if v.params:
         lines += _params_table(v.params)

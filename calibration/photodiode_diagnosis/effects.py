@@ -237,6 +237,11 @@ class YawScale(RingEffect):
         return y0 + (inst.yaw_deg - y0) / float(p[0])
 
 
+ZENITH_UNIT_DEG = 85.0
+"""A unit this high [deg, nominal elevation] looks at the zenith (its pointing offsets cannot
+stand in for a tilt of the instrument)."""
+
+
 class Tilt(RingEffect):
     name = "tilt"
     geometric = True
@@ -253,11 +258,15 @@ class Tilt(RingEffect):
 
     def applicable_to(self, inst) -> str | None:
         """A tilt in the body frame turns with the instrument: every unit's view and
-        polarizer are rotated by one fixed rotation, which is exactly a change of each unit's
-        pointing and polarizer angle. With the pointing fitted on the session the two cannot
-        be told apart; with it calibrated on other sessions they can."""
+        polarizer are rotated by one fixed rotation, which for units looking away from the
+        zenith is exactly a change of each unit's pointing (elevation and azimuth offsets)
+        and polarizer angle. With that pointing fitted on the session the two cannot be told
+        apart; with it calibrated on other sessions they can. A unit at the zenith has no
+        azimuth to offset and its elevation cannot rise past 90 deg, so its pointing cannot
+        stand in for a tilt."""
         p = inst.pointing_deg
-        if p is None or not np.all(np.isfinite(p)):
+        at_zenith = any(u.elevation_deg >= ZENITH_UNIT_DEG for u in inst.sensor.units)
+        if not at_zenith and (p is None or not np.all(np.isfinite(p))):
             return ("a constant tilt turns with the instrument, as a change of every unit's "
                     "pointing and polarizer angle, which the base model fits on this session: "
                     "calibrate the pointing on other sessions (--pointing-from) to fit it")

@@ -15,7 +15,8 @@ Channel faults (a whole photodiode column is excluded and reported):
   (:func:`malus_outliers`): the channel does not follow Malus's law against the fitted sky.
 
 Unit faults: a unit left with fewer than three working photodiodes at distinct polarizer
-angles (modulo 180 deg) cannot measure a linear polarization and is excluded (``too_few``).
+angles (modulo 180 deg), or two on a rotating analyser (:func:`rotating_units`), cannot
+measure a linear polarization and is excluded (``too_few``).
 
 Reading exclusions (counted, not faults): missing, zero and saturated readings, every
 reading of a unit at a sample where one of its photodiodes is saturated (the sun or its glare
@@ -53,7 +54,7 @@ from .instrument import Instrument
 
 __all__ = ["ZERO_FRACTION", "SATURATED_FRACTION", "STUCK_FRACTION", "DUPLICATE_FRACTION",
            "RAIL_BAND", "RAIL_MIN_FRACTION", "GLARE_BIN", "GLARE_FACTOR", "Screen", "screen",
-           "malus_outliers", "bright_glare", "unit_brightness"]
+           "malus_outliers", "bright_glare", "unit_brightness", "rotating_units"]
 
 ZERO_FRACTION = 0.2
 SATURATED_FRACTION = 0.25
@@ -108,6 +109,13 @@ class Screen:
         return [f["channel"] for f in self.faults]
 
 
+def _saturation_value(inst: Instrument) -> float:
+    """The declared saturation value; infinite when the sidecar declares none (normalised
+    readings have no rail)."""
+    value = inst.source.get("saturation_value")
+    return np.inf if value is None else float(value)
+
+
 def _rail(values, finite, sat_value):
     below = finite & (values < sat_value)
     if not below.any():
@@ -130,16 +138,33 @@ def _mode_fraction(x) -> tuple[float, float]:
     return float(vals[k]), float(cnt[k] / x.size)
 
 
+def rotating_units(inst: Instrument) -> np.ndarray:
+    """(U,) bool: the units whose analyser turns (a photodiode's polarizer angle changes from
+    sample to sample, :attr:`Instrument.pd_angle_row_deg`)."""
+    out = np.zeros(inst.n_units, bool)
+    if inst.pd_angle_row_deg is None or inst.n == 0:
+        return out
+    turns = np.ptp(np.mod(np.asarray(inst.pd_angle_row_deg, float), 180.0), axis=0) > 0.0
+    out[np.unique(inst.pd_unit[turns])] = True
+    return out
+
+
 def _unit_check(inst: Instrument, channel_ok, faults):
+    """Units left with too few working photodiodes at distinct polarizer angles: three for a
+    fixed analyser (the radiance, the degree and the angle of polarization at each sample),
+    two for a turning one (its photodiodes sweep every angle, so a crossed pair samples the
+    modulation over each half-turn)."""
     unit_ok = np.ones(inst.n_units, bool)
+    turning = rotating_units(inst)
     for u in range(inst.n_units):
         cols = np.flatnonzero((inst.pd_unit == u) & channel_ok)
         angles = {float(a) % 180.0 for a in inst.pd_angle_deg[cols]}
-        if len(angles) < 3:
+        need = 2 if turning[u] else 3
+        if len(angles) < need:
             unit_ok[u] = False
             faults.append({"channel": f"u{u}", "kind": "too_few",
                            "evidence": {"working_photodiodes": [inst.columns[c] for c in cols],
-                                        "needed": "3 at distinct polarizer angles"}})
+                                        "needed": f"{need} at distinct polarizer angles"}})
     return unit_ok
 
 
@@ -148,7 +173,7 @@ def screen(inst: Instrument) -> Screen:
     R = inst.readings
     n, P = R.shape
     finite = np.isfinite(R)
-    sat_value = float(inst.source.get("saturation_value", np.inf))
+    sat_value = _saturation_value(inst)
     rail = _rail(R, finite, sat_value)
     finite, saturated, zero = _masks(inst, rail)
     faults, ok = [], np.ones(P, bool)
@@ -203,7 +228,7 @@ def _masks(inst: Instrument, rail):
     """Finite, saturated (declared value or rail) and zero readings (n, P)."""
     R = inst.readings
     finite = np.isfinite(R)
-    sat_value = float(inst.source.get("saturation_value", np.inf))
+    sat_value = _saturation_value(inst)
     with np.errstate(invalid="ignore"):
         saturated = finite & ((R >= sat_value) | ((R >= rail) if rail is not None else False))
         zero = finite & (R == 0.0)

@@ -190,7 +190,10 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     fwd : Forward
     theta0 : ndarray
         Start (and value of the fixed parameters). The pointing is held whatever ``free``
-        says when the instrument's pointing is calibrated (:attr:`Instrument.pointing_deg`).
+        says when the instrument's pointing is calibrated (:attr:`Instrument.pointing_deg`),
+        and so is every parameter the readings leave without effect
+        (:meth:`Forward.held_by_readings`) or that the profiled radiance absorbs
+        (:meth:`Forward.absorbed_by_profile`).
     sigma : float
         Noise level of the relative residuals, weighting the data against the prior.
     covariance : bool
@@ -213,6 +216,10 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     L = fwd.layout
     free = np.ones(L.size, bool) if free is None else np.asarray(free, bool).copy()
     free &= _not_calibrated(fwd)             # calibrated pointing: held
+    # what the readings cannot inform (the dark offsets of dark-subtracted or normalised
+    # readings, the DoP scale of normalised ones) is held: free, it would follow its prior
+    # or wander to a bound, and be reported as a finding
+    free &= ~(fwd.held_by_readings() | fwd.absorbed_by_profile())
     pri = priors or Priors.for_model(fwd, theta)
     theta = np.clip(theta, pri.lower, pri.upper)
     usable_idx = np.flatnonzero(fwd.usable.ravel())
@@ -265,7 +272,8 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     if covariance:
         joint = free.copy()
         if profiled is not None:
-            joint |= np.asarray(profiled, bool) & _not_calibrated(fwd)
+            joint |= (np.asarray(profiled, bool) & _not_calibrated(fwd)
+                      & ~fwd.held_by_readings() & ~fwd.absorbed_by_profile())
         jidx = np.flatnonzero(joint)
         J = _jacobian(fwd, theta, r, obs, joint, pri.step, usable_idx)
         w_joint = np.where(np.isfinite(pri.sd[jidx]), 1.0 / pri.sd[jidx] ** 2, 0.0)

@@ -30,7 +30,12 @@ no effect (:attr:`sensor.photodiodes_io.PhotodiodeData.unrecoverable`). With a r
 analyser a unit's photodiodes see one angle per sample, so ``I`` and ``J`` are shared by the
 samples of each half-turn of the analyser (:attr:`Instrument.analyser_cycle`): the sky does
 not change within a half-turn of a few seconds, and a crossed pair's two readings per sample
-could not determine both.
+could not determine both. They are profiled per photodiode there, not per unit: each
+photodiode was normalised on its own, with its own scale and zero for each revolution (the
+extremes of its noisy readings), which a unit's shared ``I`` and ``J`` cannot absorb (on the
+simulated rotating-analyser session they left a held-out gap 17 % above the white-noise
+floor); what a normalised photodiode tells over a half-turn is the phase of its modulation,
+the angle of polarization.
 
 Which parameters are shared and which are per sweep: gains, offsets, polarizer angles, the
 pointing of every unit's axis (elevation and azimuth offsets from nominal) and the DoP scale
@@ -189,9 +194,18 @@ class Forward:
         """Group label (n,) of the samples that share the profiled radiance (and polarized
         radiance) of each unit; None: every sample its own. Normalised readings of a rotating
         analyser share them over each half-turn of the analyser."""
+        self._profile_member = self.member
+        """Which photodiodes share a profiled radiance (K, P): each unit's (K = U), or each
+        photodiode its own (K = P) for normalised readings of a rotating analyser."""
+        self._profile_col = units
+        """Profile (0..K-1) of every photodiode (P,)."""
         cycle = getattr(inst, "analyser_cycle", None)
         if self.normalised and cycle is not None:
             self.profile_rows = np.unique(np.asarray(cycle), return_inverse=True)[1].ravel()
+            # each photodiode normalised on its own (its own scale and zero per revolution):
+            # its own radiance and polarized radiance per half-turn, which absorb them
+            P = units.size
+            self._profile_member, self._profile_col = np.eye(P), np.arange(P)
         self._sky = RayleighSky(1.0)
         self._dop_in_sky = bool(effect is not None and effect.dop_scale_in_sky)
         """The DoP scale is the base sky's ``d_max`` inside the effect's sky (see
@@ -212,6 +226,16 @@ class Forward:
         if self.normalised:
             held[self.layout.scale] = True
         return held
+
+    def absorbed_by_profile(self) -> np.ndarray:
+        """Parameters (size,) bool that the profiled radiance absorbs whatever the readings
+        are: the gains of photodiodes profiled each on their own (normalised readings of a
+        rotating analyser, where each photodiode's radiance and polarized radiance per
+        half-turn take up its gain). Held in every fit and not reported as fitted."""
+        out = np.zeros(self.layout.size, bool)
+        if self._profile_member is not self.member:
+            out[self.layout.lam] = True
+        return out
 
     # ---------------------------------------------------------------- geometry stage
     def headings(self, theta) -> np.ndarray:
@@ -284,9 +308,10 @@ class Forward:
                             responsivity=np.exp(theta[L.lam]))
 
     def _unit_sums(self, x) -> np.ndarray:
-        """Sums of ``x`` (n, P) over each unit's photodiodes (n, U), and over the samples of
-        each group of :attr:`profile_rows` when it is set (G, U)."""
-        s = x @ self.member.T
+        """Sums of ``x`` (n, P) over the photodiodes of each profile (n, K: each unit's, or
+        each photodiode alone, :attr:`_profile_member`), and over the samples of each group
+        of :attr:`profile_rows` when it is set (G, K)."""
+        s = x @ self._profile_member.T
         if self.profile_rows is None:
             return s
         out = np.zeros((int(self.profile_rows.max()) + 1, s.shape[1]))
@@ -309,7 +334,7 @@ class Forward:
         num = self._unit_sums(yo * mw)
         den = self._unit_sums(mw * mw)
         radiance = self._per_sample(num / np.maximum(den, 1e-300))
-        return radiance[:, self.inst.pd_unit] * m + off, radiance
+        return radiance[:, self._profile_col] * m + off, radiance
 
     def _offsets(self, theta, obs: SkySample):
         """Dark offsets (P,) (0 unless the readings are raw) plus an effect's additive light
@@ -359,7 +384,8 @@ class Forward:
                 polarized = np.where(neg, 0.0, polarized)
                 radiance = np.where(neg, c0 / np.maximum(a00, 1e-300), radiance)
             radiance, polarized = self._per_sample(radiance), self._per_sample(polarized)
-            return radiance[:, u] * b0 + polarized[:, u] * b1 + off, radiance
+            k = self._profile_col
+            return radiance[:, k] * b0 + polarized[:, k] * b1 + off, radiance
 
     def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:
         """Relative residuals (n, P): ``(r - r_hat) / unit mean``, 0 where not usable."""

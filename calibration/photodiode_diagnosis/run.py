@@ -18,7 +18,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from sensor.photodiodes_io import PhotodiodeData
+from sensor.photodiodes_io import PhotodiodeData, heading_error_deg
 from skysim.exceptions import InvalidParameterError
 from skysim.geometry import angle_between_deg, direction_vector, elevation_azimuth, wrap_deg
 from skysim.sky import RayleighSky
@@ -33,7 +33,7 @@ from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, c
                          search_clock)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
 from .errors import InstrumentDataError, PointingCalibrationError, SunTooLowError
-from .faults import bright_glare, malus_outliers, screen
+from .faults import bright_glare, malus_outliers, rotating_units, screen
 from .fit import FIT_SAMPLES, fit, fit_headings, fit_pinned, geometry_mask, orient
 from .fit import thin as _thin
 from .forward import Forward, SunTrack
@@ -371,10 +371,11 @@ def _held_out(fwd_ho: Forward, theta_tr, layout_tr, sigma):
     return res.theta, fwd_ho.residual(res.theta)
 
 
-def _grid_decode(fwd: Forward, theta, centre, offsets, lag=None) -> np.ndarray:
+def _grid_decode(fwd: Forward, theta, centre, offsets, lag=None, cycle=None) -> np.ndarray:
     """Headings ``centre + offsets[k]`` (n,) scored per sample, the best refined by a
     parabola through its neighbours; ``lag`` (n, U) shifts each unit's prediction to the
-    heading of its conversion."""
+    heading of its conversion. ``cycle`` (n,) of int: the samples of each label share one
+    heading, scored by the sum of their costs (``centre`` must be equal within a label)."""
     n, K = fwd.inst.n, offsets.size
     cost = np.zeros((K, n))
     groups = ([(slice(None), 0.0)] if lag is None else
@@ -386,6 +387,11 @@ def _grid_decode(fwd: Forward, theta, centre, offsets, lag=None) -> np.ndarray:
                 cost[g] += np.sum(fwd.residual(theta)[:, cols] ** 2, axis=1)
     finally:
         fwd.heading_override = None
+    if cycle is not None:
+        label = np.unique(cycle, return_inverse=True)[1].ravel()
+        total = np.zeros((K, int(label.max()) + 1 if n else 0))
+        np.add.at(total.T, label, cost.T)
+        cost = total[:, label]
     k = np.argmin(cost, axis=0)
     i = np.arange(n)
     wrap = offsets[-1] - offsets[0] + (offsets[1] - offsets[0]) >= 360.0 - 1e-9
@@ -409,14 +415,20 @@ def decode_headings(fwd: Forward, theta, step_deg: float = 5.0) -> np.ndarray:
     the two samples): a multiplexed compass knows when each unit converted, and so its
     decoded heading does not lag while it turns. That refinement searches +-10 deg around the
     heading decoded without it (the turn between a unit's conversions is a few degrees).
+
+    With a rotating analyser (:attr:`Instrument.analyser_cycle`) a unit's photodiodes read
+    one polarizer angle per sample, and the modulation that carries the angle of
+    polarization is read over a half-turn of the analyser: the costs of a half-turn's
+    samples are summed and the half-turn gets one heading (that of all its samples).
     """
     n = fwd.inst.n
-    h = _grid_decode(fwd, theta, np.zeros(n), np.arange(0.0, 360.0, step_deg))
+    cycle = fwd.inst.analyser_cycle
+    h = _grid_decode(fwd, theta, np.zeros(n), np.arange(0.0, 360.0, step_deg), cycle=cycle)
     conv = conversion_rows(fwd.inst)
     heading = fwd.headings(theta)
     lag = heading[:, None] - heading[conv]                      # (n, U) [deg]
     if np.any(lag):
-        h = _grid_decode(fwd, theta, h, np.arange(-10.0, 10.0 + 1e-9, 2.5), lag)
+        h = _grid_decode(fwd, theta, h, np.arange(-10.0, 10.0 + 1e-9, 2.5), lag, cycle)
     return np.where(fwd.usable.any(axis=1), h, np.nan)
 
 
@@ -504,13 +516,27 @@ class _Session:
     max_iter: int
 
 
+_FEWER = {1: "no unit", 2: "fewer than two units"}
+
+
+def _units_needed(inst: Instrument, unit_ok=None) -> int:
+    """Working units a session needs: one when a working unit's analyser turns (it sweeps
+    every polarizer angle, and the sky's angle of polarization at one view fixes the heading
+    modulo 180 deg), else two (fixed units each read one angle per photodiode; two views
+    are what tell the sky's pattern from the instrument's polarizer offsets). ``unit_ok``
+    (U,) bool: the working units (default: all)."""
+    turning = rotating_units(inst)
+    return 1 if turning[slice(None) if unit_ok is None else unit_ok].any() else 2
+
+
 def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
     """Screen the faults and fit the base model: ``(session, None)``, or ``(None, (screen,
     why))`` when fewer than two units read a usable sky."""
     scr = screen(inst)
-    if scr.unit_ok.sum() < 2:
-        return None, (scr, f"fewer than two units keep three working photodiodes "
-                           f"({len(scr.faults)} faults)")
+    need = _units_needed(inst, scr.unit_ok)
+    if scr.unit_ok.sum() < need:
+        return None, (scr, f"{_FEWER[need]} keep{'s' if need == 1 else ''} enough working "
+                           f"photodiodes ({len(scr.faults)} faults)")
     work = replace(inst, flagged=~scr.reading_ok)
     base = Forward(_thin(work), sun=sun)
     L = base.layout
@@ -528,8 +554,8 @@ def _fit_session(inst: Instrument, sun: SunTrack, max_iter: int):
     outliers = malus_outliers(inst, scr, full.residual(plain.theta), full.usable)
     if outliers is not scr:
         scr = outliers
-        if scr.unit_ok.sum() < 2:
-            return None, (scr, "fewer than two units follow Malus's law")
+        if scr.unit_ok.sum() < need:
+            return None, (scr, f"{_FEWER[need]} follow{'s' if need == 1 else ''} Malus's law")
         work, base, plain, full = _refit(inst, scr, plain.theta, sun, sign, max_iter)
     start = plain.theta.copy()
     start[L.pointing] = 0.0     # the plain fit's pointing took up the DoP misfit
@@ -679,6 +705,7 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
         return _no_signal_report(inst, *silent, seed)
     unavailable = {e.name: why for e in cand
                    if (why := e.available_at(sun_el) or e.applicable_to(s.work)) is not None}
+    unavailable.update(_unreadable(s.work, cand, sun, unavailable))
     held = _cross_validate(s, cand, folds, unavailable)
     noise = _noise_floor(s, held, folds, seed)
     floor = noise.value
@@ -709,6 +736,78 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     return _report(s, held, ranked, verdict, noise, n_folds, sun_el, seed)
 
 
+UNREADABLE_SAMPLES = 64
+"""Samples (evenly spread over the session) on which :func:`_unreadable` compares a
+candidate's angle of polarization with the base sky's."""
+
+
+def _unreadable(inst: Instrument, cand, sun: SunTrack, skip) -> dict:
+    """``{name: "not applicable: <reason>"}`` of the candidates the readings cannot tell.
+
+    A candidate that acts on the yaw alone (a yaw scale, which stretches the turn within a
+    sweep) is not applicable when a probe of its parameters (5 % of the way from its null
+    to its upper bound) leaves every recorded yaw as it is: no sweep turns.
+
+    Normalised readings keep no degree of polarization (:meth:`Forward.held_by_readings`):
+    their fit reads the angle of polarization alone. A candidate that changes the degree of
+    polarization (or the radiance) the units see but not their angle of polarization (a
+    depolarizing occluder, an aureole; on a zenith unit, the unit's view holding no azimuth
+    sector, an occluder of the horizon too) leaves them unchanged: it is reported as not
+    applicable instead of fitted. Which candidates do is read from the model itself, not
+    from their names: each start's angle of polarization at every unit, on
+    :data:`UNREADABLE_SAMPLES` samples, against the base sky's; a change below 1e-6 deg
+    (round-off of the Stokes arithmetic is below 1e-9 deg) is none. Candidates with a sky of
+    their own (they change the angle near the neutral points) and geometric or output-stage
+    ones (they act on the headings, the times or the readings) are not tested."""
+    out = {}
+    for e in cand:
+        if e.name in skip or not _acts_on_yaw_only(e):
+            continue
+        p = np.asarray(e.null, float)
+        p = p + 0.05 * np.where(np.isfinite(e.upper), np.asarray(e.upper, float) - p, 1.0)
+        if np.array_equal(e.yaw(inst, p), inst.yaw_deg):
+            out[e.name] = (f"not applicable: {e.name} acts on the yaw turned within a sweep, "
+                           "and no sweep turns (the recorded yaw is constant within each)")
+    if inst.readings_kind != "normalised":
+        return out
+    rows = np.unique(np.linspace(0, inst.n - 1, min(UNREADABLE_SAMPLES, inst.n)).astype(int))
+    sub = inst.subset(rows)
+    base = None
+    for e in cand:
+        if e.name in skip or e.name in out or e.geometric or e.output_only or _has_sky(e):
+            continue
+        fe = Forward(sub, e, sun=sun)
+        if base is None:
+            t0 = np.zeros(fe.layout.size)
+            t0[fe.layout.scale] = NOMINAL_DOP_SCALE
+            base = Forward(sub, sun=sun).observe(t0[:fe.layout.n_base + fe.layout.n_heading])
+        change = 0.0
+        for p in e.starts(None):
+            t = np.zeros(fe.layout.size)
+            t[fe.layout.scale] = NOMINAL_DOP_SCALE
+            t[fe.layout.effect] = p
+            obs = fe.observe(t)
+            d = np.mod(obs.aop_unit_deg - base.aop_unit_deg + 90.0, 180.0) - 90.0
+            change = max(change, float(np.nanmax(np.abs(d))) if d.size else 0.0)
+        if change < 1e-6:
+            out[e.name] = ("not applicable: the readings are normalised (no degree of "
+                           f"polarization survives them) and {e.name} changes the degree of "
+                           "polarization the units see, not their angle of polarization "
+                           f"(at most {change:.1g} deg over its starts)")
+    return out
+
+
+def _acts_on_yaw_only(effect) -> bool:
+    """True for a candidate whose model changes the recorded yaw alone (neither the times,
+    the attitude, the sky nor the readings)."""
+    kind = type(effect)
+    return (kind.yaw is not RingEffect.yaw and kind.time_shift_s is RingEffect.time_shift_s
+            and kind.attitude is RingEffect.attitude and not _has_sky(effect)
+            and kind.modify is RingEffect.modify and kind.observe is RingEffect.observe
+            and kind.additive is RingEffect.additive
+            and not effect.output_only)
+
+
 def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _Noise,
             n_folds: int, sun_el, seed: int) -> DiagnosisReport:
     """The report: where the base model's held-out gap lies, the heading error of the base
@@ -717,6 +816,7 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
     work, L = s.work, s.layout
     output = instrument_output(work)
     named = verdict.best_candidate is not None and verdict.effect == verdict.best_candidate
+    ambiguity = work.heading_ambiguity_deg
     heading_error = {}
     for key in ("base", verdict.best_candidate if named else None):
         if key is None:
@@ -724,8 +824,8 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
         errs = []
         for f, ho in zip(held.fits[key], held.rows[key]):
             fwd = Forward(output.subset(ho), f.state.effect, sun=s.sun, polarizer_sign=s.sign)
-            errs.append(wrap_deg(decode_headings(fwd, f.state.theta)
-                                 - fwd.headings(f.state.theta)))
+            errs.append(heading_error_deg(decode_headings(fwd, f.state.theta),
+                                          fwd.headings(f.state.theta), ambiguity))
         e_all = np.concatenate(errs)
         e_all = e_all[np.isfinite(e_all)]
         heading_error[key] = float(np.sqrt(np.mean(e_all ** 2))) if e_all.size else None
@@ -746,7 +846,10 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
                            "decoded from the instrument's output (held readings at the "
                            "heading of their conversion)"
                            + ("" if work.absolute_yaw else
-                              " (relative yaw: per-sweep offset fitted)"),
+                              " (relative yaw: per-sweep offset fitted)")
+                           + f", wrapped into +-{ambiguity / 2:g} deg",
+                 "ambiguity_deg": ambiguity,
+                 "ambiguity": AMBIGUITY_NOTE[ambiguity],
                  "base_deg": heading_error.get("base"),
                  "best_deg": heading_error.get(best) if best in heading_error else None},
              "base_fit": _base_fit_report(s.theta, L, s.base, work, s.sign),
@@ -760,6 +863,16 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
     return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None,
                            noise.rms, noise.method, faults, data,
                            RING_THRESHOLDS.to_dict(), seed, extra)
+
+
+AMBIGUITY_NOTE = {
+    180.0: "every unit looks at the zenith: a zenith-only compass knows its heading modulo "
+           "180 deg (the sky's angle of polarization there is the same for a heading and its "
+           "opposite), so a decoded heading 180 deg from the fitted one is no error",
+    360.0: "the units' views off the zenith tell a heading from its opposite: errors over "
+           "the full circle"}
+"""What the heading error's wrap (:attr:`Instrument.heading_ambiguity_deg`) means, for the
+report."""
 
 
 def _no_signal_report(inst: Instrument, scr, why: str, seed: int) -> DiagnosisReport:
@@ -1343,31 +1456,76 @@ def _instrument_checks(inst: Instrument, theta, L, fwd, sun) -> dict:
 
 def _base_fit_report(theta, L, fwd, inst, sign):
     """The base fit's parameters by unit and photodiode; ``None`` for those the screen
-    excluded (they were never fitted)."""
+    excluded (they were never fitted) and for those the readings cannot inform
+    (:meth:`Forward.held_by_readings`, :meth:`Forward.absorbed_by_profile`: held, never
+    fitted), with what the data cannot
+    recover (``not_recoverable``, :attr:`Instrument.unrecoverable`) and the fitted
+    parameters that ended at a bound of the fit (``at_bound``: a bound that binds is a
+    parameter taking up a misfit of the model, not a measurement)."""
     pd_fitted = fwd.usable.any(axis=0)
     unit_fitted = np.zeros(L.n_units, bool)
     unit_fitted[inst.pd_unit[pd_fitted]] = True
+    held = fwd.held_by_readings() | fwd.absorbed_by_profile()
 
     def per_unit(values):
         return {f"u{u}": float(d) if unit_fitted[u] else None for u, d in enumerate(values)}
 
-    def per_pd(values, f=float):
-        return {c: f(v) if ok else None for c, v, ok in zip(inst.columns, values, pd_fitted)}
+    def per_pd(values, f=float, held_too=None):
+        ok = pd_fitted if held_too is None else pd_fitted & ~held_too
+        return {c: f(v) if k else None for c, v, k in zip(inst.columns, values, ok)}
 
     point = theta[L.pointing] + (0.0 if inst.pointing_deg is None
                                  else np.nan_to_num(inst.pointing_deg))
     el = point[:L.n_units]
     return {"pointing_held": inst.pointing_deg is not None,"polarizer_sense": "as unit frame" if sign > 0 else "opposite to unit frame",
-            "dop_scale": float(theta[L.scale]),
+            "dop_scale": None if held[L.scale] else float(theta[L.scale]),
             "polarizer_offset_deg": per_unit(theta[L.delta]),
             "polarizer_angle_deviation_deg": per_pd(theta[L.angle]),
             "elevation_offset_deg": per_unit(el),
             "elevation_offset_mean_deg": (float(np.mean(el[unit_fitted])) if unit_fitted.any()
                                           else None),
             "azimuth_offset_deg": per_unit(point[L.n_units:]),
-            "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g))),
-            "offset": per_pd(theta[L.off], lambda o: float(o * fwd.level)),
-            "heading_offset_deg": [float(h) for h in theta[L.heading]]}
+            "gain": per_pd(theta[L.lam], lambda g: float(np.exp(g)), held[L.lam]),
+            "offset": per_pd(theta[L.off], lambda o: float(o * fwd.level), held[L.off]),
+            "heading_offset_deg": [float(h) for h in theta[L.heading]],
+            "at_bound": _base_at_bound(theta, L, fwd, inst, held),
+            "not_recoverable": [dict(u) for u in inst.unrecoverable]}
+
+
+def _base_at_bound(theta, L, fwd, inst, held) -> list:
+    """Names of the base fit's fitted parameters at a bound of :class:`.fit.Priors` (within
+    1e-6 of the bound's magnitude, at least 1e-9): ``dop_scale``, ``offset:<column>``,
+    ``polarizer_angle_deviation_deg:<column>``, ``elevation_offset_deg:u<k>``,
+    ``azimuth_offset_deg:u<k>``."""
+    from .fit import Priors
+    pri = Priors.for_model(fwd, theta)
+    tol = np.maximum(1e-6 * np.maximum(np.abs(pri.lower), np.abs(pri.upper)), 1e-9)
+    tol = np.where(np.isfinite(tol), tol, 1e-9)
+    at = (np.isfinite(pri.lower) & (theta <= pri.lower + tol)) | \
+         (np.isfinite(pri.upper) & (theta >= pri.upper - tol))
+    at &= ~held & _not_pinned(fwd, inst, L)
+    names = np.empty(L.size, object)
+    names[L.scale] = "dop_scale"
+    names[L.off] = [f"offset:{c}" for c in inst.columns]
+    names[L.angle] = [f"polarizer_angle_deviation_deg:{c}" for c in inst.columns]
+    names[L.pointing] = ([f"elevation_offset_deg:u{u}" for u in range(L.n_units)]
+                         + [f"azimuth_offset_deg:u{u}" for u in range(L.n_units)])
+    return [str(names[i]) for i in np.flatnonzero(at) if names[i] is not None]
+
+
+def _not_pinned(fwd, inst, L) -> np.ndarray:
+    """(size,) bool: parameters the base fit was free to move (not a screened-out
+    photodiode's or unit's, not calibrated pointing)."""
+    m = np.ones(L.size, bool)
+    pd_fitted = fwd.usable.any(axis=0)
+    unit_fitted = np.zeros(L.n_units, bool)
+    unit_fitted[inst.pd_unit[pd_fitted]] = True
+    for sl in (L.lam, L.off, L.angle):
+        m[sl] = pd_fitted
+    m[L.pointing] = np.r_[unit_fitted, unit_fitted]
+    if inst.pointing_deg is not None:
+        m[np.arange(L.size)[L.pointing][np.isfinite(inst.pointing_deg)]] = False
+    return m
 
 
 def diagnose_photodiodes(data: PhotodiodeData, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,

@@ -487,8 +487,35 @@ def _diagnose_cmd(args) -> int:
                   f"{'yes' if c.explained else 'no'} |")
         else:
             print(f"| {c.effect} | unavailable | | |")
+    for line in _instrument_summary(report):
+        print(line)
     print(f"wrote {out}/" + ", ".join(p.name for p in written))
     return 0
+
+
+def _instrument_summary(report: DiagnosisReport) -> list[str]:
+    """What a photodiode report says beside its verdict, one line each: the heading error
+    (and the heading ambiguity of a zenith-only compass), the base fit's parameters at a
+    bound of the fit, what the data cannot recover, and why a candidate was not applicable."""
+    extra = report.extra or {}
+    lines = []
+    for c in report.candidates:
+        if not c.available and c.not_applicable:
+            lines.append(f"{c.effect}: {c.not_applicable}")
+    he = extra.get("heading_error")
+    if he and he.get("base_deg") is not None:
+        best = "" if he.get("best_deg") is None else f", {he['best_deg']:.3g} deg with the " \
+                                                       "named effect"
+        amb = he.get("ambiguity_deg", 360.0)
+        mod = f" (modulo {amb:g} deg: {he['ambiguity']})" if amb != 360.0 else ""
+        lines.append(f"heading error {he['base_deg']:.3g} deg RMS{best}{mod}")
+    base = extra.get("base_fit") or {}
+    if base.get("at_bound"):
+        lines.append("base fit at a bound (taking up a misfit, not a measurement): "
+                     + ", ".join(base["at_bound"]))
+    for u in base.get("not_recoverable", []):
+        lines.append(f"not recoverable: {u['quantity']} ({u['reason']})")
+    return lines
 
 
 def _real_benchmark_cmd(args) -> int:
