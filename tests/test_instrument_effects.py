@@ -217,3 +217,10 @@ def test_aerosol_candidate_takes_the_instruments_band(standing_ring):
     assert e.wavelength_nm == 500.0
     grid = GridAerosolSky(2.0, wavelength_nm=350.0)
     assert all(s.wavelength_nm == 350.0 for s in grid.skies)
+
+
+def test_side_glare_starts_fit_its_parameter_list(standing_ring):
+    e = get_ring_effect("side_glare")
+    e.bind(instrument_from_photodiodes(standing_ring))
+    assert all(s.shape == (len(e.parameter_names),) for s in e.starts(None))
+    assert e.k == 2 * 32 + 1

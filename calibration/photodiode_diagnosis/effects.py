@@ -787,8 +787,8 @@ class SideGlare(StrayLight):
         self.fd_step = with_side(self.fd_step, (1e-3,) * P)
 
     def starts(self, ctx) -> list:
-        P = self.per_photodiode // 2
-        return [np.r_[s[:P], np.zeros(P), s[P:]] for s in super().starts(ctx)]
+        P = self.per_photodiode // 2      # stray light's starts, no side to begin with
+        return [np.r_[np.full(P, 0.05), np.zeros(P), s] for s in (5.0, 15.0, 30.0)]
 
     def additive(self, p, obs, sun_enu, pd_unit):
         P = self.per_photodiode // 2
