@@ -165,10 +165,10 @@ def test_ring_failing_candidates_are_not_applicable(monkeypatch):
     """The compass failure: an SVD that does not converge in one candidate's fit."""
     from calibration.photodiode_diagnosis import run
     from ring_sessions import ring_session
-    fails = {"tilt": FAILURES["svd"], "fov": FAILURES["numeric"]}
+    fails = {"aureole": FAILURES["svd"], "fov": FAILURES["numeric"]}
     monkeypatch.setattr(run, "_fit_effect", _raiser(
         run._fit_effect, fails, lambda fe, starts, sigma: fe.effect.name))
-    rep = diagnose(ring_session(), ("yaw_scale", "tilt", "fov"), folds=3)
+    rep = diagnose(ring_session(), ("yaw_scale", "aureole", "fov"), folds=3)
     _check(rep, fails, ("yaw_scale",))
     assert rep.verdict.effect in ("none", "unexplained")      # a clean session
 
