@@ -135,13 +135,10 @@ def test_rayleigh_radiance_unit_matches_the_thin_multiple_scattering_sky():
         np.testing.assert_allclose(ratio, 1.0, atol=0.07)
 
 
-@pytest.fixture(scope="module")
-def overcast_reference():
-    """Radiative transfer of an overcast layer (1-2 km, cloud tau 1 and 2) in a Rayleigh sky
-    of tau 0.1 over albedo 0.1 (within 1.2 % of exact engine runs, tests/test_clouds.py), on
-    13 elevations between 5 and 85 deg and relative azimuths every 15 deg: two suns not used
-    in the design of the model."""
-    pytest.importorskip("sasktran2", reason="the radiative transfer needs the 'rt' extra")
+def _overcast_pair(sun, tau):
+    """The overcast (1-2 km, cloud ``tau``) over a Rayleigh sky of tau 0.1 and albedo 0.1, on
+    13 elevations between 5 and 85 deg (exact engine cosines) and relative azimuths every
+    15 deg: ``(E, A, radiative transfer, model)``."""
     from skysim.clouds import CloudLayer, CloudySky
     from skysim.multiple import MultipleScatteringSky, zenith_nodes_deg
     from skysim.rt_sasktran import MU_MAX, MU_MIN
@@ -151,14 +148,19 @@ def overcast_reference():
     el = el[(el > 5.0) & (el < 85.0)]
     E, A = np.meshgrid(el, np.arange(0.0, 181.0, 15.0), indexing="ij")
     clear = MultipleScatteringSky(tau=0.1, albedo=0.1)
-    out = {}
-    for sun, tau in ((30.0, 2.0), (50.0, 1.0)):
-        rt = CloudySky(CloudLayer(tau, 1000.0, 2000.0), tau=0.1, albedo=0.1).field(
-            E, A, sun, 0.0)
-        model = PartlyCloudySky(clear, CloudField(1.0, tau, 0, base_m=1000.0)).field(
-            E, A, sun, 0.0)
-        out[(sun, tau)] = (E, A, rt, model)
-    return out
+    rt = CloudySky(CloudLayer(tau, 1000.0, 2000.0), tau=0.1, albedo=0.1).field(E, A, sun, 0.0)
+    model = PartlyCloudySky(clear, CloudField(1.0, tau, 0, base_m=1000.0)).field(E, A, sun,
+                                                                                 0.0)
+    return E, A, rt, model
+
+
+@pytest.fixture(scope="module")
+def overcast_reference():
+    """Radiative transfer of an overcast layer (1-2 km, cloud tau 1 and 2) in a Rayleigh sky
+    of tau 0.1 over albedo 0.1 (within 1.2 % of exact engine runs, tests/test_clouds.py):
+    two suns not used in the design of the model (:func:`_overcast_pair`)."""
+    pytest.importorskip("sasktran2", reason="the radiative transfer needs the 'rt' extra")
+    return {(sun, tau): _overcast_pair(sun, tau) for sun, tau in ((30.0, 2.0), (50.0, 1.0))}
 
 
 @pytest.mark.slow
@@ -197,18 +199,7 @@ def test_thick_overcast_follows_the_radiative_transfer(sun, tau):
     # between horizon and zenith; the DoP within 0.02 RMS (measured 0.004-0.010: both skies
     # are nearly unpolarized, the radiative transfer's DoP at most 0.026)
     pytest.importorskip("sasktran2", reason="the radiative transfer needs the 'rt' extra")
-    from skysim.clouds import CloudLayer, CloudySky
-    from skysim.multiple import MultipleScatteringSky, zenith_nodes_deg
-    from skysim.rt_sasktran import MU_MAX, MU_MIN
-    theta = np.degrees(np.arccos(np.clip(np.cos(np.radians(zenith_nodes_deg(17))), MU_MIN,
-                                         MU_MAX)))
-    el = 90.0 - theta
-    el = el[(el > 5.0) & (el < 85.0)]
-    E, A = np.meshgrid(el, np.arange(0.0, 181.0, 15.0), indexing="ij")
-    clear = MultipleScatteringSky(tau=0.1, albedo=0.1)
-    rt = CloudySky(CloudLayer(tau, 1000.0, 2000.0), tau=0.1, albedo=0.1).field(E, A, sun, 0.0)
-    model = PartlyCloudySky(clear, CloudField(1.0, tau, 0, base_m=1000.0)).field(E, A, sun,
-                                                                                 0.0)
+    _, _, rt, model = _overcast_pair(sun, tau)
     ratio = model.I / rt.I
     assert 0.9 < np.median(ratio) < 1.1
     assert 0.8 < ratio.min() and ratio.max() < 1.2

@@ -325,7 +325,7 @@ CAMERA_TIME = "2024-05-22T02:30:00+00:00"
 
 
 def camera_frame(seed: int, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None,
-                 extinction_ratio=np.inf, sky=None, yaw_deg: float = 30.0):
+                 extinction_ratio=np.inf, sky=None, yaw_deg: float = 30.0, time=None):
     """A raw frame of the camera simulator (:class:`sensor.camera.PolarizationCamera`) with
     the given injected errors, and the sidecar of the *nominal* camera, as a user's would be.
 
@@ -342,6 +342,8 @@ def camera_frame(seed: int, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None,
     sky : Sky, optional
         Default: the Rayleigh sky of :data:`CAMERA_DMAX`.
     yaw_deg : float
+    time : datetime, optional
+        Timezone-aware time of the frame (default :data:`CAMERA_TIME`).
     """
     import datetime as dt
 
@@ -352,7 +354,7 @@ def camera_frame(seed: int, *, lens_shift=(0.0, 0.0, 1.0), angle_offsets=None,
 
     from .camera import CameraFrame
     n = CAMERA_SIZE
-    time = dt.datetime.fromisoformat(CAMERA_TIME)
+    time = dt.datetime.fromisoformat(CAMERA_TIME) if time is None else time
     nominal = PolarizationCamera.fisheye(n, n)
     lens = FisheyeLens(nominal.lens.focal_px * lens_shift[2], nominal.lens.cx + lens_shift[0],
                        nominal.lens.cy + lens_shift[1], nominal.lens.fov_deg)
