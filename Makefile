@@ -8,7 +8,7 @@ export OPENBLAS_NUM_THREADS ?= 1
 export MKL_NUM_THREADS ?= 1
 export OMP_NUM_THREADS ?= 1
 
-.PHONY: run test test-slow test-all bench clean venv
+.PHONY: run test test-slow test-matrix test-all bench clean venv
 
 $(BIN)/python:
 	$(PYTHON) -m venv $(VENV)
@@ -35,7 +35,8 @@ run: $(VENV)/.installed-run
 # `make test`: every test not marked slow, on TEST_WORKERS processes (pytest-xdist; a test
 # module's tests share a process, so its module fixtures are built once); `make test-slow`: the
 # tests marked slow (long reference runs, reproductions, recoveries on real sessions);
-# `make test-all`: both. Benchmarks (tests/benchmarks) run under `make bench`: some call the
+# `make test-matrix`: the identifiability matrices (each instrument's candidates simulated and
+# diagnosed, tens of minutes); `make test-all`: all of them. Benchmarks (tests/benchmarks) run under `make bench`: some call the
 # radiative-transfer engine dozens of times. A selection that collects no test (pytest exit
 # 5, e.g. no slow test left) is not a failure.
 TEST_WORKERS ?= 2
@@ -45,7 +46,10 @@ test: $(VENV)/.installed-test
 	$(PYTEST) -m "not slow" || [ $$? -eq 5 ]
 
 test-slow: $(VENV)/.installed-test
-	$(PYTEST) -m slow || [ $$? -eq 5 ]
+	$(PYTEST) -m "slow and not matrix" || [ $$? -eq 5 ]
+
+test-matrix: $(VENV)/.installed-test
+	$(PYTEST) -m matrix || [ $$? -eq 5 ]
 
 test-all: $(VENV)/.installed-test
 	$(PYTEST) || [ $$? -eq 5 ]
