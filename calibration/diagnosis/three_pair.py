@@ -34,7 +34,7 @@ from .core import Thresholds
 from .errors import InsufficientDataError, SingleHeadingError
 from .report import Candidate, DiagnosisReport
 from .three_pair_data import MIN_SUN_ELEVATION_DEG, DiagnosisData
-from .three_pair_fit import base_parameters, effect_parameters, fit_model, predict
+from .three_pair_fit import base_parameters, effect_parameters, fit_form, fit_model, predict
 
 __all__ = ["DEFAULT_CANDIDATES", "METRIC", "cross_validate", "diagnose_three_pair",
            "harmonics", "where_slices"]
@@ -160,6 +160,11 @@ def harmonics(data: DiagnosisData, residual_V, phi_deg) -> list[dict]:
 
 def _fold_params(fits, effect) -> dict:
     P = np.array([f.params for f in fits])
+    if hasattr(effect, "report"):       # the reported form's values from the fold values
+        names = list(effect.report(P[0]))
+        P = np.array([[d["value"] for d in effect.report(p).values()] for p in P])
+        return {n: {"value": float(v), "se": float(s), "unit": "1"} for n, v, s in zip(
+            names, P.mean(axis=0), P.std(axis=0, ddof=1) / np.sqrt(len(P)))}
     se = P.std(axis=0, ddof=1) / np.sqrt(len(P)) if len(P) > 1 else np.full(P.shape[1], np.nan)
     return {n: {"value": float(v), "se": float(s), "unit": u}
             for n, v, s, u in zip(effect.parameter_names, P.mean(axis=0), se, effect.units)}
@@ -212,7 +217,7 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
     InsufficientDataError, SingleHeadingError
         When no held-out split or no heading spread is possible.
     """
-    cands = all_effects(effects)
+    cands = [fit_form(e) for e in all_effects(effects)]
     ctx = data.ctx
     _check(data)
     fold_of = core.assign_folds(ctx.block, folds)

@@ -10,9 +10,13 @@ References
    doi:10.3788/OPE.20142206.1424, eqs. (2)-(3), (10)-(14).
 .. [2] D. W. Marquardt, "An algorithm for least-squares estimation of nonlinear
    parameters", J. Soc. Ind. Appl. Math. 11(2):431-441 (1963), doi:10.1137/0111030.
+.. [3] M. Born, E. Wolf, *Principles of Optics*, 7th ed., Cambridge University Press (1999),
+   sec. 1.4.2 (a partial polarizer's efficiency ``eta = (1 - eps) / (1 + eps)``).
 """
 
 from __future__ import annotations
+
+from typing import ClassVar
 
 import numpy as np
 
@@ -20,8 +24,8 @@ from ..effects import BASE_NAMES, Context, Effect, geometry, jacobians, outputs
 from ..solve import solve_pair
 from .fit_result import FitResult
 
-__all__ = ["BASE_UNITS", "N_BASE", "base_parameters", "effect_parameters", "fit_model",
-           "predict"]
+__all__ = ["BASE_UNITS", "N_BASE", "RelativeExtinction", "base_parameters",
+           "effect_parameters", "fit_form", "fit_model", "predict"]
 
 N_BASE = len(BASE_NAMES)
 BASE_UNITS = ("deg",) * 6 + ("1",) * 4
@@ -29,6 +33,115 @@ BASE_UNITS = ("deg",) * 6 + ("1",) * 4
 terms and DoP scale dimensionless)."""
 _BASE_PRIOR_SD = np.r_[np.full(6, 5.0), np.full(3, 0.2), 1.0]
 _BASE_STEP_TOL = np.r_[np.full(6, 1e-5), np.full(3, 1e-7), 1e-7]
+
+
+class RelativeExtinction(Effect):
+    """The extinction-ratio candidate in the form the data identify: how the six polarizers
+    differ from their mean.
+
+    A polarizer of extinction ratio ``eps`` passes polarized light with the efficiency
+    ``eta = (1 - eps) / (1 + eps) = exp(-2 atanh eps)`` ([3]_;
+    :mod:`calibration.effects.extinction_ratio`). A factor common to the six ``eta`` is
+    exactly a smaller DoP scale ``s`` (``eta d`` is all the outputs see), and the intensity
+    factor ``1 + eps`` is exactly a change of the transmittance terms ``f``. What the outputs
+    identify is therefore
+
+    ``eps_k_rel = atanh(eps_k) - mean_j atanh(eps_j)``, ``k = 1..6``, summing to zero
+
+    (equal to ``eps_k - mean(eps)`` within 1 % of the larger ``eps`` for ``eps <= 0.1``).
+    The fit frees ``eps_1_rel .. eps_5_rel`` (``eps_6_rel`` is minus their sum; all six are
+    reported, :meth:`report`), so no parameter meets the physical bound ``eps >= 0`` that a
+    fit of the six ``eps`` themselves presses its lowest one against once the prior pins
+    their common level. The model's efficiencies are ``eta_k = exp(-2 eps_k_rel) / M``
+    (:meth:`efficiencies`), ``M = (sum_j exp(-2 p eps_j_rel))^(1/p)`` a smooth maximum
+    (``p`` = :attr:`SMOOTH_MAX_POWER`: ``M`` is between the largest ``exp(-2 eps_j_rel)``
+    and 6^(1/p) = 1.036 times it), so that every ``eta`` is at most 1 and the outputs are
+    smooth in the parameters where two polarizers are nearly equal; the base's
+    ``dop_scale`` reads ``d_max`` times the common factor.
+    """
+
+    name = "extinction_ratio"
+    parameter_names = tuple(f"eps_{k}_rel" for k in range(1, 6))
+    reported_names = tuple(f"eps_{k}_rel" for k in range(1, 7))
+    units = ("1",) * 5
+    bounds = np.tile([-0.55, 0.55], (5, 1))
+    """``atanh(0.5) = 0.549``: ``eps`` in 0..0.5 (the library effect's range) keeps every
+    difference from the mean inside +-0.55."""
+    prior_mean = np.zeros(5)
+    prior_sd = np.full(5, 0.05)
+    """The library effect's prior width per polarizer (it fixes nothing the data see)."""
+    fd_step = np.full(5, 1e-4)
+    null = np.zeros(5)
+    SMOOTH_MAX_POWER = 50.0
+    generation_range: ClassVar[dict] = {"eps_k_rel": "differences of the library effect's "
+                                        "log-uniform [1e-3, 0.1] eps per polarizer"}
+
+    @staticmethod
+    def from_eps(eps) -> np.ndarray:
+        """The six ``eps_k_rel`` of six extinction ratios ``eps`` (class docstring)."""
+        a = np.arctanh(np.asarray(eps, float))
+        return a - a.mean()
+
+    def _all(self, p) -> np.ndarray:
+        p = np.asarray(p, float)
+        return np.r_[p, -p.sum()]
+
+    def draw(self, rng):
+        from ..effects import get_effect
+        return self.from_eps(get_effect("extinction_ratio").draw(rng))[:5]
+
+    def _weights(self, p):
+        """``(eta, w)``: the efficiencies and the softmax weights ``w_j = dlnM/d(-2 r_j)``."""
+        x = -2.0 * self._all(p)
+        z = self.SMOOTH_MAX_POWER * (x - x.max())
+        w = np.exp(z) / np.exp(z).sum()
+        ln_m = x.max() + np.log(np.exp(z).sum()) / self.SMOOTH_MAX_POWER
+        return np.exp(x - ln_m), w
+
+    def efficiencies(self, p) -> np.ndarray:
+        """The six ``eta_k = exp(-2 eps_k_rel) / M`` (class docstring), each at most 1."""
+        return self._weights(p)[0]
+
+    def channel_terms(self, ctx, p):
+        return {"extinction": (np.ones(6), self.efficiencies(p))}
+
+    def output_jacobian(self, ctx, p, parts):
+        # U = G [log10(A) - log10(B) + f], A = 1 + eta_n d cos 2x_n, B = 1 - eta_m d cos 2x_m,
+        # eta_k = exp(-2 r_k) / M: at fixed M, h_k = dU/dr_k is -2 G/ln10 eta_n dc1 / A
+        # (numerator) or -2 G/ln10 eta_m dc2 / B (denominator); M moves every eta, with
+        # dlnM/dr_j = -2 w_j, so the full column is h_j - w_j sum_k h_k; r_6 = -(r_1 + ...
+        # + r_5) makes each free column d/dr_j - d/dr_6
+        eta, w = self._weights(p)
+        kl = parts["G_ln10"]
+        h = np.zeros(parts["A"].shape + (6,))
+        ch = np.arange(3)
+        h[:, ch, 2 * ch] = -2.0 * kl * eta[0::2] * parts["dc1"] / parts["A"]
+        h[:, ch, 2 * ch + 1] = -2.0 * kl * eta[1::2] * parts["dc2"] / parts["B"]
+        h = h - w * h.sum(axis=-1, keepdims=True)
+        return h[..., :5] - h[..., 5:6]
+
+    def report(self, values, covariance=None) -> dict:
+        """``name -> {"value", "se", "unit"}`` of all six ``eps_k_rel`` from the five fitted
+        ones (``se`` from their covariance, NaN without one)."""
+        T = np.vstack([np.eye(5), -np.ones((1, 5))])
+        v = T @ np.asarray(values, float)
+        se = (np.full(6, np.nan) if covariance is None
+              else np.sqrt(np.maximum(np.diag(T @ covariance @ T.T), 0.0)))
+        return {n: {"value": float(a), "se": float(b), "unit": "1"}
+                for n, a, b in zip(self.reported_names, v, se)}
+
+    def describe(self, p) -> dict:
+        return {n: d["value"] for n, d in self.report(p).items()}
+
+
+FIT_FORMS = {"extinction_ratio": RelativeExtinction()}
+"""Candidates fitted in another form than the library effect's parameters: the combination
+the three-pair outputs identify."""
+
+
+def fit_form(effect: Effect) -> Effect:
+    """The form in which ``effect`` is fitted (:data:`FIT_FORMS`; itself otherwise)."""
+    return FIT_FORMS.get(effect.name, effect)
 
 
 def base_parameters(fit: FitResult) -> dict:
@@ -40,6 +153,10 @@ def effect_parameters(fit: FitResult, effect: Effect | None) -> dict:
     """``name -> {"value", "se", "unit"}`` of the effect (empty for a base fit)."""
     if effect is None:
         return {}
+    if hasattr(effect, "report"):
+        idx = np.arange(fit.theta.size)[fit.effect]
+        cov = None if fit.covariance is None else fit.covariance[np.ix_(idx, idx)]
+        return effect.report(fit.params, cov)
     return fit.parameters(fit.effect, effect.parameter_names, effect.units)
 
 
