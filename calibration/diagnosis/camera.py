@@ -65,8 +65,10 @@ sky misses raw frames, and which camera or sky effect explains it.
    own weakly polarized light, Zege, Ivanov & Katsev 1991 [4]_; ``tau = 0`` is the base sky
    exactly). Every parameter's standard error is the sandwich covariance over super-pixels
    at the optimum (:meth:`calibration.diagnosis.FitResult.from_least_squares`).
-7. **Score, verdict, shrink, where.** :mod:`calibration.diagnosis.core`; three independent
-   values per super-pixel (the four ``y_k`` sum to zero). Slices: angular distance from the
+7. **Score, verdict, shrink, where.** Scores by :mod:`calibration.diagnosis.core` (three
+   independent values per super-pixel: the four ``y_k`` sum to zero); the paired judge,
+   the verdict and the shrink with its bootstrap standard errors over held-out blocks by
+   :func:`calibration.diagnosis.judge.verdict`, as for every instrument. Slices: angular distance from the
    sun, view elevation, view azimuth, image rings (radius as a fraction of the image circle)
    and image quadrants.
 
@@ -96,7 +98,7 @@ from .core import Thresholds
 from .errors import DiagnosisError
 from .fit_result import FitResult
 from .protocol import candidate_names
-from .report import Candidate, DiagnosisReport, Verdict
+from .report import Candidate, DiagnosisReport
 
 __all__ = ["CAMERA_CANDIDATES", "CameraAdapter", "CameraEffect", "CameraFrame",
            "CameraFrames", "CameraInputError", "DEFAULT_CAMERA_CANDIDATES", "diagnose_camera",
@@ -650,21 +652,11 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
             at_bound=core.at_bound(P[:, :eff.k], eff.bounds[0], eff.bounds[1],
                                    eff.parameter_names, null=eff.null),
             details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
-    rows, dec = core.judge(rows, {"base": res0, **residuals}, block, floor, thresholds,
-                           floor_note=noise.note)
-    effect = dec.effect
+    held = {name: r[use] for name, r in {"base": res0, **residuals}.items()}
+    rows, verdict = judge.verdict(rows, held, block[use], floor, thresholds,
+                                  np.random.default_rng(seed), floor_note=noise.note)
     best = next((r.effect for r in rows if r.available), None)
-    named = best is not None and effect == best
-    after = residuals.get(best, res0) if effect != "none" else res0
-    G1 = core.rms(after, use[:, None] & np.ones((1, 4), bool))
-    se = core.shrink_uncertainty(np.sqrt(np.nansum(res0 ** 2, 1))[use],
-                                 np.sqrt(np.nansum(after ** 2, 1))[use], block[use],
-                                 np.random.default_rng(seed)) or {}
-    verdict = Verdict(effect, dec.reason, best, G0, G1, 1 - G1 / G0, se.get("gap_before_se"),
-                      se.get("gap_after_se") if effect != "none" else se.get("gap_before_se"),
-                      (se.get("shrink_se") if effect != "none" else 0.0) if se else None,
-                      next(r.params for r in rows if r.effect == effect) if named else {},
-                      dec.group, dec.share, dec.share_se, dec.separated_by)
+    after = residuals.get(best, res0) if verdict.effect != "none" else res0
     geom = {k: np.concatenate([p.geometry[k] for p in prepared])[use]
             for k in ("sun_distance_deg", "elevation_deg", "azimuth_deg", "radius",
                       "quadrant")}

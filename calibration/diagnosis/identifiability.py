@@ -233,6 +233,7 @@ def _three_pair() -> InstrumentMatrix:
     from experiments.workflows.diagnose import simulate_session
 
     from .three_pair import DEFAULT_CANDIDATES
+    from .three_pair_fit import fit_form
     pattern = np.array([1.2, 0.7, 1.0, 1.4, 0.6, 1.1])   # spread of the six photodiodes
 
     def tilt(beta, gamma_deg):
@@ -256,20 +257,34 @@ def _three_pair() -> InstrumentMatrix:
         "multiple_scattering": ([0.12, 0.1], [0.35, 0.3]),
         "overcast": ([0.6], [2.5]),
     }
-    strengths = {}
+    strengths, injected = {}, {}
     for name in DEFAULT_CANDIDATES:
         e = get_effect(name)
         if e.available() is not None:
             continue
-        strengths[name] = {s: dict(zip(e.parameter_names, map(float, v)))
-                           for s, v in zip(("moderate", "strong"), values[name])}
+        strengths[name] = {}
+        for s, v in zip(("moderate", "strong"), values[name]):
+            v = np.asarray(v, float)
+            # the truth in the parameters the diagnosis reports (the extinction ratios as
+            # the six polarizers' differences from their mean, what the outputs identify)
+            form = fit_form(e)
+            names, shown = ((form.reported_names, form.from_eps(v)) if form is not e
+                            else (e.parameter_names, v))
+            strengths[name][s] = dict(zip(names, map(float, shown)))
+            injected[name, s] = v
 
     def simulate(effect, truth, seed):
-        params = None if truth is None else np.array(list(truth.values()))
-        return simulate_session(effect, np.random.default_rng(seed), params=params)["data"]
+        if truth is None:
+            return simulate_session(None, np.random.default_rng(seed))["data"]
+        strength = next(s for s, t in strengths[effect].items() if t == truth)
+        # a noise draw of its own per effect and strength (the seed with the case's
+        # index), so that no two cases share their noise and each z-score is a draw
+        case = list(injected).index((effect, strength)) + 1
+        return simulate_session(effect, np.random.default_rng([seed, case]),
+                                params=injected[effect, strength])["data"]
 
     return InstrumentMatrix("three-pair", tuple(DEFAULT_CANDIDATES), strengths, simulate,
-                            seeds=(11, 12, 13))
+                            seeds=(11, 12, 13, 14, 15, 16))
 
 
 SKY_NOISE = 1e-3
