@@ -403,6 +403,12 @@ def _camera() -> InstrumentMatrix:
     def simulate(effect, truth, seed):
         if effect is None:
             return camera_frame(seed)
+        # a shot-noise draw of its own per effect and strength (the seed with the case's
+        # index), so that no two cases share their noise and each z-score is a draw
+        case = next(i for i, (e, s) in enumerate(
+            (e, s) for e, by in strengths.items() for s in by) if e == effect
+            and strengths[e][s] == truth) + 1
+        seed = int(np.random.SeedSequence([seed, case]).generate_state(1)[0])
         if effect == "lens":
             return camera_frame(seed, lens_shift=(truth["dcx_px"], truth["dcy_px"],
                                                   truth["focal_scale"]))
