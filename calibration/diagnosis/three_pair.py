@@ -13,8 +13,12 @@
 4. **Which.** Each candidate effect of :mod:`calibration.effects` is added to the base model
    and refitted fold by fold, scored by :func:`.core.held_out_score`.
 5. **Verdict and how far.** :func:`.judge.verdict` (the paired judge, :func:`.core.decide`,
-   gaps before and after, the shrink with block-bootstrap standard errors) and the best
-   effect's parameters fitted on all data with their covariance.
+   gaps before and after, the shrink with block-bootstrap standard errors), with the paired
+   margin as Student's t for the number of sweeps (:func:`paired_margin`), and the best
+   effect's parameters fitted on all data with their covariance. A candidate whose
+   library parameters the outputs cannot all identify is fitted in the form they do
+   (:data:`.three_pair_fit.FIT_FORMS`: the extinction ratios as differences from their
+   mean).
 
 References
 ----------
