@@ -87,13 +87,14 @@ def paired_margin(paired_se: float, n_blocks: int) -> float:
     Returns
     -------
     float
-        The margin in jackknife standard errors (``paired_se`` itself with fewer than two
-        sweeps, where the judge compares single readings).
+        The margin in jackknife standard errors, to 0.01 (``paired_se`` itself with fewer
+        than two sweeps, where the judge compares single readings).
     """
     from scipy.stats import norm, t
     if n_blocks < 2 or paired_se <= 0:
         return float(paired_se)
-    return float(t.ppf(norm.cdf(paired_se), n_blocks - 1))
+    # to 0.01, as the verdict's reason prints it
+    return round(float(t.ppf(norm.cdf(paired_se), n_blocks - 1)), 2)
 
 
 def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
