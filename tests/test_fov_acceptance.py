@@ -93,7 +93,7 @@ def test_quadrature_converges_on_the_sky(ring):
     :data:`FOV_NODES` states: 4e-5 at a HWHM of 10 deg, 1.5e-4 at 22.7 and 30 deg (a ring's
     readings carry about 4e-3 of noise). The radiance too, to 4e-5 and 1.5e-4 up to 22.7
     deg; at 30 deg the horizon, 45 deg below the axis, cuts the acceptance where it is
-    still 3e-3 of its peak, and the radiance is good to 5e-4."""
+    still 1e-2 of its peak, and the radiance is good to 5e-4."""
     sensor, sky, att, sun = ring
     for h, tol, tol_i in ((10.0, 4e-5, 4e-5), (ACCEPTANCE_HWHM_DEG, 1.5e-4, 1.5e-4),
                           (30.0, 1.5e-4, 5e-4)):
