@@ -469,8 +469,8 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
     with the effect made physically: a multiple-scattering or neutral-point sky, the units'
     measured acceptance sampled over :data:`RING_CAP` directions, an occluded sector or a
-    solar aureole in the sky, sunlight scattered inside the instrument added to the readings, a tilted
-    platform, a clock or gyro error in the recorded times or yaw.
+    solar aureole in the sky, sunlight scattered inside the instrument added to the
+    readings, a tilted platform, a clock or gyro error in the recorded times or yaw.
 
     Parameters
     ----------
