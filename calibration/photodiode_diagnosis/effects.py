@@ -88,9 +88,9 @@ from sensor.compound_eye import SkySample
 from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 
 from ..diagnosis.errors import EffectUnavailableError
+from ..effects import UnknownEffectError
 from .acceptance import (ACCEPTANCE_HWHM_DEG, ACCEPTANCE_ORDER, HWHM_MAX_DEG,
                          acceptance_quadrature, observe_directions)
-from ..effects import UnknownEffectError
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
