@@ -131,7 +131,7 @@ def test_ring_session_generator_injects_what_it_is_told():
         y = t.yaw_deg.to_numpy(float)[:60]
         return np.degrees(np.unwrap(np.radians(y)))[-1] - y[0]
     assert turn(scaled.table) == pytest.approx(1.05 * turn(clean.table), rel=1e-9)
-    wide = ring_session("fov", {"alpha_deg": 20.0}, seed=3)
+    wide = ring_session("fov", {"hwhm_deg": 20.0}, seed=3)
     change = np.median(np.abs(wide.table[wide.columns].to_numpy(float) / R0 - 1.0))
     assert 0.005 < change < 0.05, change
 

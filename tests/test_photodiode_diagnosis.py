@@ -29,9 +29,7 @@ from calibration.photodiode_diagnosis import (
     screen,
 )
 from calibration.photodiode_diagnosis.effects import (
-    fov_offsets_deg,
     get_ring_effect,
-    integrate_stokes,
     occlusion_weight,
 )
 from calibration.photodiode_diagnosis.forward import Forward, SunTrack
@@ -84,19 +82,6 @@ def test_effects_vanish_at_null(session, name):
     th[ext.layout.effect] = e.null
     np.testing.assert_allclose(ext.residual(th), base.residual(th[:base.layout.size]),
                                atol=1e-12)
-
-
-def test_fov_ring_is_second_order_exact():
-    """The six-direction ring at alpha/sqrt(2) averages any quadratic field exactly as the
-    uniform cap does (mean r^2 = alpha^2 / 2 on a cap of radius alpha, small-angle)."""
-    a = 10.0
-    offs = fov_offsets_deg(a)
-    r2 = np.sum(offs[:, :2] ** 2, axis=1)
-    np.testing.assert_allclose(r2.mean(), a ** 2 / 2, rtol=1e-12)
-    np.testing.assert_allclose(offs[:, :2].mean(axis=0), 0.0, atol=1e-12)
-    # equal Stokes average: two orthogonal fully polarized halves cancel
-    I, d, _ = integrate_stokes(np.ones(2), np.ones(2), np.array([0.0, 90.0]), axis=0)
-    assert I == 1.0 and d < 1e-12
 
 
 def test_occlusion_weight_is_a_sector():

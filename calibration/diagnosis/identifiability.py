@@ -446,10 +446,10 @@ field site)."""
 RING_START = "2022-05-12T16:01:00+02:00"
 """Start of the simulated ring sessions (afternoon sun, about 40 deg high)."""
 RING_DMAX = 0.6
-RING_CAP = (4, 8)
-"""Equal-area rings x directions per ring over which a unit's cone of view is averaged in
-the simulated field-of-view sessions (the candidate's fit uses six directions at the cone's
-RMS radius: the generator is not the fitter's quadrature)."""
+RING_CAP = (48, 24)
+"""Equal-area rings x directions per ring over which a unit's acceptance is sampled in the
+simulated field-of-view sessions (the candidate's fit uses 6 x 6 Gauss-Legendre directions:
+the generator is not the fitter's quadrature)."""
 
 
 def _modified_sky(base, kind: str, truth: dict):
@@ -488,10 +488,10 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
 
     The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
-    with the effect made physically: a multiple-scattering or neutral-point sky, a cone of
-    view averaged over :data:`RING_CAP` directions, an occluded sector or a solar aureole
-    in the sky, sunlight scattered inside the instrument added to the readings, a tilted
-    platform, a clock or gyro error in the recorded times or yaw.
+    with the effect made physically: a multiple-scattering or neutral-point sky, the units'
+    measured acceptance sampled over :data:`RING_CAP` directions, an occluded sector or a
+    solar aureole in the sky, sunlight scattered inside the instrument added to the
+    readings, a tilted platform, a clock or gyro error in the recorded times or yaw.
 
     Parameters
     ----------
@@ -551,7 +551,7 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
         R = t[cols].to_numpy(float)
         if effect == "fov":
             R = (pm.counts_per_radiance * _cone_readings(sensor, sky, att, sun,
-                                                         truth["alpha_deg"])
+                                                         truth["hwhm_deg"])
                  + pm.noise_counts * rng.standard_normal(R.shape))
         else:   # sunlight inside the instrument, on readings that carry their noise already
             pd_unit = np.repeat(np.arange(sensor.n_units),
@@ -582,26 +582,31 @@ def _unit_views(obs) -> np.ndarray:
     return direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)
 
 
-def _cone_readings(sensor, sky, att, sun, alpha_deg: float) -> np.ndarray:
-    """Noise-free mean readings [radiance units] (n, P) of photodiodes whose unit sees a
-    uniform cone of half-angle ``alpha_deg``: the readings of :data:`RING_CAP` equal-area
-    directions averaged (each direction a rotation of the unit about its own x/y axes)."""
-    from dataclasses import replace
+def _cone_readings(sensor, sky, att, sun, hwhm_deg: float) -> np.ndarray:
+    """Noise-free mean readings [radiance units] (n, P) of photodiodes whose units weigh the
+    sky by the measured acceptance of half-width ``hwhm_deg``
+    (:func:`calibration.photodiode_diagnosis.acceptance.acceptance`), the ground dark.
+
+    Each photodiode's Malus reading is averaged over :data:`RING_CAP` equal-area directions
+    (equal steps in the cosine of the off-axis angle out to where the acceptance falls to
+    1e-8, equal steps in azimuth), each weighted by the acceptance: a rule of its own, not
+    the candidate's Gauss-Legendre one, and about thirty times finer."""
+    from calibration.photodiode_diagnosis.acceptance import (ACCEPTANCE_ORDER, acceptance,
+                                                             observe_directions)
     K, M = RING_CAP
-    r = alpha_deg * np.sqrt((np.arange(K) + 0.5) / K)
-    b = 2.0 * np.pi * (np.arange(M) + 0.5 * (np.arange(K)[:, None] % 2)) / M
-    offs = np.stack([(r[:, None] * np.cos(b)).ravel(), (r[:, None] * np.sin(b)).ravel(),
-                     np.zeros(K * M)], axis=-1)
-    wide = replace(sensor, units=tuple(replace(u, installation_error_deg=tuple(o))
-                                       for u in sensor.units for o in offs))
-    obs = wide.observe(sky, att, sun)
+    t_max = min(90.0, hwhm_deg * (np.log(1e8) / np.log(2.0)) ** (1.0 / ACCEPTANCE_ORDER))
+    cos_t = 1.0 - (np.arange(K) + 0.5) / K * (1.0 - np.cos(np.radians(t_max)))
+    theta = np.repeat(np.degrees(np.arccos(cos_t)), M)
+    az = (360.0 * (np.arange(M) + 0.5 * (np.arange(K)[:, None] % 2)) / M).ravel()
+    w = acceptance(theta, hwhm_deg)
+    obs, unit, w, _ = observe_directions(sensor, sky, att, sun, theta, az, w / w.sum())
     out = []
     for i, u in enumerate(sensor.units):
-        sl = slice(i * K * M, (i + 1) * K * M)
+        cols = unit == i
         for a in u.photodiodes_deg:
-            chi = np.radians(obs.aop_unit_deg[:, sl] - a)
-            out.append(np.mean(obs.radiance[:, sl] * (1.0 + obs.dop[:, sl] * np.cos(2 * chi)),
-                               axis=1))
+            chi = np.radians(obs.aop_unit_deg[:, cols] - a)
+            out.append((obs.radiance[:, cols] * (1.0 + obs.dop[:, cols] * np.cos(2 * chi)))
+                       @ w[cols])
     return np.stack(out, axis=1)
 
 
@@ -613,7 +618,7 @@ def _ring() -> InstrumentMatrix:
                                 "strong": {"tau": 0.25, "albedo": 0.1}},
         "neutral_points": {"moderate": {"separation_deg": 20.0},
                            "strong": {"separation_deg": 40.0}},
-        "fov": {"moderate": {"alpha_deg": 15.0}, "strong": {"alpha_deg": 28.0}},
+        "fov": {"moderate": {"hwhm_deg": 15.0}, "strong": {"hwhm_deg": 30.0}},
         "occlusion": {"moderate": {"center_deg": 100.0, **occl, "depolarization": 0.4},
                       "strong": {"center_deg": 250.0, **occl, "depolarization": 0.8}},
         "yaw_scale": {"moderate": {"factor": 1.02}, "strong": {"factor": 0.95}},

@@ -1,0 +1,256 @@
+"""Angular acceptance of a ring unit's photodiodes and the quadrature that averages the sky's
+Stokes vector over it.
+
+The acceptance is the one measured on the units of the Gkanias et al. (2023) ring compass
+[1]_ (their Fig. 9h): a torch was swept across two photodiodes in their 3D-printed casings in
+10-deg steps and the readings logged (:data:`TORCH_SCAN`). Within about 20 deg of the axis the
+readings sit on one plateau (11924-11972 counts, flat to 0.4 % while ``cos 20 deg = 0.94``):
+the converter saturates there, so the on-axis response is at least the plateau and the widths
+derived with the plateau as the peak are upper bounds. The unsaturated flanks fall from 0.4-0.7
+of the plateau at 20 deg off-axis to 0.02-0.1 at 30 deg: steeper than a Gaussian, as a
+photodiode behind an aperture is (a flat top vignetted at its edge). A generalized Gaussian
+
+.. math:: a(\\theta) = \\exp[-\\ln 2\\,(\\theta / h)^n],\\qquad \\theta < 90^\\circ,
+
+with ``h`` the half-width at half-maximum (HWHM) and ``n`` the edge's steepness, fits the six
+flank readings of both photodiodes with a log-RMS of 0.14 (a Gaussian, ``n = 2``: 0.62):
+``h = 22.7 +- 0.4 deg``, ``n = 4.7 +- 0.3`` (:func:`fit_torch_scan`). Beyond 40 deg the casing
+lets through 0.1-3 % of the plateau: light through the plastic, which this acceptance leaves
+out (sunlight reaching the photodiodes through the casing is what the ``stray_light`` and
+``side_glare`` candidates model).
+
+The width ``h`` of the diagnosis candidate is free between 0 (a pencil beam, the base model)
+and 60 deg, the HWHM of a bare photodiode's cosine response, the widest any casing can leave
+(a casing only narrows it). Directions below the horizon (a unit at 45 deg elevation sees the
+ground from 45 deg off-axis) contribute no light: the ground is taken as dark. On the
+measured acceptance the ground lies where ``a < 1e-7`` of the on-axis response; at the
+60-deg bound a dark ground underestimates the radiance that units then see (a field of albedo
+0.1-0.2 sends back a tenth to a fifth of the sky's light, unpolarized).
+
+References
+----------
+.. [1] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
+   compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
+   Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w, Fig. 9h; the torch scan is
+   ``sensor_response_distribution/map.txt`` of the repository
+   InsectRobotics/CelestialCompassAnalysis (commit a14712c1165b385a51d0c9d2817af820409db4fe,
+   GPL-3.0; the readings are quoted here as measured values, averaged over the two logged
+   extremes at each angle).
+.. [2] G. H. Golub, J. H. Welsch, "Calculation of Gauss quadrature rules", Math. Comp.
+   23:221-230 (1969) (Gauss-Legendre nodes and weights, :func:`numpy.polynomial.legendre.leggauss`).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from skysim.exceptions import InvalidParameterError
+
+__all__ = ["TORCH_SCAN", "PLATEAU_COUNTS", "ACCEPTANCE_HWHM_DEG", "ACCEPTANCE_ORDER",
+           "HWHM_MAX_DEG", "fit_torch_scan", "acceptance", "acceptance_quadrature",
+           "quadrature_rotations_deg", "observe_directions"]
+
+TORCH_SCAN = {
+    "angle_deg": np.arange(-90.0, 91.0, 10.0),
+    "pd3_counts": np.array([2.0, 15.0, 36.0, 74.5, 107.0, 273.0, 517.5, 8047.5, 11956.5,
+                            11926.0, 11952.0, 11970.0, 1253.0, 374.5, 155.5, 88.5, 50.5, 22.0,
+                            4.0]),
+    "pd4_counts": np.array([1.5, 6.5, 11.5, 21.5, 86.5, 249.5, 2684.5, 11944.5, 11961.5,
+                            11935.0, 11965.5, 5270.0, 192.0, 101.0, 26.0, 21.5, 14.0, 8.5,
+                            1.0]),
+}
+"""Torch scan of photodiodes 3 and 4 of a ring unit [counts, absolute values] against the
+torch's angle from the photodiode's axis [deg] (reference [1] of the module)."""
+
+PLATEAU_COUNTS = 11950.0
+"""Level [counts] on which the scan's readings within about 20 deg of the axis sit (the
+converter's saturation; median of the nine plateau readings, 11924-11972)."""
+
+ACCEPTANCE_HWHM_DEG = 22.7
+"""HWHM [deg] of the measured acceptance (:func:`fit_torch_scan`, an upper bound: the peak
+is saturated)."""
+
+ACCEPTANCE_ORDER = 4.7
+"""Steepness ``n`` of the measured acceptance's edge (:func:`fit_torch_scan`)."""
+
+HWHM_MAX_DEG = 60.0
+"""Widest HWHM [deg]: a bare photodiode's cosine response (``cos 60 deg = 1/2``)."""
+
+_CUT = 1e-6
+"""Relative acceptance at which the polar quadrature stops (the weight left out beyond it is
+below ``1e-6`` of the total for ``n >= 2``)."""
+
+
+def fit_torch_scan():
+    """The measured acceptance's HWHM and edge steepness from :data:`TORCH_SCAN`.
+
+    Fits ``log(r / plateau) = -ln 2 (|theta - b_k| / h)^n`` to the edge readings of both
+    photodiodes (those within 30 deg of the axis and below 90 % of the plateau, six in all:
+    from 40 deg outward the readings level off at 0.1-3 % of the plateau, light through the
+    casing, not the aperture's edge), with one centre ``b_k`` per photodiode (its own
+    mounting) and ``h``, ``n`` shared.
+
+    Returns
+    -------
+    dict
+        ``hwhm_deg``, ``order``, their standard errors ``hwhm_se_deg``, ``order_se``, the
+        centres ``centres_deg`` (2,) and ``log_rms`` (RMS of the log residuals), and
+        ``gaussian_log_rms``: the same fit with ``n = 2``.
+    """
+    from scipy.optimize import least_squares
+    x = TORCH_SCAN["angle_deg"]
+    sel = [(r / PLATEAU_COUNTS) for r in (TORCH_SCAN["pd3_counts"], TORCH_SCAN["pd4_counts"])]
+    keep = [(np.abs(x) <= 30.0) & (y < 0.9) for y in sel]
+
+    def resid(h, n, b):
+        return np.concatenate([-np.log(2.0) * (np.abs(x[k] - bk) / h) ** n - np.log(y[k])
+                               for y, k, bk in zip(sel, keep, b)])
+    full = least_squares(lambda p: resid(p[0], p[1], p[2:]), [20.0, 4.0, 0.0, 0.0])
+    dof = full.fun.size - full.x.size
+    cov = np.linalg.inv(full.jac.T @ full.jac) * np.sum(full.fun ** 2) / dof
+    gauss = least_squares(lambda p: resid(p[0], 2.0, p[1:]), [20.0, 0.0, 0.0])
+    return {"hwhm_deg": float(full.x[0]), "order": float(full.x[1]),
+            "hwhm_se_deg": float(np.sqrt(cov[0, 0])), "order_se": float(np.sqrt(cov[1, 1])),
+            "centres_deg": full.x[2:].copy(),
+            "log_rms": float(np.sqrt(np.mean(full.fun ** 2))),
+            "gaussian_log_rms": float(np.sqrt(np.mean(gauss.fun ** 2)))}
+
+
+def _check_width(hwhm_deg, order):
+    h, n = float(hwhm_deg), float(order)
+    if not np.isfinite(h) or not 0.0 < h <= HWHM_MAX_DEG:
+        raise InvalidParameterError(
+            f"acceptance half-width {hwhm_deg!r} deg must be in (0, {HWHM_MAX_DEG:g}]")
+    if not np.isfinite(n) or n < 2.0:
+        raise InvalidParameterError(f"acceptance order {order!r} must be finite and >= 2")
+    return h, n
+
+
+def acceptance(theta_deg, hwhm_deg: float, order: float = ACCEPTANCE_ORDER) -> np.ndarray:
+    """Relative response of a photodiode to light ``theta_deg`` [deg] off its axis.
+
+    ``exp(-ln 2 (theta / h)^n)`` in front of the photodiode (``theta < 90 deg``), 0 behind.
+
+    Parameters
+    ----------
+    theta_deg : array_like
+        Off-axis angle [deg], >= 0.
+    hwhm_deg : float
+        Half-width at half-maximum ``h`` [deg], in (0, :data:`HWHM_MAX_DEG`].
+    order : float
+        Edge steepness ``n`` (>= 2; 2 is a Gaussian).
+
+    Returns
+    -------
+    ndarray
+        Response relative to the on-axis one.
+
+    Raises
+    ------
+    InvalidParameterError
+        For a width or order out of range.
+    """
+    h, n = _check_width(hwhm_deg, order)
+    t = np.asarray(theta_deg, float)
+    return np.where(t < 90.0, np.exp(-np.log(2.0) * (t / h) ** n), 0.0)
+
+
+def acceptance_quadrature(hwhm_deg: float, order: float = ACCEPTANCE_ORDER, *,
+                          n_polar: int = 4, n_azimuth: int = 6):
+    """Directions and weights that average a field over the acceptance.
+
+    Gauss-Legendre in the off-axis angle ``theta`` on ``[0, theta_max]`` (``theta_max`` where
+    the acceptance falls to ``1e-6``, at most 90 deg) times the midpoint rule in the azimuth
+    about the axis (exact for azimuthal harmonics below ``n_azimuth``), each node weighted by
+    ``a(theta) sin(theta)`` and the weights normalised to sum to 1, so that
+    ``sum(w f) -> int a f dOmega / int a dOmega``.
+
+    Parameters
+    ----------
+    hwhm_deg, order : float
+        The acceptance (:func:`acceptance`).
+    n_polar, n_azimuth : int
+        Nodes in ``theta`` and in the azimuth (>= 1 each).
+
+    Returns
+    -------
+    theta_deg, azimuth_deg, weights : ndarray (n_polar * n_azimuth,)
+        Off-axis angle [deg], azimuth about the axis [deg] and weight of each direction.
+
+    Raises
+    ------
+    InvalidParameterError
+        For a width or order out of range, or node counts below 1.
+    """
+    h, n = _check_width(hwhm_deg, order)
+    for name, v in (("n_polar", n_polar), ("n_azimuth", n_azimuth)):
+        if int(v) != v or v < 1:
+            raise InvalidParameterError(f"{name} {v!r} must be a positive integer")
+    t_max = min(90.0, h * (np.log(1.0 / _CUT) / np.log(2.0)) ** (1.0 / n))
+    x, gw = np.polynomial.legendre.leggauss(int(n_polar))
+    t = 0.5 * t_max * (x + 1.0)
+    w_t = gw * acceptance(t, h, n) * np.sin(np.radians(t))
+    b = 360.0 * (np.arange(n_azimuth) + 0.5) / n_azimuth
+    # alternate rings half a step apart in azimuth: fewer coincident azimuths across rings
+    az = (b[None, :] + 180.0 / n_azimuth * (np.arange(n_polar) % 2)[:, None]) % 360.0
+    w = np.repeat(w_t, n_azimuth)
+    return np.repeat(t, n_azimuth), az.ravel(), w / w.sum()
+
+
+def quadrature_rotations_deg(theta_deg, azimuth_deg) -> np.ndarray:
+    """Rotation vectors [deg] (k, 3) in a unit's frame that turn its axis ``theta_deg`` off
+    along ``azimuth_deg`` about it: rotations by ``theta`` about the in-plane axis
+    ``(cos b, sin b, 0)``, which carry the unit's polarizer frame along the great circle (the
+    parallel transport of its reference direction)."""
+    t, b = np.asarray(theta_deg, float), np.radians(np.asarray(azimuth_deg, float))
+    return np.stack([t * np.cos(b), t * np.sin(b), np.zeros_like(t)], axis=-1)
+
+
+def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
+    """What each unit sees along directions about its axis, those below the horizon dropped.
+
+    Parameters
+    ----------
+    sensor : sensor.compound_eye.CompoundEyeSensor
+        The instrument (its units' own installation errors kept: each direction's rotation
+        is applied after them).
+    sky, att, sun_enu
+        As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
+    theta_deg, azimuth_deg, weights : array_like (k,)
+        Directions about each unit's axis [deg] and their weights
+        (:func:`acceptance_quadrature`).
+
+    Returns
+    -------
+    obs : SkySample
+        What the kept directions see, columns ``(unit, direction)`` in unit order.
+    unit : ndarray of int (c,)
+        Unit of each column.
+    weight : ndarray (c,)
+        Weight of each column (those of directions below the horizon at any sample dropped,
+        the rest unchanged: the ground is dark).
+    theta : ndarray (c,)
+        Off-axis angle [deg] of each column.
+    """
+    from dataclasses import replace
+
+    from scipy.spatial.transform import Rotation
+    rot = quadrature_rotations_deg(theta_deg, azimuth_deg)
+    w = np.asarray(weights, float)
+    t = np.asarray(theta_deg, float)
+    k = rot.shape[0]
+    units = tuple(
+        replace(u, installation_error_deg=tuple(
+            (Rotation.from_rotvec(u.installation_error_deg, degrees=True)
+             * Rotation.from_rotvec(r, degrees=True)).as_rotvec(degrees=True)))
+        for u in sensor.units for r in rot)
+    wide = replace(sensor, units=units)
+    # every column's view in ENU at every sample, as the sensor computes it
+    R_ns = att.as_matrix().reshape(-1, 3, 3) @ wide.body_installation().as_matrix()
+    z = wide.view_directions_sensor(True)                                  # (c, 3)
+    up = np.einsum("nj,cj->nc", R_ns[:, 2, :], z)                          # ENU up component
+    keep = np.all(up >= 0.0, axis=0)
+    unit = np.repeat(np.arange(sensor.n_units), k)[keep]
+    kept = replace(wide, units=tuple(u for u, f in zip(units, keep) if f))
+    return (kept.observe(sky, att, sun_enu), unit, np.tile(w, sensor.n_units)[keep],
+            np.tile(t, sensor.n_units)[keep])

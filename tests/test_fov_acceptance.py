@@ -1,0 +1,185 @@
+"""The ring's field-of-view candidate: the units' measured acceptance, its quadrature and the
+simulated sessions' independent sampling of it."""
+
+import numpy as np
+import pandas as pd
+import pytest
+from scipy.integrate import quad
+
+from calibration.diagnosis.identifiability import _cone_readings
+from calibration.photodiode_diagnosis.acceptance import (
+    ACCEPTANCE_HWHM_DEG,
+    ACCEPTANCE_ORDER,
+    HWHM_MAX_DEG,
+    acceptance,
+    acceptance_quadrature,
+    fit_torch_scan,
+    observe_directions,
+)
+from calibration.photodiode_diagnosis.effects import (
+    FOV_NODES,
+    FieldOfView,
+    fov_offsets_deg,
+    integrate_stokes,
+)
+from sensor.compound_eye import PhotodiodeModel, body_attitude, ring_configuration
+from skysim.exceptions import InvalidParameterError
+from skysim.sky import RayleighSky
+from skysim.sun import Site, sun_vector
+
+
+@pytest.fixture(scope="module")
+def ring():
+    """Eight units at 45 deg elevation turning once under the 16:01 sun of the reference day."""
+    sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
+    yaw = np.linspace(0.0, 360.0, 36, endpoint=False)
+    att = body_attitude(yaw, np.zeros(yaw.size), np.zeros(yaw.size))
+    times = pd.DatetimeIndex([pd.Timestamp("2022-05-12T16:01:00+02:00")] * yaw.size)
+    sun, _ = sun_vector(times, Site(39.258648, 8.440184, 0.0))
+    return sensor, RayleighSky(0.6), att, sun
+
+
+def _stokes(sensor, sky, att, sun, hwhm, nodes):
+    th, az, w = acceptance_quadrature(hwhm, n_polar=nodes[0], n_azimuth=nodes[1])
+    obs, unit, w, _ = observe_directions(sensor, sky, att, sun, th, az, w)
+    G = np.zeros((unit.size, sensor.n_units))
+    G[np.arange(unit.size), unit] = w
+    x = np.radians(2.0 * obs.aop_unit_deg)
+    L = obs.radiance
+    I = L @ G
+    return I, (L * obs.dop * np.cos(x)) @ G / I, (L * obs.dop * np.sin(x)) @ G / I
+
+
+def test_torch_scan_gives_the_stated_acceptance():
+    f = fit_torch_scan()
+    # the module's constants are the fit rounded to 0.1 (its SE is 0.4 deg and 0.3)
+    assert f["hwhm_deg"] == pytest.approx(ACCEPTANCE_HWHM_DEG, abs=0.05)
+    assert f["order"] == pytest.approx(ACCEPTANCE_ORDER, abs=0.05)
+    assert f["hwhm_se_deg"] < 1.0 and f["order_se"] < 0.5
+    # the edge is steeper than a Gaussian: ten times smaller log residuals
+    assert f["log_rms"] < 0.1 < 0.5 < f["gaussian_log_rms"]
+    assert acceptance(ACCEPTANCE_HWHM_DEG, ACCEPTANCE_HWHM_DEG) == pytest.approx(0.5, rel=1e-12)
+    assert acceptance(90.0, HWHM_MAX_DEG) == 0.0        # nothing from behind the photodiode
+
+
+def test_quadrature_averages_a_linear_field_exactly_and_matches_adaptive_integration():
+    """The average of the direction vector over an acceptance symmetric about the axis is the
+    axis times <cos theta>: the azimuth rule cancels x and y to rounding, and <cos theta>
+    converges with the polar nodes (8 -> 12 -> 24) to scipy's adaptive Gauss-Kronrod
+    integral over the whole front hemisphere within 1e-7: the rule stops where the
+    acceptance falls to 1e-6, which moves <cos theta> by 1e-9 (5 deg) to 5e-8 (45 deg),
+    measured against 48 nodes."""
+    for h in (5.0, ACCEPTANCE_HWHM_DEG, 45.0):
+        def a(x):
+            return acceptance(np.degrees(x), h) * np.sin(x)
+        opts = {"limit": 400, "epsabs": 1e-14, "epsrel": 1e-13}
+        ref = quad(lambda x: a(x) * np.cos(x), 0, np.pi / 2, **opts)[0] / quad(
+            a, 0, np.pi / 2, **opts)[0]
+        errs = []
+        for k in (8, 12, 24):
+            th, az, w = acceptance_quadrature(h, n_polar=k, n_azimuth=6)
+            t, b = np.radians(th), np.radians(az)
+            v = np.stack([np.sin(t) * np.cos(b), np.sin(t) * np.sin(b), np.cos(t)], axis=-1)
+            mean = w @ v
+            np.testing.assert_allclose(mean[:2], 0.0, atol=1e-15)
+            assert w.sum() == pytest.approx(1.0, rel=1e-14)
+            errs.append(abs(mean[2] - ref))
+        assert errs[0] > errs[1] > errs[2] and errs[2] < 1e-7, (h, errs)
+
+
+def test_quadrature_converges_on_the_sky(ring):
+    """Against a 32 x 64 rule, the errors of the normalised Stokes parameters ``Q/I``,
+    ``U/I`` fall with the polar nodes, and the candidate's rule meets what
+    :data:`FOV_NODES` states: 4e-5 at a HWHM of 10 deg, 1.5e-4 at 22.7 and 30 deg (a ring's
+    readings carry about 4e-3 of noise). The radiance too, to 4e-5 and 1.5e-4 up to 22.7
+    deg; at 30 deg the horizon, 45 deg below the axis, cuts the acceptance where it is
+    still 1e-2 of its peak, and the radiance is good to 5e-4."""
+    sensor, sky, att, sun = ring
+    for h, tol, tol_i in ((10.0, 4e-5, 4e-5), (ACCEPTANCE_HWHM_DEG, 1.5e-4, 1.5e-4),
+                          (30.0, 1.5e-4, 5e-4)):
+        ref = _stokes(sensor, sky, att, sun, h, (32, 64))
+        errs, errs_i = [], []
+        for k in (3, 4, 6):
+            got = _stokes(sensor, sky, att, sun, h, (k, FOV_NODES[1]))
+            errs.append(max(np.max(np.abs(got[1] - ref[1])), np.max(np.abs(got[2] - ref[2]))))
+            errs_i.append(np.max(np.abs(got[0] / ref[0] - 1.0)))
+        assert errs[0] > errs[1] > errs[2], errs
+        assert FOV_NODES[0] == 6 and errs[2] < tol and errs_i[2] < tol_i, (h, errs, errs_i)
+
+
+def test_integrate_stokes_weights_the_radiance():
+    I, d, chi = integrate_stokes(np.ones(2), np.ones(2), np.array([0.0, 90.0]), axis=0)
+    assert I == 1.0 and d < 1e-12
+    # a bright horizontal and a dim vertical fully polarized direction: Q = (3 - 1) / 4
+    I, d, chi = integrate_stokes(np.array([[3.0, 1.0]]), np.ones((1, 2)),
+                                 np.array([[0.0, 90.0]]), axis=1, weights=np.array([.5, .5]))
+    np.testing.assert_allclose([I[0], d[0], chi[0]], [2.0, 0.5, 0.0], atol=1e-12)
+
+
+def test_candidate_reduces_to_the_base_and_agrees_with_the_photodiode_average(ring):
+    sensor, sky, att, sun = ring
+    fov = FieldOfView()
+    base = sensor.observe(sky, att, sun)
+    null = fov.observe(sensor, sky, att, sun, np.array(fov.null))
+    np.testing.assert_array_equal(null.dop, base.dop)
+    np.testing.assert_array_equal(null.aop_unit_deg, base.aop_unit_deg)
+    narrow = fov.observe(sensor, sky, att, sun, np.array([1e-3]))
+    # a 1e-3 deg acceptance sees the axis: the sky changes by ~1e-8 over it
+    np.testing.assert_allclose(narrow.dop, base.dop, atol=1e-8)
+    np.testing.assert_allclose(narrow.view_elevation_deg, base.view_elevation_deg, atol=1e-6)
+    wide = fov.observe(sensor, sky, att, sun, np.array([ACCEPTANCE_HWHM_DEG]))
+    # the Stokes average is the photodiodes' Malus readings averaged (what the simulated
+    # sessions compute), to rounding
+    th, az, w = fov_offsets_deg(ACCEPTANCE_HWHM_DEG)
+    obs, unit, w, _ = observe_directions(sensor, sky, att, sun, th, az, w)
+    for u in range(sensor.n_units):
+        for a in (0.0, 45.0, 90.0, 135.0):
+            c = unit == u
+            direct = (obs.radiance[:, c] * (1 + obs.dop[:, c] * np.cos(
+                2 * np.radians(obs.aop_unit_deg[:, c] - a)))) @ w[c]
+            via = wide.radiance[:, u] * (1 + wide.dop[:, u] * np.cos(
+                2 * np.radians(wide.aop_unit_deg[:, u] - a)))
+            np.testing.assert_allclose(via, direct, rtol=1e-12)
+    # single scattering is mirror-symmetric about the plane through the sun and the view,
+    # and so is the acceptance: its average keeps the axis's angle of polarization
+    d_aop = (wide.aop_unit_deg - base.aop_unit_deg + 90.0) % 180.0 - 90.0
+    assert np.max(np.abs(d_aop)) < 1e-6
+    assert np.all(wide.dop < base.dop + 1e-12)      # averaging over angles depolarizes
+
+
+def test_directions_below_the_horizon_are_dark(ring):
+    _, sky, att, sun = ring
+    low = ring_configuration(8, 10.0, photodiode=PhotodiodeModel())
+    th, az, w = fov_offsets_deg(30.0)
+    obs, unit, kept, theta = observe_directions(low, sky, att, sun, th, az, w)
+    assert np.all(obs.view_elevation_deg >= 0.0)
+    # at 10 deg elevation, directions more than 10 deg below the axis are dropped
+    assert kept.sum() < low.n_units * w.sum() - 0.1
+    o = FieldOfView().observe(low, sky, att, sun, np.array([30.0]))
+    assert np.all(np.isfinite(o.dop)) and np.all(o.view_elevation_deg > 10.0)
+
+
+def test_bad_widths_are_named():
+    with pytest.raises(InvalidParameterError, match="-1.0"):
+        acceptance(10.0, -1.0)
+    with pytest.raises(InvalidParameterError, match="61"):
+        acceptance_quadrature(61.0)
+    with pytest.raises(InvalidParameterError, match="n_polar 0"):
+        acceptance_quadrature(20.0, n_polar=0)
+    with pytest.raises(InvalidParameterError, match="order 1.5"):
+        acceptance(10.0, 20.0, order=1.5)
+
+
+def test_simulated_sessions_sample_the_acceptance_independently(ring):
+    """The generator's equal-area rule and the candidate's Gauss-Legendre rule agree on the
+    readings to the candidate's stated accuracy (1.5e-4 of the radiance at 22.7 deg, with
+    margin 2 for the generator's own error)."""
+    sensor, sky, att, sun = ring
+    R = _cone_readings(sensor, sky, att, sun, ACCEPTANCE_HWHM_DEG)
+    o = FieldOfView().observe(sensor, sky, att, sun, np.array([ACCEPTANCE_HWHM_DEG]))
+    pd_unit = np.repeat(np.arange(sensor.n_units), 4)
+    ang = np.tile([0.0, 45.0, 90.0, 135.0], sensor.n_units)
+    fit = o.radiance[:, pd_unit] * (1 + o.dop[:, pd_unit] * np.cos(
+        2 * np.radians(o.aop_unit_deg[:, pd_unit] - ang)))
+    np.testing.assert_allclose(fit / o.radiance[:, pd_unit], R / o.radiance[:, pd_unit],
+                               atol=3e-4)
