@@ -490,6 +490,7 @@ class NeutralPoints(RingEffect):
     DoP, tested)."""
 
     name = "neutral_points"
+    aop_from_own_sky = True
     parameter_names = ("separation_deg",)
     units = ("deg",)
     null = (0.0,)
