@@ -437,6 +437,7 @@ class GridMultipleSky:
 
 class MultipleScattering(RingEffect):
     name = "multiple_scattering"
+    aop_from_own_sky = True
     parameter_names = ("tau", "albedo")
     units = ("1", "1")
     null = (0.0, 0.0)
