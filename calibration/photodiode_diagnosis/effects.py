@@ -110,9 +110,14 @@ for by name (``--effects multiple_scattering,...``):
   add minutes to a session, beyond the one-minute goal of a default diagnosis on this
   machine class;
 - ``multiple_scattering``: a simulated ring under a multiple-scattering sky (tau 0.25,
-  albedo 0.1) keeps a held-out gap of 1.06 times the noise floor after the base fit, as
-  clean data do: the base model's gains, polarizer angles, unit pointing and DoP scale take
-  the sky's shape up, so the candidate cannot be told from the base on one session;
+  albedo 0.1) on three one-minute sweeps keeps a held-out gap of 1.06 times the noise floor
+  after the base fit, as clean data do: a 0/90 gain imbalance with the 45 and 135 deg films
+  turned by half of it is exactly a change of the polarization each unit sees (a Lorentz
+  boost of its Stokes vector, which the per-unit sum rule cannot see), and the base fit
+  takes the sky's shape up that way while the sun stands still. With the sun moving
+  between sweeps (three sweeps 90 min apart) the gains cannot follow it and the candidate
+  is named with its own tau and albedo; real gains differ by up to 12 % between
+  photodiodes, so no prior tying them to a common value could stand in for that;
 - ``tilt``: a constant tilt of the instrument turns with it, so it is exactly a change of
   every unit's pointing and polarizer angle, which the base model fits per unit: it can be
   read only with the pointing calibrated on other sessions (``--pointing-from``);
