@@ -88,3 +88,39 @@ def test_gain_imbalance_is_a_change_of_the_polarization_seen():
     np.testing.assert_allclose(real, ideal, rtol=1e-12)
     np.testing.assert_allclose(ideal[:, 0] + ideal[:, 2], ideal[:, 1] + ideal[:, 3],
                                rtol=1e-12)
+
+
+def test_standard_pressure_against_the_1976_standard_atmosphere_table():
+    """U.S. Standard Atmosphere 1976, table I (geometric altitude): 898.76 hPa at 1 km,
+    794.95 at 2 km, 540.48 at 5 km. Within 0.1 %: the formula takes geopotential height,
+    4 m below the geometric at 5 km (0.05 % in pressure)."""
+    from calibration.photodiode_diagnosis.effects import standard_pressure_hPa
+    np.testing.assert_allclose(standard_pressure_hPa([0.0, 1000.0, 2000.0, 5000.0]),
+                               [1013.25, 898.76, 794.95, 540.48], rtol=1e-3)
+
+
+def test_multiple_scattering_takes_tau_from_the_band():
+    """With the band in the sidecar the candidate fits the albedo alone, its ``tau`` that of
+    Bodhaine et al.'s closed-form fit (their eq. 30, an independent formula, within 1e-3
+    in the visible: ``tests/test_multiple.py``) at sea level; at 2 km the air's column is
+    the standard atmosphere's pressure ratio thinner (0.785, gravity changing it by 0.06 %).
+    Without a band, ``tau`` and the albedo are both fitted."""
+    from calibration.photodiode_diagnosis.effects import MultipleScattering
+    from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
+    from skysim.molecular import bodhaine_optical_thickness_fit
+    data = ring_session(seed=3)
+    e = MultipleScattering()
+    e.bind(instrument_from_photodiodes(data))
+    assert e.parameter_names == ("tau", "albedo") and e.tau_fixed is None
+    data.sidecar["band"] = {"wavelength_nm": 440.0}
+    inst = instrument_from_photodiodes(data)
+    e.bind(inst)
+    assert e.parameter_names == ("albedo",) and e.k == 1 and len(e.prior_mean) == 1
+    # the site's latitude (39.3 deg) moves gravity, and tau, by 0.06 % from 45 deg's
+    assert e.tau_fixed == pytest.approx(float(bodhaine_optical_thickness_fit(440.0)), rel=2e-3)
+    from dataclasses import replace
+    from skysim.sun import Site
+    high = replace(inst, site=Site(inst.site.latitude_deg, inst.site.longitude_deg, 2000.0))
+    sea = e.tau_fixed
+    e.bind(high)
+    assert e.tau_fixed / sea == pytest.approx(794.95 / 1013.25, rel=2e-3)
