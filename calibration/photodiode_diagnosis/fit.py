@@ -313,6 +313,14 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     A geometric effect started away from its null (a clock hours off, found by a coarse
     search) first has the pointing re-read from the AoP with the effect held at its start.
 
+    A sky effect whose sky has its own angle of polarization (``aop_from_own_sky``: the
+    neutral-point and multiple-scattering skies) always runs stage 1, whatever ``geometry``
+    says, with its parameters free beside the pointing, from ``theta0`` and from each of
+    the effect's starts (the best AoP cost kept): the pointing the base model read under
+    single scattering is off under such a sky (8.4 deg low under neutral points 40 deg
+    apart), and held there the effect's fit cannot reach its own sky. Stage 2 is then
+    reported not converged when stage 1 was not, so that a caller continues both.
+
     A free unit elevation or clock in one fit of the full model takes up the difference
     between the model's and the real sky's DoP profile (on a real ring the unit elevations
     followed the sun from +7 to -13 deg); the angle of polarization carries the geometry
