@@ -558,6 +558,9 @@ class NeutralPoints(RingEffect):
 
     name = "neutral_points"
     aop_from_own_sky = True
+    """The units' pointing is read from the angle of polarization under this sky
+    (:func:`.fit.fit_pinned`): held at where single scattering's AoP put it (8.4 deg low on
+    a simulated ring under neutral points 40 deg apart), the fit stopped at 6 deg."""
     parameter_names = ("separation_deg",)
     units = ("deg",)
     null = (0.0,)
