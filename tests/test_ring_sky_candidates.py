@@ -39,9 +39,9 @@ def _recovered(rep, effect, truth):
 def test_neutral_point_sky_named_with_its_separation(separation):
     """A Berry-Dennis-Lee sky (neutral points 20 and 40 deg apart, the matrix's two
     strengths) on three one-minute sweeps: named by the default candidates, its separation
-    within 3 SE (measured 20.26 +- 0.37 and 39.86 +- 0.17 deg). Before the candidate read
-    the units' pointing under its own sky it was held at the pointing the single-scattering
-    AoP gave (8 deg low for 40 deg) and stopped at 6-15 deg."""
+    within 3 SE (measured 20.26 +- 0.37 and 39.86 +- 0.17 deg). The candidate reads the
+    units' pointing under its own sky: held at the pointing the single-scattering AoP gives
+    (8 deg low for 40 deg), its fit stops at 6-15 deg."""
     truth = {"separation_deg": separation}
     rep = diagnose(ring_session("neutral_points", truth, 31), seed=0)
     _recovered(rep, "neutral_points", truth)

@@ -479,8 +479,8 @@ class MultipleScattering(RingEffect):
     name = "multiple_scattering"
     aop_from_own_sky = True
     """The units' pointing is read from the angle of polarization under this sky
-    (:func:`.fit.fit_pinned`): held at where single scattering's AoP put it (2 deg low on a
-    simulated ring under tau 0.25), the fit ran tau to its lower bound."""
+    (:func:`.fit.fit_pinned`): held where single scattering's AoP puts it (2 deg low on a
+    simulated ring under tau 0.25), the fit runs tau to its lower bound."""
 
     def __init__(self):
         self._grid = None
@@ -559,8 +559,8 @@ class NeutralPoints(RingEffect):
     name = "neutral_points"
     aop_from_own_sky = True
     """The units' pointing is read from the angle of polarization under this sky
-    (:func:`.fit.fit_pinned`): held at where single scattering's AoP put it (8.4 deg low on
-    a simulated ring under neutral points 40 deg apart), the fit stopped at 6 deg."""
+    (:func:`.fit.fit_pinned`): held where single scattering's AoP puts it (8.4 deg low on a
+    simulated ring under neutral points 40 deg apart), the fit stops at 6 deg."""
     parameter_names = ("separation_deg",)
     units = ("deg",)
     null = (0.0,)
