@@ -474,7 +474,10 @@ class MultipleScattering(RingEffect):
     al. 1999 [8]_, :func:`skysim.molecular.bodhaine_optical_thickness`;
     :func:`standard_pressure_hPa`), and only the ground albedo is. With the band unknown,
     ``tau`` stays free beside the albedo and takes up whatever lowers the DoP (aerosols as
-    well as molecules), so it reads as an effective thickness, not the air's."""
+    well as molecules), so it reads as an effective thickness, not the air's. With ``tau``
+    fixed the candidate has no null that is the base sky (the air's multiple scattering is
+    always there, as the ``aerosol`` candidate's lowest node is): its null is a black
+    ground, the lower bound of the albedo, where a fit is reported at a bound."""
 
     name = "multiple_scattering"
     aop_from_own_sky = True
