@@ -116,8 +116,9 @@ for by name (``--effects multiple_scattering,...``):
   boost of its Stokes vector, which the per-unit sum rule cannot see), and the base fit
   takes the sky's shape up that way while the sun stands still. With the sun moving
   between sweeps (three sweeps 90 min apart) the gains cannot follow it and the candidate
-  is named with its own tau and albedo; real gains differ by up to 12 % between
-  photodiodes, so no prior tying them to a common value could stand in for that;
+  is named with its own tau and albedo (and without it the neutral-point sky is named for
+  it: ask for it on such sessions); real gains differ by up to 12 % between photodiodes, so
+  no prior tying them to a common value could stand in for that;
 - ``tilt``: a constant tilt of the instrument turns with it, so it is exactly a change of
   every unit's pointing and polarizer angle, which the base model fits per unit: it can be
   read only with the pointing calibrated on other sessions (``--pointing-from``);
