@@ -2,10 +2,12 @@
 base model that reduces to it at its null parameters (tested), used to fit here and, through
 the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind benchmark.
 
-- ``multiple_scattering`` (``tau``, ``albedo``): the sky of
-  :class:`skysim.multiple.MultipleScatteringSky` (plane-parallel Rayleigh atmosphere of optical
-  thickness ``tau`` over a Lambertian ground, validated against Natraj et al. 2009) instead of
-  single scattering; the DoP scale stays free. Tends to the base sky as ``tau -> 0``.
+- ``multiple_scattering`` (``tau``, ``albedo``; ``albedo`` alone when the band is known): the
+  sky of :class:`skysim.multiple.MultipleScatteringSky` (plane-parallel Rayleigh atmosphere of
+  optical thickness ``tau`` over a Lambertian ground, validated against Natraj et al. 2009)
+  instead of single scattering; the DoP scale stays free. With the instrument's band known,
+  ``tau`` is the air's at the band and the site's pressure, not fitted. Tends to the base sky
+  as ``tau -> 0``.
 - ``aerosol`` (``aod_550``): Rayleigh and aerosol multiple scattering
   (:class:`skysim.aerosol.AerosolSky`, OPAC continental average) with the AOD fitted.
 - ``neutral_points`` (``separation_deg``): the Berry, Dennis & Lee (2004) sky whose neutral
@@ -71,6 +73,11 @@ References
 .. [6] R. Hegedüs, S. Åkesson, G. Horváth, "Polarization patterns of thick clouds: overcast
    skies have distribution of the angle of polarization similar to that of clear skies",
    J. Opt. Soc. Am. A 24(8):2347-2356 (2007), doi:10.1364/JOSAA.24.002347.
+.. [7] NOAA, NASA, USAF, *U.S. Standard Atmosphere, 1976*, NOAA-S/T 76-1562, U.S.
+   Government Printing Office (1976).
+.. [8] B. A. Bodhaine, N. B. Wood, E. G. Dutton, J. R. Slusser, "On Rayleigh optical depth
+   calculations", J. Atmos. Oceanic Technol. 16(11):1854-1861 (1999),
+   doi:10.1175/1520-0426(1999)016<1854:ORODC>2.0.CO;2.
 .. [2] E. Gkanias, R. Mitchell, J. Stankiewicz, S. R. Khan, S. Mitra, B. Webb, "Celestial
    compass sensor mimics the insect eye for navigation under cloudy and occluded skies",
    Commun. Eng. 2:82 (2023), doi:10.1038/s44172-023-00132-w (ring compass, canopy scenes).
@@ -106,9 +113,15 @@ for by name (``--effects multiple_scattering,...``):
   add minutes to a session, beyond the one-minute goal of a default diagnosis on this
   machine class;
 - ``multiple_scattering``: a simulated ring under a multiple-scattering sky (tau 0.25,
-  albedo 0.1) keeps a held-out gap of 1.06 times the noise floor after the base fit, as
-  clean data do: the base model's gains, polarizer angles, unit pointing and DoP scale take
-  the sky's shape up, so the candidate cannot be told from the base on one session;
+  albedo 0.1) on three one-minute sweeps keeps a held-out gap of 1.06 times the noise floor
+  after the base fit, as clean data do: a 0/90 gain imbalance with the 45 and 135 deg films
+  turned by half of it is exactly a change of the polarization each unit sees (a Lorentz
+  boost of its Stokes vector, which the per-unit sum rule cannot see), and the base fit
+  takes the sky's shape up that way while the sun stands still. With the sun moving
+  between sweeps (three sweeps 90 min apart) the gains cannot follow it and the candidate
+  is named with its own tau and albedo (and without it the neutral-point sky is named for
+  it: ask for it on such sessions); real gains differ by up to 12 % between photodiodes, so
+  no prior tying them to a common value could stand in for that;
 - ``tilt``: a constant tilt of the instrument turns with it, so it is exactly a change of
   every unit's pointing and polarizer angle, which the base model fits per unit: it can be
   read only with the pointing calibrated on other sessions (``--pointing-from``);
@@ -441,13 +454,16 @@ class GridMultipleSky:
     TAU_NODES: ClassVar[np.ndarray] = np.array([0.02, 0.05, 0.1, 0.2, 0.4, 1.0])
     ALBEDO_NODES: ClassVar[np.ndarray] = np.array([0.0, 0.3, 0.6])
 
-    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0):
+    def __init__(self, sun_step_deg, sun_origin_deg: float = 0.0, tau: float | None = None):
+        """``tau``: one optical thickness, the only node (a thickness fixed by the band and
+        the pressure); None: :data:`TAU_NODES`."""
         from skysim.multiple import MultipleScatteringSky
+        self.tau_nodes = self.TAU_NODES if tau is None else np.array([float(tau)])
         self.skies = {(i, j): MultipleScatteringSky(tau=float(t), albedo=float(a),
                                                     sun_step_deg=sun_step_deg,
                                                     sun_node_origin_deg=sun_origin_deg,
                                                     settings=fit_engine_settings())
-                      for i, t in enumerate(self.TAU_NODES)
+                      for i, t in enumerate(self.tau_nodes)
                       for j, a in enumerate(self.ALBEDO_NODES)}
 
     def at(self, tau: float, albedo: float):
@@ -468,10 +484,13 @@ class GridMultipleSky:
     def weights(self, tau, albedo) -> dict:
         """Weights of the node skies ``{(i_tau, j_albedo): w}`` (nonzero only) at
         ``(tau, albedo)``."""
-        lt = np.log(self.TAU_NODES)
-        x = float(np.clip(np.log(tau), lt[0], lt[-1]))
-        i = int(np.clip(np.searchsorted(lt, x) - 1, 0, lt.size - 2))
-        f = (x - lt[i]) / (lt[i + 1] - lt[i])
+        lt = np.log(self.tau_nodes)
+        if lt.size == 1:
+            i, f = 0, 0.0
+        else:
+            x = float(np.clip(np.log(tau), lt[0], lt[-1]))
+            i = int(np.clip(np.searchsorted(lt, x) - 1, 0, lt.size - 2))
+            f = (x - lt[i]) / (lt[i + 1] - lt[i])
         a0, a1, a2 = self.ALBEDO_NODES
         A = float(albedo)
         wa = [(A - a1) * (A - a2) / ((a0 - a1) * (a0 - a2)),
@@ -493,22 +512,75 @@ class GridMultipleSky:
         return tuple(c.reshape(vel.shape) for c in out)
 
 
+STANDARD_PRESSURE_HPA = 1013.25
+"""Sea-level pressure of the standard atmosphere [hPa]."""
+
+
+def standard_pressure_hPa(altitude_m) -> np.ndarray:
+    """Pressure [hPa] of the standard atmosphere at ``altitude_m`` [m] (troposphere, up to
+    11 km): ``p0 (1 - L h / T0)^(g M / (R L))`` with ``L`` = 6.5 K/km, ``T0`` = 288.15 K and
+    exponent 5.25588 (U.S. Standard Atmosphere 1976 [7]_, eq. 33a). A site's weather moves
+    its pressure by about 1-3 %, and the molecular optical thickness with it."""
+    h = np.asarray(altitude_m, float)
+    return STANDARD_PRESSURE_HPA * (1.0 - 0.0065 * h / 288.15) ** 5.25588
+
+
 class MultipleScattering(RingEffect):
+    """The multiple-scattering sky of a plane-parallel molecular atmosphere over a
+    Lambertian ground (module docstring). With the instrument's band known (the sidecar's
+    ``band``), the optical thickness is not fitted: it is the molecular one of the band's
+    effective wavelength at the site's standard-atmosphere pressure and gravity (Bodhaine et
+    al. 1999 [8]_, :func:`skysim.molecular.bodhaine_optical_thickness`;
+    :func:`standard_pressure_hPa`), and only the ground albedo is. With the band unknown,
+    ``tau`` stays free beside the albedo and takes up whatever lowers the DoP (aerosols as
+    well as molecules), so it reads as an effective thickness, not the air's. With ``tau``
+    fixed the candidate has no null that is the base sky (the air's multiple scattering is
+    always there, as the ``aerosol`` candidate's lowest node is): its null is a black
+    ground, the lower bound of the albedo, where a fit is reported at a bound."""
+
     name = "multiple_scattering"
-    parameter_names = ("tau", "albedo")
-    units = ("1", "1")
-    null = (0.0, 0.0)
-    lower = (0.02, 0.0)
-    upper = (1.0, 0.6)
-    prior_sd = (0.5, 0.3)
-    fd_step = (2e-3, 2e-3)
+    aop_from_own_sky = True
+    """The units' pointing is read from the angle of polarization under this sky
+    (:func:`.fit.fit_pinned`): held where single scattering's AoP puts it (2 deg low on a
+    simulated ring under tau 0.25), the fit runs tau to its lower bound."""
+
+    def __init__(self):
+        self._grid = None
+        self.tau_fixed = None
+        """The band's molecular optical thickness when the band is known, else None."""
+        self._set_parameters()
+
+    def _set_parameters(self) -> None:
+        if self.tau_fixed is None:
+            self.parameter_names, self.units = ("tau", "albedo"), ("1", "1")
+            self.null, self.lower, self.upper = (0.0, 0.0), (0.02, 0.0), (1.0, 0.6)
+            self.prior_sd, self.fd_step = (0.5, 0.3), (2e-3, 2e-3)
+        else:
+            self.parameter_names, self.units = ("albedo",), ("1",)
+            self.null, self.lower, self.upper = (0.0,), (0.0,), (0.6,)
+            self.prior_sd, self.fd_step = (0.3,), (2e-3,)
+
+    def bind(self, inst) -> None:
+        """Fix ``tau`` from the instrument's band and site (class docstring), or free it
+        when the band is unknown."""
+        from skysim.molecular import bodhaine_optical_thickness
+        band = (inst.source or {}).get("band_wavelength_nm")
+        tau = None
+        if band is not None:
+            site = inst.site
+            tau = float(bodhaine_optical_thickness(
+                float(band), standard_pressure_hPa(site.altitude_m), site.latitude_deg,
+                site.altitude_m))
+        if tau != self.tau_fixed:
+            self.tau_fixed, self._grid = tau, None
+            self._set_parameters()
 
     @property
     def prior_mean(self) -> np.ndarray:
-        return np.array([0.15, 0.1])
+        return np.array([0.1] if self.tau_fixed is not None else [0.15, 0.1])
 
     def starts(self, ctx) -> list:
-        return [np.array([0.15, 0.1])]
+        return [self.prior_mean]
 
     def available(self) -> str | None:
         if importlib.util.find_spec("sasktran2") is None:
@@ -522,9 +594,6 @@ class MultipleScattering(RingEffect):
                     f"atmosphere); got {float(np.min(sun_elevation_deg)):.2f} deg")
         return self.available()
 
-    def __init__(self):
-        self._grid = None
-
     @staticmethod
     def _session_nodes(sun_enu):
         """Sun-node step and origin [deg] for a session's suns (unit vectors, (n, 3)):
@@ -534,7 +603,9 @@ class MultipleScattering(RingEffect):
 
     def sky(self, p, base_sky, sun_enu):
         if self._grid is None:
-            self._grid = GridMultipleSky(*self._session_nodes(sun_enu))
+            self._grid = GridMultipleSky(*self._session_nodes(sun_enu), tau=self.tau_fixed)
+        if self.tau_fixed is not None:
+            return self._grid.at(self.tau_fixed, float(p[0]))
         return self._grid.at(float(p[0]), float(p[1]))
 
 
@@ -548,6 +619,10 @@ class NeutralPoints(RingEffect):
     DoP, tested)."""
 
     name = "neutral_points"
+    aop_from_own_sky = True
+    """The units' pointing is read from the angle of polarization under this sky
+    (:func:`.fit.fit_pinned`): held where single scattering's AoP puts it (8.4 deg low on a
+    simulated ring under neutral points 40 deg apart), the fit stops at 6 deg."""
     parameter_names = ("separation_deg",)
     units = ("deg",)
     null = (0.0,)

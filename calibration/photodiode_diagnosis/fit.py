@@ -22,7 +22,7 @@ References
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -313,6 +313,14 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     A geometric effect started away from its null (a clock hours off, found by a coarse
     search) first has the pointing re-read from the AoP with the effect held at its start.
 
+    A sky effect whose sky has its own angle of polarization (``aop_from_own_sky``: the
+    neutral-point and multiple-scattering skies) always runs stage 1, whatever ``geometry``
+    says, with its parameters free beside the pointing, from ``theta0`` and from each of
+    the effect's starts (the best AoP cost kept): the pointing the base model read under
+    single scattering is off under such a sky (8.4 deg low under neutral points 40 deg
+    apart), and held there the effect's fit cannot reach its own sky. Stage 2 is then
+    reported not converged when stage 1 was not, so that a caller continues both.
+
     A free unit elevation or clock in one fit of the full model takes up the difference
     between the model's and the real sky's DoP profile (on a real ring the unit elevations
     followed the sun from +7 to -13 deg); the angle of polarization carries the geometry
@@ -331,6 +339,8 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     theta = np.asarray(theta0, float)
     first = None
     e = fwd.effect
+    own_sky_aop = e is not None and not e.geometric and getattr(e, "aop_from_own_sky", False)
+    geometry = geometry or own_sky_aop
     if geometry and e is not None and e.geometric and np.any(theta[L.effect] != e.null):
         # a start away from the effect's null (a clock hours off): the pointing is re-read
         # from the AoP there first, since the base's pointing was fitted without it
@@ -346,7 +356,7 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     if geometry:
         free = np.ones(L.size, bool)
         free[L.scale] = False
-        if fwd.effect is not None and not fwd.effect.geometric:
+        if fwd.effect is not None and not fwd.effect.geometric and not own_sky_aop:
             free[L.effect] = False
         profiled = None
         if fwd.effect is not None and fwd.effect.geometric:
@@ -357,16 +367,32 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
             free[L.pointing] = False
             profiled = np.zeros(L.size, bool)
             profiled[L.pointing] = True
+        starts = [theta]
+        if own_sky_aop:
+            # the sky's angle of polarization has local minima in its parameters (on two
+            # simulated sweeps, a neutral-point separation of 11 deg against the true 20,
+            # whose AoP cost is 1.6 % higher): its own starts are fitted too, the best kept
+            for p in e.starts(None):
+                if not np.allclose(p, theta[L.effect]):
+                    t = theta.copy()
+                    t[L.effect] = p
+                    starts.append(t)
         fwd.dop_free = True
         try:
-            first = fit(fwd, theta, free, sigma=sigma, max_iter=max_iter, covariance=covariance,
-                        profiled=profiled)
+            first = min((fit(fwd, t, free, sigma=sigma, max_iter=max_iter,
+                             covariance=covariance, profiled=profiled) for t in starts),
+                        key=lambda f: f.cost)
         finally:
             fwd.dop_free = False
         theta = first.theta
     if not full:            # the AoP stage is all the caller reads
         return None, first
-    return fit(fwd, theta, ~geometry_mask(fwd), sigma=sigma, max_iter=max_iter), first
+    second = fit(fwd, theta, ~geometry_mask(fwd), sigma=sigma, max_iter=max_iter)
+    if own_sky_aop and not first.converged:
+        # the sky's parameters were still moving the pointing: not converged, so that the
+        # caller continues both stages from here
+        second = replace(second, converged=False)
+    return second, first
 
 
 def coarse_headings(fwd: Forward, theta, step_deg: float = 15.0) -> np.ndarray:
