@@ -614,7 +614,9 @@ def particle_layer_profile(tau: float, particle_taus, layer: ParticleLayer,
     interval below the base and down over the one above the top, and is scaled so that the
     layer's optical thickness (trapezoid rule: exact for linear interpolation) is the case's.
     ``max_layer_tau`` [1], if given: at least as many levels inside the layer as keep each
-    level interval there at most that optical thickness in the thickest case.
+    level interval there at most that optical thickness in the thickest case, and the two
+    edge ramps as narrow as those intervals (by default they span a slab interval each, and
+    hold up to 0.9 of a cloud of optical thickness 20 with 101 levels).
 
     Returns
     -------
@@ -633,6 +635,10 @@ def particle_layer_profile(tau: float, particle_taus, layer: ParticleLayer,
         check_in_range("max_layer_tau", max_layer_tau, 0.0, np.inf, low_open=True)
         n_inside = max(n_inside, int(np.ceil(float(ptau.max(initial=0.0)) / max_layer_tau)) + 1)
     inside = np.linspace(base, top, n_inside)
+    if max_layer_tau is not None:
+        # the edge ramps as thin as the intervals inside
+        step = (top - base) / (n_inside - 1)
+        inside = np.concatenate([inside, np.clip([base - step, top + step], 0.0, H)])
     altitudes = np.unique(np.concatenate([np.linspace(0.0, H, settings.n_levels), inside]))
     in_layer = ((altitudes >= base) & (altitudes <= top)).astype(float)
     # optical thickness of a unit-extinction profile under linear interpolation (trapezoid)
@@ -681,11 +687,16 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     successive_orders : bool
         True: the multiple scatter from the engine's successive orders of scattering instead
         of its discrete ordinates (a different solver of the same atmosphere, for checks;
-        some ten times slower). It converges only with ``successive_orders_directions`` of
-        434 or more, a phase matrix already truncated (:func:`delta_m_truncation`: with the
-        engine's own delta-M scaling its first order keeps the whole forward peak, which its
-        directions alias: the radiance changes by a factor 2 from 230 to 434 directions) and
-        layers of optical thickness 0.5 or less (``tests/test_clouds.py``).
+        some ten times slower). Under a water cloud it converges only for a phase matrix
+        truncated beforehand (:func:`delta_m_truncation`; with the engine's own delta-M
+        scaling its first order keeps the whole forward peak, which its directions alias:
+        the radiance grows 1.2-1.9 times from 230 to 434 directions) and with 434 or more
+        directions (434 to 590 change the radiance by up to 2.2 %, the DoP by 7e-3; 590
+        take 11 GB of memory). Even then its DoP is up to 0.011 low in the clear Rayleigh
+        sky of optical thickness 1 against the tables of Natraj et al. (2009) (0.1 at the
+        zenith), and under clouds of optical thickness 10-20 its radiance depends on how
+        the cloud's edges are resolved (from 13 % below to 10 % above the discrete
+        ordinates, which agree with DISORT within 2 %; ``docs/clouds.md``).
     successive_orders_directions : int
         Directions of the successive orders' incoming and outgoing quadratures (one of the
         engine's Lebedev sizes: 110, 230, 434, 590, ...); the cost grows about as its 1.5th
