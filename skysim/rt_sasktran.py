@@ -670,7 +670,8 @@ def layered_particle_stokes_cases(tau: float, albedo: float, particle_taus,
     :data:`MAX_PARTICLE_SSA` (the engine's solution of a conservative droplet layer is
     unstable). Verified for droplet layers up to an optical thickness of 20
     (``tests/test_clouds.py``: transmitted flux against the delta-Eddington and the
-    asymptotic theory of thick layers).
+    asymptotic theory of thick layers, radiance against DISORT within 3.4 % at cloud optical
+    thickness 1-20).
 
     Parameters
     ----------
