@@ -78,9 +78,11 @@ __all__ = [
     "SkyGapInputError",
     "albedo_decomposition",
     "diagnose_sky",
+    "dmax_se",
     "fit_albedo",
     "fit_dmax",
     "fit_tau",
+    "gauss_newton",
     "predict_qu",
     "slice_residuals",
 ]
