@@ -5,26 +5,34 @@ a *sky*: a measured or reference field of the normalised Stokes
 parameters ``q = Q/I``, ``u = U/I`` (equivalently DoP and AoP) on view directions, for several
 cases (sun positions) under one atmosphere.
 
+The method is the judge's (:mod:`calibration.diagnosis.judge`), as for every instrument:
+folds of whole cases (one sun each: the independent blocks), held-out scores, the paired
+comparison, the verdict rule and the shrink. This adapter brings the sky's data, base model,
+candidates and fits.
+
 1. **Base model and gap.** The single-scattering Rayleigh sky with a free ``d_max``
    (``d = d_max sin^2 g / (1 + cos^2 g)``, AoP perpendicular to the scattering plane; Coulson
-   1988 [1]_ ch. 2) is fitted on the *calibration cases*; ``q, u`` are linear in ``d_max`` so
-   the fit is closed-form least squares. The **gap** is the RMS over the *withheld cases* of the
-   Stokes residual ``|(q, u)_model - (q, u)_data|`` (a DoLP-sized number: it equals the DoP
-   error where the AoP is right and ``2 d sin(dAoP)`` where the DoP is right, and it stays
-   defined at the neutral points where the AoP is not).
+   1988 [1]_ ch. 2) is fitted on the calibration cases of each fold; ``q, u`` are linear in
+   ``d_max`` so the fit is closed-form least squares. The **gap** is the RMS over the
+   *withheld cases* of the Stokes residual ``|(q, u)_model - (q, u)_data|`` (a DoLP-sized
+   number: it equals the DoP error where the AoP is right and ``2 d sin(dAoP)`` where the DoP
+   is right, and it stays defined at the neutral points where the AoP is not). The folds
+   are the user's split (``calibration_cases``: one held-out fold) or whole cases dealt
+   round-robin into folds, each withheld in turn (:func:`judge.cross_validate`).
 2. **Where.** The withheld residuals by angular distance from the sun, near vs away from the
    horizon, in vs out of the neutral-point zones (scattering angle < 30 deg or > 150 deg: the
    Babinet and Brewster points lie 15-25 deg from the sun, the Arago point as far above the
    anti-sun [2]_), and by view zenith angle (:func:`calibration.diagnosis.core.partition_slices`,
    two degrees of freedom per point: ``dq`` and ``du``).
-3. **Which.** Candidates, each fitted on the calibration cases only and scored on the withheld
-   ones: ``d_max`` (the base itself), ``multiple_scattering`` (a Rayleigh slab of free optical
-   thickness ``tau`` over a black ground, no parameter added to the base's one) and
-   ``ground_albedo`` (``tau`` and the Lambertian albedo ``A`` free, one added), both solved
-   by sasktran2 through :class:`skysim.multiple.MultipleScatteringSky`; scored by
-   :func:`calibration.diagnosis.core.held_out_score` and judged by
-   :func:`calibration.diagnosis.core.decide`: the effect's name, ``none`` (single scattering
-   with a fitted ``d_max`` is within the noise floor) or ``unexplained``.
+3. **Which.** Candidates, each fitted on the calibration cases of each fold and scored on the
+   withheld ones: ``d_max`` (the base itself), ``multiple_scattering`` (a Rayleigh slab of
+   free optical thickness ``tau`` over a black ground, no parameter added to the base's one)
+   and ``ground_albedo`` (``tau`` and the Lambertian albedo ``A`` free, one added), both
+   solved by sasktran2 through :class:`skysim.multiple.MultipleScatteringSky`; scored by
+   :func:`judge.score` (:func:`calibration.diagnosis.core.held_out_score` [3]_) and judged by
+   :func:`judge.verdict`: the effect's name, ``none`` (single scattering with a fitted
+   ``d_max`` is within the noise floor), ``group``, ``partly_explained`` or ``unexplained``.
+   Every parameter carries a standard error (:func:`dmax_se`, :func:`gauss_newton`).
 4. **How far.** Held-out gap before and after, the shrink ``1 - G_after / G_before`` (with
    bootstrap standard errors over the withheld cases when there are two or more) and the
    fitted parameters.
@@ -39,7 +47,8 @@ albedo of the slab lit from below and ``V`` independent of ``A`` (Chandrasekhar 
 ch. X, sect. 72, the "planetary problem"; the ground depolarizes, so the series of ground-sky
 reflections is scalar). Three calls per (tau, sun), at ``A = 0, 1/2, 1``, give ``s`` and ``V``;
 any albedo is then a formula (tested against a direct engine call in
-``tests/test_sky_gap.py``).
+``tests/test_sky_gap.py``). The standard errors cost three engine calls per sun and fit
+(:func:`gauss_newton`), 10-20 % of the search's.
 
 References
 ----------
@@ -50,6 +59,8 @@ References
    doi:10.1214/aos/1176344136.
 .. [4] S. Chandrasekhar, *Radiative Transfer*, Oxford (1950; Dover 1960), ch. X.
 .. [5] V. Natraj, K.-F. Li, Y. L. Yung, ApJ 691:1909 (2009), doi:10.1088/0004-637X/691/2/1909.
+.. [6] D. M. Bates, D. G. Watts, *Nonlinear Regression Analysis and Its Applications*, Wiley
+   (1988), ch. 2.
 """
 
 from __future__ import annotations
