@@ -161,12 +161,19 @@ def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = Non
     return out
 
 
-def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int) -> dict:
+def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int, *,
+          n_held_out: int | None = None) -> dict:
     """A candidate's held-out scores against the base model (module doc, step 2): ``gap_after``,
-    ``shrink``, ``score``, ``k``, ``excess_removed``, ``blocks_improved``, ``converged`` (in
-    every fold)."""
+    ``shrink``, ``score``, ``k``, ``excess_removed``, ``blocks_improved`` (over the blocks
+    holding a held-out reading), ``converged`` (in every fold).
+
+    ``n_held_out`` is the number of independent held-out values of the score
+    (:func:`.core.held_out_score`); by default the usable held-out readings. A reading row
+    whose values are constrained (four analyser outputs that sum to zero carry three) gives
+    fewer.
+    """
     g0, gc = core.rms(held.held("base")), core.rms(held.held(name))
-    n_ho = int(held.usable.sum())
+    n_ho = int(held.usable.sum()) if n_held_out is None else int(n_held_out)
     return {"effect": name, "gap_after": gc, "shrink": 1 - gc / g0,
             "score": core.held_out_score(gc, g0, floor, n_ho, k, n_cal), "k": k,
             "excess_removed": core.excess_removed(gc, g0, floor),
