@@ -297,12 +297,16 @@ def _sky() -> InstrumentMatrix:
 
     def simulate(effect, truth, seed):
         if effect is None:
-            sky = RayleighSky(dmax=0.7)
+            sky, case_id = RayleighSky(dmax=0.7), 0
         else:
             sky = MultipleScatteringSky(tau=truth["tau"], albedo=truth.get("albedo", 0.0),
                                         settings=settings)
+            case_id = 1 + [(e, t) for e, by in strengths.items()
+                           for t in by.values()].index((effect, truth))
         f = sky.field(E, A, S, 0.0)
-        rng = np.random.default_rng(seed)
+        # a noise draw of its own per case (the seed with the case's index), so that no two
+        # cases share their noise and each z-score is an independent draw
+        rng = np.random.default_rng([seed, case_id])
         q = f.Q / f.I + rng.normal(0.0, SKY_NOISE, S.size)
         u = f.U / f.I + rng.normal(0.0, SKY_NOISE, S.size)
         return SkyCases(case, E, A, S, np.zeros_like(S), q, u)
