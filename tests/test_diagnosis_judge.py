@@ -112,7 +112,8 @@ def test_a_given_split_is_one_held_out_fold_and_scores_count_held_blocks_only():
     blocks of 10 points: the base model is the training mean, the candidate a fitted line;
     the line lowers every held-out block's sum of squares, so ``blocks_improved`` is 1 (the
     three calibration-only blocks, with nothing held out, are not counted as unimproved).
-    ``n_held_out`` is the score's ``N`` (:func:`core.held_out_score`)."""
+    ``n_held_out`` is the score's ``N`` (:func:`core.held_out_score`); ``scale`` converts the
+    gap to the report unit and leaves the score alone."""
     from calibration.diagnosis import judge
     rng = np.random.default_rng(3)
     block = np.repeat(np.arange(6), 10)
@@ -137,6 +138,8 @@ def test_a_given_split_is_one_held_out_fold_and_scores_count_held_blocks_only():
     assert row["score"] == core.held_out_score(gc, g0, 0.1, 30, 1, 30)
     assert judge.score(held, "line", 1, block, 0.1, 30, n_held_out=20)["score"] == \
         core.held_out_score(gc, g0, 0.1, 20, 1, 30)
+    mv = judge.score(held, "line", 1, block, 0.1, 30, scale=1e3)
+    assert mv["gap_after"] == 1e3 * gc and mv["score"] == row["score"]
     with pytest.raises(ValueError, match=r"held-out folds \[2\]"):
         judge.cross_validate(folds, ["line"], y.shape, fit_fold, held_folds=[2])
 

@@ -162,7 +162,7 @@ def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = Non
 
 
 def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int, *,
-          n_held_out: int | None = None) -> dict:
+          n_held_out: int | None = None, scale: float = 1.0) -> dict:
     """A candidate's held-out scores against the base model (module doc, step 2): ``gap_after``,
     ``shrink``, ``score``, ``k``, ``excess_removed``, ``blocks_improved`` (over the blocks
     holding a held-out reading), ``converged`` (in every fold).
@@ -170,11 +170,12 @@ def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int, *,
     ``n_held_out`` is the number of independent held-out values of the score
     (:func:`.core.held_out_score`); by default the usable held-out readings. A reading row
     whose values are constrained (four analyser outputs that sum to zero carry three) gives
-    fewer.
+    fewer. ``floor`` is in residual units; ``gap_after`` is reported in ``scale`` report
+    units per residual unit (1e3 for residuals in V reported in mV).
     """
     g0, gc = core.rms(held.held("base")), core.rms(held.held(name))
     n_ho = int(held.usable.sum()) if n_held_out is None else int(n_held_out)
-    return {"effect": name, "gap_after": gc, "shrink": 1 - gc / g0,
+    return {"effect": name, "gap_after": scale * gc, "shrink": 1 - gc / g0,
             "score": core.held_out_score(gc, g0, floor, n_ho, k, n_cal), "k": k,
             "excess_removed": core.excess_removed(gc, g0, floor),
             "blocks_improved": core.blocks_improved(held.held("base"), held.held(name), block),
