@@ -111,6 +111,10 @@ PARAMETER_BOUNDS = {"d_max": (0.0, 1.0), "tau": TAU_BOUNDS, "albedo": (0.0, 1.0)
 """Range searched for each sky parameter (a fit at a bound: the candidate's form is wrong
 for these data or the range too narrow)."""
 DEFAULT_THRESHOLDS = Thresholds(block_name="cases")
+NULL_SE = 2.0
+"""Standard errors by which a fitted albedo must exceed 0 (a black ground, where the
+``ground_albedo`` sky is the ``multiple_scattering`` one) for the ground to be a finding; a
+smaller one leaves the candidate indistinguishable from its null and it is not named."""
 
 
 class SkyGapInputError(DiagnosisError, ValueError):
@@ -629,6 +633,9 @@ def diagnose_sky(cases: SkyCases, calibration_cases=None, *, candidates=SKY_CAND
         row["at_bound"] = core.at_bound(P, *zip(*[PARAMETER_BOUNDS[n]
                                                   for n in eff.parameter_names]),
                                         eff.parameter_names)
+        if name == "ground_albedo":
+            a = row["params"]["albedo"]
+            row["null_excluded"] = bool(a["se"] is None or a["value"] > NULL_SE * a["se"])
         for key in ("calibration_gap", "engine_evaluations", "fit_seconds"):
             v = [f.state[key] for f in fits]
             row[key] = v[0] if len(v) == 1 else float(np.sum(v) if key != "calibration_gap"
