@@ -218,3 +218,28 @@ def test_natraj_reader_conventions_thin_atmosphere_is_single_scattering(referenc
     assert p["d_max"] == pytest.approx(1.0, abs=0.03)
     assert np.sqrt(np.mean((q - c.q) ** 2 + (u - c.u) ** 2)) < 0.02
     assert np.sqrt(np.mean((q + c.q) ** 2 + (u - c.u) ** 2)) > 0.5
+
+
+@pytest.mark.parametrize("albedo_se, verdict", [(1e-3, "unexplained"), (1e-4, "ground_albedo")])
+def test_ground_albedo_within_two_se_of_black_is_not_named(monkeypatch, albedo_se, verdict):
+    """A multiple-scattering sky (tau 0.3, black ground) diagnosed without the
+    multiple-scattering candidate: a ground albedo fitted at 0.0012 is the black-ground sky
+    when its SE is 1e-3 (1.2 SE from 0: not named, the null not excluded) and a ground when
+    its SE is 1e-4 (12 SE). The fit is replaced by one returning those values, so that the
+    rule alone is tested; the held-out prediction is the engine's."""
+    settings = needs_engine()
+    from calibration.diagnosis import sky
+    from skysim.multiple import MultipleScatteringSky
+    c = make_cases(MultipleScatteringSky(tau=0.3, albedo=0.0, settings=settings),
+                   np.random.default_rng(2))
+
+    def fit(c_cal, effect, *args, **kwargs):
+        return {"params": {"tau": 0.3, "albedo": 0.0012},
+                "se": {"tau": 1e-3, "albedo": albedo_se}, "gap": FLOOR,
+                "engine_evaluations": 0, "seconds": 0.0}
+    monkeypatch.setattr(sky, "fit_tau", fit)
+    d = diagnose_sky(c, [0], candidates=("d_max", "ground_albedo"), noise_floor=FLOOR,
+                     settings=settings)
+    assert d.verdict.effect == verdict, d.verdict.reason
+    if verdict == "unexplained":
+        assert "indistinguishable from its null" in d.verdict.reason
