@@ -106,6 +106,44 @@ def test_at_bound_names_parameters_on_a_bound_but_not_at_their_null():
     assert core.at_bound([0.0, 0.0, 1.0], lo, hi, "abc", null=[0.0, 0.0, 1.0]) == []
 
 
+def test_a_given_split_is_one_held_out_fold_and_scores_count_held_blocks_only():
+    """``held_folds``: the calibration rows (fold 0) are only fitted on, never held out, and
+    a held-out block count leaves them out. A straight line ``y = 2 x`` plus noise over
+    blocks of 10 points: the base model is the training mean, the candidate a fitted line;
+    the line lowers every held-out block's sum of squares, so ``blocks_improved`` is 1 (the
+    three calibration-only blocks, with nothing held out, are not counted as unimproved).
+    ``n_held_out`` is the score's ``N`` (:func:`core.held_out_score`); ``scale`` converts the
+    gap to the report unit and leaves the score alone."""
+    from calibration.diagnosis import judge
+    rng = np.random.default_rng(3)
+    block = np.repeat(np.arange(6), 10)
+    x = rng.uniform(-1.0, 1.0, block.size)
+    y = 2.0 * x + rng.normal(0.0, 0.1, block.size)
+    folds = np.where(block < 3, 0, 1)
+    calls = []
+
+    def fit_fold(train, held, skip):
+        calls.append(held)
+        slope, icpt = np.polyfit(x[train], y[train], 1)
+        return np.ones(held.size, bool), {
+            "base": judge.FoldFit(y[train].mean() - y[held]),
+            "line": judge.FoldFit(slope * x[held] + icpt - y[held], np.array([slope]))}
+
+    held = judge.cross_validate(folds, ["line"], y.shape, fit_fold, held_folds=[1])
+    assert len(calls) == 1 and np.array_equal(calls[0], np.flatnonzero(folds == 1))
+    assert np.array_equal(held.usable, folds == 1)
+    row = judge.score(held, "line", 1, block, 0.1, 30)
+    assert row["blocks_improved"] == 1.0
+    g0, gc = core.rms(held.held("base")), core.rms(held.held("line"))
+    assert row["score"] == core.held_out_score(gc, g0, 0.1, 30, 1, 30)
+    assert judge.score(held, "line", 1, block, 0.1, 30, n_held_out=20)["score"] == \
+        core.held_out_score(gc, g0, 0.1, 20, 1, 30)
+    mv = judge.score(held, "line", 1, block, 0.1, 30, scale=1e3)
+    assert mv["gap_after"] == 1e3 * gc and mv["score"] == row["score"]
+    with pytest.raises(ValueError, match=r"held-out folds \[2\]"):
+        judge.cross_validate(folds, ["line"], y.shape, fit_fold, held_folds=[2])
+
+
 # ------------------------------------------------------------------ failing candidates
 FAILURES = {"svd": np.linalg.LinAlgError("SVD did not converge"),
             "numeric": FloatingPointError("overflow encountered in exp")}

@@ -342,15 +342,27 @@ def test_entry_point_refuses_what_it_cannot_read(tilt_measurement, tmp_path):
         diagnose(path)
 
 
-def test_sky_field_through_the_entry_point_splits_by_fold():
-    """Two suns, two folds: the second sun is withheld (the golden sky case gives it
-    explicitly); a sky field needs its noise floor."""
+def test_sky_field_through_the_entry_point_cross_validates_by_case():
+    """Two suns, two folds: each sun is withheld in turn (the golden sky case gives its split
+    explicitly); the base's d_max is the mean of the two fold fits, and its standard error
+    that of two independent fits (each on one sun); a sky field needs its noise floor."""
     from test_sky_gap import FLOOR, make_cases
 
+    from calibration.diagnosis.sky import dmax_se, fit_dmax
     from skysim.sky import RayleighSky
     c = make_cases(RayleighSky(dmax=0.7), np.random.default_rng(1))
     r = diagnose(c, ("d_max",), folds=2, noise_floor=FLOOR)
-    assert r.data["withheld_cases"] == [1] and r.verdict.effect == "none"
+    assert r.data["withheld_cases"] == [0, 1] and r.verdict.effect == "none"
+    assert r.data["split"]["folds"] == [[0], [1]]
+    p = r.verdict.params["d_max"]
+    # fold 0 withholds sun 0 and fits sun 1, and the other way round
+    fits = [fit_dmax(c.subset([k]))["d_max"] for k in (1, 0)]
+    ses = [dmax_se(c.subset([k]), d) for k, d in zip((1, 0), fits)]
+    assert p["fold_values"] == pytest.approx(fits, rel=1e-12)
+    assert p["value"] == pytest.approx(np.mean(fits), rel=1e-12)
+    # the larger of the two-fit SE and the fold spread's (module doc of sky._fold_params)
+    assert p["se"] == pytest.approx(max(np.sqrt(np.mean(np.square(ses)) / 2),
+                                        np.std(fits, ddof=1) / np.sqrt(2)), rel=1e-12)
     with pytest.raises(ValueError, match="noise_floor"):
         diagnose(c, ("d_max",))
 

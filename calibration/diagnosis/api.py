@@ -51,7 +51,7 @@ def diagnose(data_or_path, candidates=None, *, folds: int = 3, seed: int = 0,
     candidates : sequence of str, optional
         Candidate effects (default: the instrument's default set).
     folds : int
-        Held-out folds of whole sweeps (sky fields: one split, the last fold withheld).
+        Held-out folds of whole sweeps (sky fields: of whole cases, at most one per case).
     seed : int
         Seed of the bootstrap of the standard errors.
     **options

@@ -674,7 +674,8 @@ def excess_removed(gap: float, gap_base: float, floor: float) -> float:
 
 
 def blocks_improved(res0, res1, block) -> float:
-    """Fraction of the held-out blocks whose residual sum of squares the candidate lowers.
+    """Fraction of the held-out blocks whose residual sum of squares the candidate lowers
+    (blocks with no used reading, such as calibration-only blocks, are not counted).
 
     Parameters
     ----------
@@ -683,8 +684,9 @@ def blocks_improved(res0, res1, block) -> float:
     block : array (n,)
         Block of every row.
     """
-    (ss0, _), (ss1, _) = _block_sums(res0, block), _block_sums(res1, block)
-    return float(np.mean(ss1 < ss0))
+    (ss0, n0), (ss1, _) = _block_sums(res0, block), _block_sums(res1, block)
+    held = n0 > 0
+    return float(np.mean(ss1[held] < ss0[held])) if held.any() else float("nan")
 
 
 def _block_sums(res, block) -> tuple[np.ndarray, np.ndarray]:

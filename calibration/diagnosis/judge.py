@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from . import core
+from .errors import InsufficientDataError
 from .report import Verdict
 
 __all__ = ["FoldFit", "HeldOut", "cross_validate", "score", "verdict"]
@@ -98,7 +99,8 @@ class HeldOut:
         return [n for n in names if n not in self.unavailable]
 
 
-def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = None) -> HeldOut:
+def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = None, *,
+                   held_folds=None) -> HeldOut:
     """Fit and hold out every fold (module doc, step 1).
 
     Parameters
@@ -117,15 +119,32 @@ def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = Non
     unavailable : dict, optional
         ``name -> why`` of the candidates known not to apply before any fit (a missing
         engine, a sun too low for the effect's model); they are never fitted.
+    held_folds : sequence of int, optional
+        The folds held out in turn (default: every fold). The rows of the other folds are
+        only ever fitted on: a split the user gives (calibration rows and withheld rows) is
+        one held-out fold.
 
     Returns
     -------
     HeldOut
+
+    Raises
+    ------
+    InsufficientDataError
+        For a held-out fold that no row belongs to.
     """
     out = HeldOut({k: np.zeros(shape) for k in ("base", *names)}, np.zeros(shape, bool),
                   {k: [] for k in ("base", *names)}, {k: [] for k in ("base", *names)},
                   {} if unavailable is None else unavailable)
-    for f in np.unique(folds):
+    folds = np.asarray(folds)
+    every = np.unique(folds)
+    if held_folds is None:
+        held_folds = every
+    missing = [int(f) for f in held_folds if f not in every]
+    if missing:
+        raise InsufficientDataError(f"held-out folds {missing} hold no row; the rows' folds are "
+                         f"{every.tolist()}")
+    for f in held_folds:
         train, held = np.flatnonzero(folds != f), np.flatnonzero(folds == f)
         usable, fits = fit_fold(train, held, out.unavailable)
         out.usable[held] = usable
@@ -142,13 +161,21 @@ def cross_validate(folds, names, shape, fit_fold, unavailable: dict | None = Non
     return out
 
 
-def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int) -> dict:
+def score(held: HeldOut, name: str, k: int, block, floor: float, n_cal: int, *,
+          n_held_out: int | None = None, scale: float = 1.0) -> dict:
     """A candidate's held-out scores against the base model (module doc, step 2): ``gap_after``,
-    ``shrink``, ``score``, ``k``, ``excess_removed``, ``blocks_improved``, ``converged`` (in
-    every fold)."""
+    ``shrink``, ``score``, ``k``, ``excess_removed``, ``blocks_improved`` (over the blocks
+    holding a held-out reading), ``converged`` (in every fold).
+
+    ``n_held_out`` is the number of independent held-out values of the score
+    (:func:`.core.held_out_score`); by default the usable held-out readings. A reading row
+    whose values are constrained (four analyser outputs that sum to zero carry three) gives
+    fewer. ``floor`` is in residual units; ``gap_after`` is reported in ``scale`` report
+    units per residual unit (1e3 for residuals in V reported in mV).
+    """
     g0, gc = core.rms(held.held("base")), core.rms(held.held(name))
-    n_ho = int(held.usable.sum())
-    return {"effect": name, "gap_after": gc, "shrink": 1 - gc / g0,
+    n_ho = int(held.usable.sum()) if n_held_out is None else int(n_held_out)
+    return {"effect": name, "gap_after": scale * gc, "shrink": 1 - gc / g0,
             "score": core.held_out_score(gc, g0, floor, n_ho, k, n_cal), "k": k,
             "excess_removed": core.excess_removed(gc, g0, floor),
             "blocks_improved": core.blocks_improved(held.held("base"), held.held(name), block),
