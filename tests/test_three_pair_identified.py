@@ -15,7 +15,8 @@ from scipy.stats import t as student_t
 
 from calibration import effects as E
 from calibration.diagnosis import diagnose
-from calibration.diagnosis.three_pair import DEFAULT_CANDIDATES, paired_margin
+from calibration.diagnosis.core import paired_margin
+from calibration.diagnosis.three_pair import DEFAULT_CANDIDATES
 from calibration.diagnosis.three_pair_fit import RelativeExtinction, fit_form
 from experiments.workflows.diagnose import simulate_session
 

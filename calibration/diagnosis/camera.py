@@ -531,6 +531,9 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
     block_superpixels : int
         Side of a spatial block [super-pixels] (single frame).
     thresholds : Thresholds
+        Its ``paired_se`` is a normal-equivalent level, applied as the t quantile for the
+        number of held-out blocks (:func:`.core.paired_margin`; the report's thresholds show
+        the value applied).
 
     Raises
     ------
@@ -653,6 +656,7 @@ def diagnose_camera(data: CameraFrames, candidates=DEFAULT_CAMERA_CANDIDATES, *,
                                    eff.parameter_names, null=eff.null),
             details=_dmax_correlation(fit, eff) if dmax_known is None else {}))
     held = {name: r[use] for name, r in {"base": res0, **residuals}.items()}
+    thresholds = thresholds.for_blocks(np.unique(block[use]).size)
     rows, verdict = judge.verdict(rows, held, block[use], floor, thresholds,
                                   np.random.default_rng(seed), floor_note=noise.note)
     best = next((r.effect for r in rows if r.available), None)

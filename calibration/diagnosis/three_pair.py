@@ -14,7 +14,7 @@
    and refitted fold by fold, scored by :func:`.core.held_out_score`.
 5. **Verdict and how far.** :func:`.judge.verdict` (the paired judge, :func:`.core.decide`,
    gaps before and after, the shrink with block-bootstrap standard errors), with the paired
-   margin as Student's t for the number of sweeps (:func:`paired_margin`), and the best
+   margin as Student's t for the number of sweeps (:func:`.core.paired_margin`), and the best
    effect's parameters fitted on all data with their covariance. A candidate whose
    library parameters the outputs cannot all identify is fitted in the form they do
    (:data:`.three_pair_fit.FIT_FORMS`: the extinction ratios as differences from their
@@ -24,15 +24,10 @@ References
 ----------
 .. [1] J. Yang, N. Zhou, Y. Huang, X. Liu, Opt. Precision Eng. 22(6):1424 (2014),
    doi:10.3788/OPE.20142206.1424, eqs. (2)-(3), (10)-(14).
-.. [2] B. Efron, C. Stein, "The jackknife estimate of variance", Ann. Stat. 9(3):586-596
-   (1981), doi:10.1214/aos/1176345462.
-.. [3] J. Shao, D. Tu, *The Jackknife and Bootstrap*, Springer (1995), sect. 2.1
-   (jackknife t-statistics with ``n - 1`` degrees of freedom).
 """
 
 from __future__ import annotations
 
-from dataclasses import replace
 from itertools import pairwise
 
 import numpy as np
@@ -46,7 +41,7 @@ from .three_pair_data import MIN_SUN_ELEVATION_DEG, DiagnosisData
 from .three_pair_fit import base_parameters, effect_parameters, fit_form, fit_model, predict
 
 __all__ = ["DEFAULT_CANDIDATES", "METRIC", "cross_validate", "diagnose_three_pair",
-           "harmonics", "paired_margin", "where_slices"]
+           "harmonics", "where_slices"]
 
 DEFAULT_CANDIDATES = EFFECT_NAMES
 """Candidates tried unless others are named: every effect (``multiple_scattering`` reads a
@@ -62,39 +57,9 @@ modelled (the true effect removes 97-100 % on the blind benchmark's strong cases
 the true effect withheld a look-alike removes up to 80 % (tilt standing in for the sun's
 motion over a sweep), which a minimum of one half would name. Its ``paired_se`` is read as a
 normal-equivalent one-sided level (2: 97.7 %) and applied as Student's t quantile at that
-level with one degree of freedom fewer than the held-out sweeps (:func:`paired_margin`)."""
+level with one degree of freedom fewer than the held-out sweeps (:func:`.core.paired_margin`)."""
 MIN_READINGS_PER_CHANNEL = 20
 MIN_HEADING_SPAN_DEG = 10.0
-
-
-def paired_margin(paired_se: float, n_blocks: int) -> float:
-    """The paired-SE margin applied with ``n_blocks`` held-out sweeps.
-
-    The paired differences' standard errors are jackknifed over the held-out sweeps
-    (:func:`.core.paired_difference`), so each is itself estimated with ``n_blocks - 1``
-    degrees of freedom and a difference over its SE follows Student's t, not the normal
-    law (Efron & Stein 1981 [2]_; Shao & Tu 1995 [3]_ sect. 2.1). ``paired_se`` (normal
-    SEs, one-sided) is converted to the t quantile at the same level: 2 SE (97.7 %) is 2.65
-    with six sweeps, 2.25 with twelve, 2 in the limit.
-
-    Parameters
-    ----------
-    paired_se : float
-        Margin in normal standard errors (:attr:`.core.Thresholds.paired_se`).
-    n_blocks : int
-        Held-out sweeps (the jackknife's blocks).
-
-    Returns
-    -------
-    float
-        The margin in jackknife standard errors, to 0.01 (``paired_se`` itself with fewer
-        than two sweeps, where the judge compares single readings).
-    """
-    from scipy.stats import norm, t
-    if n_blocks < 2 or paired_se <= 0:
-        return float(paired_se)
-    # to 0.01, as the verdict's reason prints it
-    return round(float(t.ppf(norm.cdf(paired_se), n_blocks - 1)), 2)
 
 
 def cross_validate(data: DiagnosisData, folds, effects, sigma_V: float):
@@ -246,7 +211,7 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
         Seed of the block bootstrap.
     thresholds : Thresholds
         Its ``paired_se`` is a normal-equivalent level, applied as the t quantile for the
-        number of sweeps (:func:`paired_margin`; the report's thresholds show the value
+        number of sweeps (:func:`.core.paired_margin`; the report's thresholds show the value
         applied).
 
     Returns
@@ -266,7 +231,7 @@ def diagnose_three_pair(data: DiagnosisData, effects=DEFAULT_CANDIDATES, *, fold
     _check(data)
     fold_of = core.assign_folds(ctx.block, folds)
     n_sweeps = int(np.unique(ctx.block[data.valid.any(axis=1)]).size)
-    thresholds = replace(thresholds, paired_se=paired_margin(thresholds.paired_se, n_sweeps))
+    thresholds = thresholds.for_blocks(n_sweeps)
     if data.valid.sum(axis=0).min() < MIN_READINGS_PER_CHANNEL:
         raise InsufficientDataError(
             f"only {int(data.valid.sum(axis=0).min())} usable readings in one channel; "
