@@ -461,10 +461,27 @@ def _modified_sky(base, kind: str, truth: dict):
     return _Wrapped()
 
 
-def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
-                 per_sweep: int = 60, start: str = RING_START, sweep_spacing_s: float = 60.0):
+RING_SWEEPS = 12
+"""Sweeps of a simulated ring session: a real session holds 11-12 one-turn recordings
+(``reference/gkanias2023/sessions.csv``)."""
+RING_SWEEP_SPACING_S = 62.0
+"""Time between the starts of successive sweeps [s]: a real session's recordings follow each
+other every 52-107 s (62 s where the times are estimated), so 12 sweeps span about 12 min."""
+RING_PER_SWEEP = 120
+"""Samples of one turn. A real turn holds about 410 samples (10 Hz over 41 s), and a fit
+thins a session to :data:`calibration.photodiode_diagnosis.fit.FIT_SAMPLES` (1500), about
+125 a sweep over 12 sweeps: 120 samples (3 deg of turn apart) are what the fits of a real
+session see, at a third of the simulation and held-out cost."""
+RING_TURN_S = 41.0
+"""Duration of one turn [s] (a real recording: about 410 samples at 10 Hz)."""
+
+
+def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING_SWEEPS,
+                 per_sweep: int = RING_PER_SWEEP, start: str = RING_START,
+                 sweep_spacing_s: float = RING_SWEEP_SPACING_S, turn_s: float = RING_TURN_S):
     """A simulated relative-yaw, counter-clockwise ring session (eight units at 45 deg
-    elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
+    elevation, one full turn per sweep; by default 12 sweeps 62 s apart, as a real session)
+    with ``effect`` injected.
 
     The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
     with the effect made physically: a multiple-scattering or neutral-point sky, a cone of
@@ -482,14 +499,22 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     seed : int
         Noise seed.
     n_sweeps, per_sweep : int
+        Sweeps, and samples of each (evenly spread over one turn).
     start : str
         ISO time of the first sample.
     sweep_spacing_s : float
         Time between the starts of successive sweeps [s].
+    turn_s : float
+        Duration of one turn [s]; must not exceed ``sweep_spacing_s``.
 
     Returns
     -------
     PhotodiodeData
+
+    Raises
+    ------
+    IdentifiabilityInputError
+        For a ``turn_s`` that is not positive or exceeds ``sweep_spacing_s``.
     """
     import pandas as pd
 
@@ -497,12 +522,17 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     from sensor.photodiodes_io import PhotodiodeData
     from skysim.sky import RayleighSky
     from skysim.sun import Site, sun_vector
+    if not (0.0 < turn_s <= sweep_spacing_s):
+        raise IdentifiabilityInputError(
+            f"turn_s = {turn_s!r} s: a turn must last more than 0 s and no longer than "
+            f"the sweep spacing ({sweep_spacing_s!r} s)")
     truth = truth or {}
     site = Site(*RING_SITE)
     rng = np.random.default_rng(seed)
     sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
     t0 = pd.Timestamp(start)
-    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + 0.1 * k)
+    dt = turn_s / per_sweep
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + dt * k)
                               for s in range(n_sweeps) for k in range(per_sweep)])
     yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
     sweep = np.repeat(np.arange(n_sweeps), per_sweep)

@@ -230,6 +230,9 @@ class YawScale(RingEffect):
     upper = (1.25,)
     prior_sd = (0.1,)
     fd_step = (1e-4,)
+    rereads_pointing: ClassVar[bool] = True
+    """The units' pointing (constant offsets) cannot stand in for a heading error that grows
+    along each turn: it is re-read at the fitted factor (:func:`.run._reread_pointing`)."""
 
     def yaw(self, inst, p) -> np.ndarray:
         first = np.r_[True, inst.sweep[1:] != inst.sweep[:-1]]
@@ -842,6 +845,9 @@ class ReadLag(RingEffect):
     upper = (2.0,)
     prior_sd = (1.0,)
     fd_step = (2e-3,)
+    rereads_pointing: ClassVar[bool] = True
+    """A lag moves the heading by the turn rate times the lag, in turns only: the constant
+    pointing offsets cannot stand in for it (:func:`.run._reread_pointing`)."""
 
     def starts(self, ctx) -> list:
         return [np.array([v]) for v in (-0.3, 0.0, 0.3)]

@@ -168,12 +168,52 @@ def _fit_effect(fe: Forward, starts, sigma):
     best = min(cost(f) for f in fits)
     if fe.effect.name != "clock_offset":
         chosen = min(fits, key=cost)
+        if getattr(fe.effect, "rereads_pointing", False):
+            chosen = _reread_pointing(fe, chosen, sigma)
     else:
         L = fe.layout
         close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
         chosen = min(close, key=lambda f: float(np.sum(np.abs(
             f[0].theta[L.effect] - np.asarray(fe.effect.null)))))
     return chosen
+
+
+POINTING_PASSES = 4
+"""Most passes of :func:`_reread_pointing` (on simulated rings with a 5 % gyro scale the
+factor moved by 1.7e-3, 7e-5, 3e-6 in successive passes: two or three suffice)."""
+
+
+def _reread_pointing(fe: Forward, pair, sigma):
+    """A geometric fit that holds the base model's pointing, redone with the pointing re-read
+    at the fitted effect, until the effect moves by less than a tenth of its SD.
+
+    The base fit, made without the effect, lets the units' pointing take up what it can of
+    the effect's misfit (on a simulated ring with a 5 % gyro scale, azimuth offsets up to 12
+    deg); the AoP fit of the effect then holds that pointing and stops short of the truth
+    (0.9517 for 0.95, 15 of its SE away). For an effect the pointing cannot stand in for (a
+    gyro scale or a read lag: a heading error that grows along each turn, where a pointing
+    offset is constant) re-reading the pointing at the fitted effect and fitting the effect
+    again is a block coordinate descent to the joint optimum (:func:`fit_pinned` re-reads the
+    pointing first from a start away from the effect's null). A clock or a tilt is not
+    re-read so: a common shift of the units' elevations stands in for them."""
+    L = fe.layout
+    for _ in range(POINTING_PASSES):
+        fr, fr_aop = pair
+        p0 = fr_aop.theta[L.effect]
+        if np.array_equal(p0, np.asarray(fe.effect.null, float)):
+            break
+        try:
+            more = fit_pinned(fe, fr.theta, sigma=sigma, max_iter=EFFECT_MAX_ITER,
+                              geometry=True, covariance=True)
+        except InvalidParameterError:
+            break
+        if more[1].cost > fr_aop.cost * (1 + 1e-9):
+            break
+        pair = more
+        sd = np.array([more[1].sd(i) for i in range(L.effect.start, L.effect.stop)], float)
+        if np.all(np.abs(more[1].theta[L.effect] - p0) <= 0.1 * np.nan_to_num(sd, nan=0.0)):
+            break
+    return pair
 
 
 EFFECT_CONTINUE_ITER = 150
