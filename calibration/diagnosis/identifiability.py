@@ -467,11 +467,13 @@ RING_SWEEPS = 12
 RING_SWEEP_SPACING_S = 62.0
 """Time between the starts of successive sweeps [s]: a real session's recordings follow each
 other every 52-107 s (62 s where the times are estimated), so 12 sweeps span about 12 min."""
-RING_PER_SWEEP = 120
-"""Samples of one turn. A real turn holds about 410 samples (10 Hz over 41 s), and a fit
-thins a session to :data:`calibration.photodiode_diagnosis.fit.FIT_SAMPLES` (1500), about
-125 a sweep over 12 sweeps: 120 samples (3 deg of turn apart) are what the fits of a real
-session see, at a third of the simulation and held-out cost."""
+RING_PER_SWEEP = 60
+"""Samples of one turn (6 deg of turn apart: 30 a period of the polarizers' ``cos 2 chi``).
+A real turn holds about 410 samples (10 Hz over 41 s), and a fit thins a session to
+:data:`calibration.photodiode_diagnosis.fit.FIT_SAMPLES` (1500), about 125 a sweep over 12
+sweeps; half that keeps a ring diagnosis of the matrix near a minute (the fits' and
+held-out residuals' cost grows with the samples), and the z-scores measure each SE against
+the scatter of the estimates on this same design."""
 RING_TURN_S = 41.0
 """Duration of one turn [s] (a real recording: about 410 samples at 10 Hz)."""
 
