@@ -12,6 +12,7 @@ with high probability: the RMS of n standard normals has a relative spread ~ 1/s
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pandas as pd
@@ -140,6 +141,33 @@ def test_ring_session_generator_injects_what_it_is_told():
     wide = ring_session("fov", {"alpha_deg": 20.0}, seed=3)
     change = np.median(np.abs(wide.table[wide.columns].to_numpy(float) / R0 - 1.0))
     assert 0.005 < change < 0.05, change
+
+
+GKANIAS = Path(__file__).resolve().parents[2] / "shared" / "reference" / "gkanias2023"
+
+
+@pytest.mark.skipif(not GKANIAS.is_dir(), reason="needs ../shared/reference/gkanias2023")
+def test_ring_session_design_is_a_real_sessions():
+    """The simulated ring session spans what a real one does: as many sweeps as the longest
+    reference sessions (11-12) and a first-to-last sample time within the reference
+    sessions' range (``reference/gkanias2023/sessions.csv``, 11-13 min); one turn takes
+    ``turn_s`` and samples are evenly spread over it. A turn longer than the sweep spacing
+    is refused, naming the value."""
+    from calibration.diagnosis.identifiability import RING_TURN_S, ring_session
+    ref = pd.read_csv(GKANIAS / "sessions.csv")
+    ref = ref[ref.category == "tod"]
+    span_ref = (pd.to_datetime(ref.last_sample_utc)
+                - pd.to_datetime(ref.first_sample_utc)).dt.total_seconds()
+    s = ring_session(seed=3)
+    t = pd.to_datetime(s.table.time)
+    span = (t.iloc[-1] - t.iloc[0]).total_seconds()
+    assert s.table.sweep.nunique() == ref.sweeps.max()
+    assert span_ref.min() <= span <= span_ref.max(), (span, span_ref.min(), span_ref.max())
+    first = t[s.table.sweep == 0]
+    turn = (first.iloc[-1] - first.iloc[0]).total_seconds()
+    assert turn == pytest.approx(RING_TURN_S * (len(first) - 1) / len(first), rel=1e-9)
+    with pytest.raises(IdentifiabilityInputError, match="turn_s = 70.0"):
+        ring_session(turn_s=70.0)
 
 
 @pytest.mark.slow
