@@ -242,6 +242,12 @@ class YawScale(RingEffect):
     pointing offsets cannot stand in for a heading error that grows along each turn
     (:func:`.run._joint_geometry`)."""
 
+    def starts(self, ctx) -> list:
+        """Factors 0.85-1.15 in steps of 0.01 (the best-scoring one starts the fit, with the
+        pointing re-read there): the base fit's pointing takes up part of a gyro scale, and
+        from the null the fit can stop in another valley on a session of few sweeps."""
+        return [np.array([f]) for f in np.round(np.arange(0.85, 1.1501, 0.01), 2)]
+
     def yaw(self, inst, p) -> np.ndarray:
         first = np.r_[True, inst.sweep[1:] != inst.sweep[:-1]]
         y0 = inst.yaw_deg[first][np.cumsum(first) - 1]
