@@ -208,9 +208,9 @@ def _joint_geometry(fe: Forward, pair, sigma):
     # then the pointing and the effect in turn (the pointing re-read with the effect held,
     # the effect with the pointing held): on three short sweeps the joint descent can stop
     # in a valley the alternation leaves (a 4 % gyro scale: residuals from 50 to 10 times
-    # the noise); on twelve sweeps the joint fit reaches the noise and the first turn stops
-    # (a turn may first raise the AoP cost: the full model's stage moves the gains and
-    # angles the next turn's AoP fit starts from), keeping the best
+    # the noise); on twelve sweeps the joint fit reaches the noise and two turns that leave
+    # the cost as it is end them (a turn may first raise the AoP cost: the full model's
+    # stage moves the gains and angles the next turn's AoP fit starts from); the best kept
     best, last, cur = pair, None, pair
     for _ in range(ALTERNATION_PASSES):
         try:
