@@ -628,8 +628,10 @@ def _ring() -> InstrumentMatrix:
         "occlusion": {"moderate": {"center_deg": 100.0, **occl, "depolarization": 0.4},
                       "strong": {"center_deg": 250.0, **occl, "depolarization": 0.8}},
         "yaw_scale": {"moderate": {"factor": 1.02}, "strong": {"factor": 0.95}},
+        # the strong clock off the whole and half hours of the coarse search: a truth on
+        # them is where the fit starts, and its error then says nothing of its SE
         "clock_offset": {"moderate": {"clock_offset_s": 900.0},
-                         "strong": {"clock_offset_s": -3600.0}},
+                         "strong": {"clock_offset_s": -3300.0}},
         "tilt": {"moderate": {"pitch_deg": 1.0, "roll_deg": -0.5},
                  "strong": {"pitch_deg": -2.5, "roll_deg": 2.0}},
         "aureole": {"moderate": {"amplitude": 0.5, "scale_deg": 15.0},
