@@ -174,7 +174,7 @@ def test_ring_session_design_is_a_real_sessions():
 @pytest.mark.matrix
 @pytest.mark.xfail(strict=True, reason=(
     "measured on seed 31, the default candidates, twelve one-turn sweeps over 12 min: the "
-    "clock (900 s, -3600 s) and the gyro scale (1.02, 0.95) named, the strong occluded "
+    "clock (900 s, -3300 s) and the gyro scale (1.02, 0.95) named, the strong occluded "
     "sector named, clean data none, no single effect named with the truth withheld; "
     "missed: the neutral-point sky partly_explained and the cone of view none (both "
     "strengths), the moderate occluded sector partly_explained, the occlusion's z RMS 0.13 "
