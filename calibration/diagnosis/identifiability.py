@@ -489,10 +489,29 @@ def _modified_sky(base, kind: str, truth: dict):
     return _Wrapped()
 
 
-def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
-                 per_sweep: int = 60, start: str = RING_START, sweep_spacing_s: float = 60.0):
+RING_SWEEPS = 12
+"""Sweeps of a simulated ring session: a real session holds 11-12 one-turn recordings
+(``reference/gkanias2023/sessions.csv``)."""
+RING_SWEEP_SPACING_S = 62.0
+"""Time between the starts of successive sweeps [s]: a real session's recordings follow each
+other every 52-107 s (62 s where the times are estimated), so 12 sweeps span about 12 min."""
+RING_PER_SWEEP = 60
+"""Samples of one turn (6 deg of turn apart: 30 a period of the polarizers' ``cos 2 chi``).
+A real turn holds about 410 samples (10 Hz over 41 s), and a fit thins a session to
+:data:`calibration.photodiode_diagnosis.fit.FIT_SAMPLES` (1500), about 125 a sweep over 12
+sweeps; half that keeps a ring diagnosis of the matrix near a minute (the fits' and
+held-out residuals' cost grows with the samples), and the z-scores measure each SE against
+the scatter of the estimates on this same design."""
+RING_TURN_S = 41.0
+"""Duration of one turn [s] (a real recording: about 410 samples at 10 Hz)."""
+
+
+def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING_SWEEPS,
+                 per_sweep: int = RING_PER_SWEEP, start: str = RING_START,
+                 sweep_spacing_s: float = RING_SWEEP_SPACING_S, turn_s: float = RING_TURN_S):
     """A simulated relative-yaw, counter-clockwise ring session (eight units at 45 deg
-    elevation, one full turn per sweep, sweeps a minute apart) with ``effect`` injected.
+    elevation, one full turn per sweep; by default 12 sweeps 62 s apart, as a real session)
+    with ``effect`` injected.
 
     The generator is the sensor simulator (:class:`sensor.compound_eye.CompoundEyeSensor`)
     with the effect made physically: a multiple-scattering or neutral-point sky, the units'
@@ -510,14 +529,22 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     seed : int
         Noise seed.
     n_sweeps, per_sweep : int
+        Sweeps, and samples of each (evenly spread over one turn).
     start : str
         ISO time of the first sample.
     sweep_spacing_s : float
         Time between the starts of successive sweeps [s].
+    turn_s : float
+        Duration of one turn [s]; must not exceed ``sweep_spacing_s``.
 
     Returns
     -------
     PhotodiodeData
+
+    Raises
+    ------
+    IdentifiabilityInputError
+        For a ``turn_s`` that is not positive or exceeds ``sweep_spacing_s``.
     """
     import pandas as pd
 
@@ -525,12 +552,17 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = 3,
     from sensor.photodiodes_io import PhotodiodeData
     from skysim.sky import RayleighSky
     from skysim.sun import Site, sun_vector
+    if not (0.0 < turn_s <= sweep_spacing_s):
+        raise IdentifiabilityInputError(
+            f"turn_s = {turn_s!r} s: a turn must last more than 0 s and no longer than "
+            f"the sweep spacing ({sweep_spacing_s!r} s)")
     truth = truth or {}
     site = Site(*RING_SITE)
     rng = np.random.default_rng(seed)
     sensor = ring_configuration(8, 45.0, photodiode=PhotodiodeModel())
     t0 = pd.Timestamp(start)
-    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + 0.1 * k)
+    dt = turn_s / per_sweep
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=sweep_spacing_s * s + dt * k)
                               for s in range(n_sweeps) for k in range(per_sweep)])
     yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps) + 20.0
     sweep = np.repeat(np.arange(n_sweeps), per_sweep)
@@ -629,8 +661,10 @@ def _ring() -> InstrumentMatrix:
         "occlusion": {"moderate": {"center_deg": 100.0, **occl, "depolarization": 0.4},
                       "strong": {"center_deg": 250.0, **occl, "depolarization": 0.8}},
         "yaw_scale": {"moderate": {"factor": 1.02}, "strong": {"factor": 0.95}},
+        # the strong clock off the whole and half hours of the coarse search: a truth on
+        # them is where the fit starts, and its error then says nothing of its SE
         "clock_offset": {"moderate": {"clock_offset_s": 900.0},
-                         "strong": {"clock_offset_s": -3600.0}},
+                         "strong": {"clock_offset_s": -3300.0}},
         "tilt": {"moderate": {"pitch_deg": 1.0, "roll_deg": -0.5},
                  "strong": {"pitch_deg": -2.5, "roll_deg": 2.0}},
         "aureole": {"moderate": {"amplitude": 0.5, "scale_deg": 15.0},

@@ -28,7 +28,8 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   it is foliage-scattered, nearly unpolarized light: its DoP is multiplied by
   ``1 - depolarization * w(az)``, ``w`` a box over the sector with logistic edges of width
   ``edge_deg`` (a unit's own field of view blurs the edge over a fraction of its acceptance
-  angle, and a ragged tree line more). The darkening is absorbed by the profiled radiance.
+  angle, and a ragged tree line more; at most 12 deg, the blur of the widest cone of view
+  the ``fov`` candidate allows). The darkening is absorbed by the profiled radiance.
   Base at ``depolarization = 0``.
 - ``yaw_scale`` (``factor``): the recorded yaw change within a sweep is ``factor`` times the
   true change (a gyro scale-factor error): ``true = y_0 + (y_rec - y_0) / factor``. Base at 1.
@@ -229,6 +230,12 @@ class ClockOffset(RingEffect):
     prior_sd = (6 * 3600.0,)
     fd_step = (5.0,)
     time_margin_s = 15 * 3600.0
+    joint_pointing: ClassVar[bool] = True
+    """Fitted jointly with the units' pointing on the angle of polarization
+    (:func:`.run._joint_geometry`): over a session of real length (12 sweeps over 12 min)
+    the sun's track tells a clock from a common shift of the units' elevations (on a
+    simulated ring, 923 +- 16 s for a 900 s error, where the pointing held at the base fit's
+    gave -7 +- 11 s)."""
     COARSE_S: ClassVar[np.ndarray] = np.arange(-28, 29) * 1800.0
     """Whole and half hours within +-14 h: timezone and daylight-saving errors."""
 
@@ -246,6 +253,16 @@ class YawScale(RingEffect):
     upper = (1.25,)
     prior_sd = (0.1,)
     fd_step = (1e-4,)
+    joint_pointing: ClassVar[bool] = True
+    """Fitted jointly with the units' pointing on the angle of polarization: constant
+    pointing offsets cannot stand in for a heading error that grows along each turn
+    (:func:`.run._joint_geometry`)."""
+
+    def starts(self, ctx) -> list:
+        """Factors 0.85-1.15 in steps of 0.01 (the best-scoring one starts the fit, with the
+        pointing re-read there): the base fit's pointing takes up part of a gyro scale, and
+        from the null the fit can stop in another valley on a session of few sweeps."""
+        return [np.array([f]) for f in np.round(np.arange(0.85, 1.1501, 0.01), 2)]
 
     def yaw(self, inst, p) -> np.ndarray:
         first = np.r_[True, inst.sweep[1:] != inst.sweep[:-1]]
@@ -405,7 +422,13 @@ class Occlusion(RingEffect):
     units = ("deg", "deg", "1", "deg")
     null = (180.0, 90.0, 0.0, 3.0)
     lower = (-720.0, 10.0, 0.0, 1.0)
-    upper = (1080.0, 300.0, 1.0, 30.0)
+    upper = (1080.0, 300.0, 1.0, 12.0)
+    """The edge's logistic scale is at most 12 deg: a sharp occluder seen through a unit's
+    cone of view of half-angle ``alpha`` fades in over about ``2 alpha`` (10-90 % over 1.3
+    ``alpha``, a logistic scale of about ``0.3 alpha``), 12 deg at the widest cone the
+    ``fov`` candidate allows (40 deg). A DoP deficit that fades over wider angles is the
+    sky's own (neutral points, many orders of scattering), not an occluder's: its fit puts
+    the edge at this bound, which keeps the occlusion from being named for it."""
     prior_sd = (np.inf, np.inf, 1.0, np.inf)
     fd_step = (0.2, 0.2, 1e-3, 0.05)
     n_fits: ClassVar[int] = 3
@@ -975,6 +998,10 @@ class ReadLag(RingEffect):
     upper = (2.0,)
     prior_sd = (1.0,)
     fd_step = (2e-3,)
+    joint_pointing: ClassVar[bool] = True
+    """Fitted jointly with the units' pointing on the angle of polarization: a lag moves the
+    heading by the turn rate times the lag, in turns only, where constant pointing offsets
+    cannot stand in for it (:func:`.run._joint_geometry`)."""
 
     def starts(self, ctx) -> list:
         return [np.array([v]) for v in (-0.3, 0.0, 0.3)]
