@@ -121,7 +121,9 @@ def test_yaw_scale_named_and_recovered(session):
     k = v["params"]["factor"]["value"]
     assert abs(k / truth["factor"] - 1) < 0.015
     assert doc["heading_error"]["best_deg"] < doc["heading_error"]["base_deg"]
-    assert doc["thresholds"] == RING_THRESHOLDS.to_dict() and row["effect"] == "yaw_scale"
+    # the paired margin applied is Student's t for the three sweeps (2 normal SE -> 4.53)
+    assert doc["thresholds"] == RING_THRESHOLDS.for_blocks(3).to_dict()
+    assert doc["thresholds"]["paired_se"] == 4.53 and row["effect"] == "yaw_scale"
     assert row["converged"] and row["at_bound"] == []
     # the share of the excess is (G_0^2 - G_c^2) / (G_0^2 - f^2) of the reported gaps, with
     # its jackknife SE over the held-out sweeps

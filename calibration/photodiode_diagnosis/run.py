@@ -45,7 +45,8 @@ __all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "or
 RING_THRESHOLDS = Thresholds(block_consistency=0.75, block_name="sweeps")
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.decide`):
 a candidate is named when it beats every other and the base by more than 2 paired SE on the
-same held-out sweeps, converged away from its bounds, removes at least half the excess
+same held-out sweeps (applied as Student's t for the number of sweeps,
+:func:`calibration.diagnosis.core.paired_margin`: 2.25 with twelve), converged away from its bounds, removes at least half the excess
 held-out variance over the floor, and lowers the held-out gap in at least 75 % of the
 held-out sweeps. A real sky is never reproduced to the noise floor by one effect (aerosols,
 clouds, the instrument's own optics all add), so a smaller share is reported as
@@ -809,11 +810,13 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
             P = np.array([f.params for f in held.fits[e.name]])
             row["null_excluded"] = bool(row.get("significant", True) and not _at_null(e, P))
     names = ["base"] + held.available([e.name for e in cand])
+    # the paired margin as Student's t for the sweeps the paired SEs are jackknifed over
+    thresholds = RING_THRESHOLDS.for_blocks(np.unique(s.work.sweep).size)
     ranked, verdict = judge.verdict([Candidate.from_dict(r) for r in rows],
                                     {k: held.held(k) for k in names}, s.work.sweep, floor,
-                                    RING_THRESHOLDS, np.random.default_rng(seed),
+                                    thresholds, np.random.default_rng(seed),
                                     floor_note=noise.floor.note)
-    return _report(s, held, ranked, verdict, noise, n_folds, sun_el, seed)
+    return _report(s, held, ranked, verdict, noise, n_folds, sun_el, seed, thresholds)
 
 
 UNREADABLE_SAMPLES = 64
@@ -889,7 +892,7 @@ def _acts_on_yaw_only(effect) -> bool:
 
 
 def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _Noise,
-            n_folds: int, sun_el, seed: int) -> DiagnosisReport:
+            n_folds: int, sun_el, seed: int, thresholds) -> DiagnosisReport:
     """The report: where the base model's held-out gap lies, the heading error of the base
     model and of a named effect, the base fit and the model-free checks."""
     floor = noise.value
@@ -942,7 +945,7 @@ def _report(s: _Session, held: judge.HeldOut, ranked, verdict: Verdict, noise: _
         s.screen.faults)
     return DiagnosisReport("photodiodes", METRIC, "1", verdict, ranked, where, None,
                            noise.rms, noise.method, faults, data,
-                           RING_THRESHOLDS.to_dict(), seed, extra)
+                           thresholds.to_dict(), seed, extra)
 
 
 AMBIGUITY_NOTE = {
