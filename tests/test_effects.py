@@ -281,17 +281,6 @@ def test_multiple_scattering_interpolation_and_albedo_formula_against_engine(tab
 
 
 @pytest.mark.parametrize("name", OUTPUT_EFFECTS)
-def test_analytic_effect_jacobian_matches_finite_differences(ctx, name):
+def test_analytic_effect_jacobian_matches_finite_differences(ctx, name, check_effect_jacobian):
     eff = E.get_effect(name)
-    p = eff.draw(np.random.default_rng(6))
-    phi, shape = E.geometry(ctx)
-    _, Je = E.jacobians(ctx, phi, shape, BASE, eff, p)
-    assert Je.shape == (ctx.n, 3, eff.k)
-    for j in range(eff.k):
-        h = eff.fd_step[j] * 1e-2
-        up, dn = p.copy(), p.copy()
-        up[j] += h
-        dn[j] -= h
-        fd = (E.forward(ctx, BASE, eff, up) - E.forward(ctx, BASE, eff, dn)) / (2 * h)
-        # central differences with steps 1e-2 of the fit's own: relative error ~1e-7
-        np.testing.assert_allclose(Je[:, :, j], fd, rtol=1e-5, atol=1e-9)
+    check_effect_jacobian(ctx, BASE, eff, eff.draw(np.random.default_rng(6)), eff.k)

@@ -57,22 +57,13 @@ def test_relative_extinction_is_the_library_effect_up_to_a_dop_scale(ctx):
 
 
 @pytest.mark.parametrize("scale", [0.0, 0.02, 0.06])
-def test_relative_extinction_jacobian_matches_finite_differences(ctx, scale):
+def test_relative_extinction_jacobian_matches_finite_differences(ctx, scale,
+                                                                 check_effect_jacobian):
     """Central differences with steps 1e-2 of the fit's own (relative error ~1e-7), at
     equal polarizers (scale 0: every eta tied, where the smooth maximum matters) and at
     spread ones."""
     rel = RelativeExtinction()
-    p = rel.from_eps(scale * PATTERN + 1e-3)[:5]
-    phi, shape = E.geometry(ctx)
-    _, Je = E.jacobians(ctx, phi, shape, BASE, rel, p)
-    assert Je.shape == (ctx.n, 3, 5)
-    for j in range(5):
-        h = rel.fd_step[j] * 1e-2
-        up, dn = p.copy(), p.copy()
-        up[j] += h
-        dn[j] -= h
-        fd = (E.forward(ctx, BASE, rel, up) - E.forward(ctx, BASE, rel, dn)) / (2 * h)
-        np.testing.assert_allclose(Je[:, :, j], fd, rtol=1e-5, atol=1e-9)
+    check_effect_jacobian(ctx, BASE, rel, rel.from_eps(scale * PATTERN + 1e-3)[:5], 5)
 
 
 def test_relative_extinction_reports_six_differences_with_their_covariance():
