@@ -228,7 +228,7 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     from scipy.spatial.transform import Rotation
 
     from sensor.compound_eye import UnitBelowHorizonError
-    from skysim.geometry import elevation_azimuth
+    from skysim.geometry import cos_sin_deg, elevation_azimuth
 
     w = np.asarray(weights, float)
     t = np.asarray(theta_deg, float)
@@ -247,9 +247,10 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     axes, view = axes[keep], view[:, :, keep]
     unit = np.repeat(np.arange(sensor.n_units), k)[keep]
     vx, vy, vz = view[:, 0, :], view[:, 1, :], view[:, 2, :]
-    horiz = np.hypot(vx, vy)
+    horiz = np.sqrt(vx * vx + vy * vy)
     el = np.degrees(np.arctan2(vz, horiz))
-    az = np.mod(np.degrees(np.arctan2(vx, vy)), 360.0)
+    az = np.degrees(np.arctan2(vx, vy))
+    az[az < 0.0] += 360.0
     sun_el, sun_az = elevation_azimuth(np.asarray(sun_enu, float).reshape(-1, 3))
     fld = sky.field(np.minimum(el, 90.0), az, sun_el[:, None], sun_az[:, None])
     # local sky basis of each view: e_el = (-sin h sin A, -sin h cos A, cos h),
@@ -258,8 +259,7 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     up = horiz == 0.0
     safe = np.where(up, 1.0, horiz)
     sa, ca = np.where(up, 0.0, vx / safe), np.where(up, 1.0, vy / safe)
-    aop = np.radians(fld.aop_deg)
-    c, s = np.cos(aop), np.sin(aop)
+    c, s = cos_sin_deg(fld.aop_deg)
     out = []
     for col in (0, 1):     # the e-vector on the columns' polarizer x, then y axes
         a = (flat @ axes[:, :, col].T).reshape(n, 3, -1)
