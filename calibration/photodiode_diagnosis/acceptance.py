@@ -257,8 +257,12 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     # e_az = (cos A, -sin A, 0), with sin h, cos h, sin A, cos A read off the view vector
     # (A = 0 straight up, as the view's azimuth is there)
     up = horiz == 0.0
-    safe = np.where(up, 1.0, horiz)
-    sa, ca = np.where(up, 0.0, vx / safe), np.where(up, 1.0, vy / safe)
+    if up.any():
+        safe = np.where(up, 1.0, horiz)
+        sa, ca = np.where(up, 0.0, vx / safe), np.where(up, 1.0, vy / safe)
+    else:
+        inv = 1.0 / horiz
+        sa, ca = vx * inv, vy * inv
     c, s = cos_sin_deg(fld.aop_deg)
     out = []
     for col in (0, 1):     # the e-vector on the columns' polarizer x, then y axes
