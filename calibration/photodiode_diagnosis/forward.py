@@ -162,6 +162,8 @@ class Forward:
         self._attitudes = []
         """The last attitudes computed, ``((heading, pitch, roll), Rotation)``, newest last."""
         self._modulations = None
+        self._additive_last = None
+        """The last additive light of the effect, ``(obs, parameters, values)``."""
         """The last modulation terms, ``(obs, key, values)`` (:meth:`_modulation`)."""
         self.effect = effect
         if effect is not None:
@@ -368,10 +370,21 @@ class Forward:
         L, e = self.layout, self.effect
         off = theta[L.off] if self.fit_offsets else np.zeros(L.n_pd)
         if e is not None:
-            add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+            add = self._additive(theta[L.effect], obs)
             if add is not None:
                 off = off + add
         return off
+
+    def _additive(self, pe, obs: SkySample):
+        """The effect's additive light (n, P) or None, remembered for the last sky sample and
+        effect parameters (a fit's steps in the gains, offsets and polarizer angles leave
+        them unchanged)."""
+        last = self._additive_last
+        if last is not None and last[0] is obs and np.array_equal(last[1], pe):
+            return last[2]
+        add = self.effect.additive(pe, obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+        self._additive_last = (obs, np.array(pe, float), add)
+        return add
 
     def _predict_dop_free(self, theta, obs: SkySample):
         """Predictions with the polarized radiance ``I d`` of every unit and sample profiled
