@@ -244,7 +244,8 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     if not keep.any():
         raise UnitBelowHorizonError("every direction about every unit's axis looks below the "
                                     "horizon at some sample")
-    axes, view = axes[keep], view[:, :, keep]
+    if not keep.all():
+        axes, view = axes[keep], view[:, :, keep]
     unit = np.repeat(np.arange(sensor.n_units), k)[keep]
     vx, vy, vz = view[:, 0, :], view[:, 1, :], view[:, 2, :]
     horiz = np.sqrt(vx * vx + vy * vy)
