@@ -48,7 +48,8 @@ from skysim.exceptions import InvalidParameterError
 
 __all__ = ["TORCH_SCAN", "PLATEAU_COUNTS", "ACCEPTANCE_HWHM_DEG", "ACCEPTANCE_ORDER",
            "HWHM_MAX_DEG", "fit_torch_scan", "acceptance", "acceptance_quadrature",
-           "quadrature_rotations_deg", "observe_directions", "observe_acceptance"]
+           "quadrature_rotations_deg", "observe_directions", "observe_axes",
+           "observe_acceptance"]
 
 TORCH_SCAN = {
     "angle_deg": np.arange(-90.0, 91.0, 10.0),
@@ -206,7 +207,8 @@ def quadrature_rotations_deg(theta_deg, azimuth_deg) -> np.ndarray:
     return np.stack([t * np.cos(b), t * np.sin(b), np.zeros_like(t)], axis=-1)
 
 
-def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
+def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
+             drop_below: bool = True):
     """Every unit's view along every direction about its axis, those below the horizon at
     any sample dropped: the geometry and the sky's light of each kept column, with the
     e-vector's components on the column's polarizer axes.
@@ -216,6 +218,10 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     and the polarizer axes of every column in ENU at every sample are three ``(3n x 3) @
     (3 x c)`` products; the local sky basis of each view comes from its vector, the sky's
     light from one call of ``sky.field`` on all columns.
+
+    With ``drop_below`` False a column below the horizon at some sample raises
+    :class:`~sensor.compound_eye.UnitBelowHorizonError` (naming its unit and sample), as the
+    sensor's own sampling does.
 
     Returns
     -------
@@ -241,6 +247,13 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     flat = R_ns.reshape(3 * n, 3)
     view = (flat @ axes[:, :, 2].T).reshape(n, 3, -1)
     keep = np.all(view[:, 2, :] >= 0.0, axis=0)
+    if not drop_below and not keep.all():
+        below = view[:, 2, :] < 0.0
+        i, c = np.argwhere(below)[0]
+        el = np.degrees(np.arcsin(np.clip(view[i, 2, c], -1.0, 1.0)))
+        raise UnitBelowHorizonError(
+            f"unit {c // k} looks {el:.2f} deg below the horizon at sample {i} "
+            f"({int(below.sum())} unit-samples in all); limit pitch/roll or tilt the unit up")
     if not keep.any():
         raise UnitBelowHorizonError("every direction about every unit's axis looks below the "
                                     "horizon at some sample")
@@ -320,6 +333,37 @@ def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
     obs = SkySample(cols["radiance"], cols["dop"], chi, e_s, cols["elevation"],
                     cols["azimuth"])
     return obs, cols["unit"], cols["weight"], cols["theta"]
+
+
+def observe_axes(sensor, sky, att, sun_enu):
+    """What each unit sees along its own axis: the sensor's sampling
+    (:meth:`~sensor.compound_eye.CompoundEyeSensor.observe`, equal to rounding) by the
+    vectorised pass of :func:`observe_directions`, which reads each view's sky basis off its
+    vector.
+
+    Parameters
+    ----------
+    sensor, sky, att, sun_enu
+        As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
+
+    Returns
+    -------
+    SkySample
+        One column per unit.
+
+    Raises
+    ------
+    UnitBelowHorizonError
+        If a unit looks below the ENU horizon at some sample (names unit and sample).
+    """
+    from sensor.compound_eye import SkySample
+    from skysim.geometry import wrap_axial_deg
+
+    cols = _columns(sensor, sky, att, sun_enu, [0.0], [0.0], [1.0], drop_below=False)
+    chi = wrap_axial_deg(np.degrees(np.arctan2(cols["e_y"], cols["e_x"])))
+    return SkySample(cols["radiance"], cols["dop"], chi,
+                     _e_vector_sensor(cols, np.arange(sensor.n_units)), cols["elevation"],
+                     cols["azimuth"])
 
 
 def observe_acceptance(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):

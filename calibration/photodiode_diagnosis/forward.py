@@ -1,8 +1,9 @@
 """Forward model of a photodiode instrument under a sky: the base model and its parameters.
 
-Geometry (what each unit sees) comes from the project's compound-eye sensor
-(:meth:`sensor.compound_eye.CompoundEyeSensor.observe`) sampling a :class:`skysim.sky.Sky`
-along each unit's view at the body attitude of every sample; the readings from Malus's law of
+Geometry (what each unit sees) is the project's compound-eye sensor's sampling
+(:meth:`sensor.compound_eye.CompoundEyeSensor.observe`, computed to rounding by
+:func:`.acceptance.observe_axes`) of a :class:`skysim.sky.Sky` along each unit's view at the
+body attitude of every sample; the readings from Malus's law of
 the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`, its formula
 without input checks in the fit's inner loop):
 
@@ -64,6 +65,7 @@ from sensor.photodiode import malus_signal
 from skysim.sky import RayleighSky
 from skysim.sun import SunTrack
 
+from .acceptance import observe_axes
 from .instrument import Instrument
 
 __all__ = ["Layout", "SunTrack", "Forward", "RELATIVE_FLOOR"]
@@ -271,7 +273,7 @@ class Forward:
         sensor = self.pointed_sensor(theta)
         if e is not None and e.observes:
             return e.observe(sensor, sky, att, sun, pe)
-        obs = sensor.observe(sky, att, sun)
+        obs = observe_axes(sensor, sky, att, sun)
         return obs if e is None else e.modify(obs, pe, sun)
 
     ATTITUDES_KEPT = 2
