@@ -14,6 +14,7 @@ from calibration.photodiode_diagnosis.acceptance import (
     acceptance,
     acceptance_quadrature,
     fit_torch_scan,
+    observe_axes,
     observe_directions,
 )
 from calibration.photodiode_diagnosis.effects import (
@@ -183,3 +184,47 @@ def test_simulated_sessions_sample_the_acceptance_independently(ring):
         2 * np.radians(o.aop_unit_deg[:, pd_unit] - ang)))
     np.testing.assert_allclose(fit / o.radiance[:, pd_unit], R / o.radiance[:, pd_unit],
                                atol=3e-4)
+
+
+def test_directions_on_the_axis_are_what_the_sensor_sees(ring):
+    """One direction on each unit's axis is the sensor's own sampling, installation errors
+    (the units' and the head's) and a unit at the zenith included: the columns' rotations,
+    views and polarizer frames agree with :meth:`CompoundEyeSensor.observe` to rounding."""
+    from sensor.compound_eye import CompoundEyeSensor, Unit
+    _, sky, att, sun = ring
+    units = (Unit(0.0, 90.0, installation_error_deg=(0.3, -0.2, 1.0)),
+             Unit(10.0, 45.0, installation_error_deg=(-1.0, 0.5, 2.0)),
+             Unit(200.0, 30.0), Unit(300.0, 60.0, installation_error_deg=(0.0, 2.0, 0.0)))
+    sensor = CompoundEyeSensor(units, installation_error_deg=(0.5, -0.4, 3.0))
+    yaw = np.linspace(0.0, 360.0, len(att), endpoint=False)
+    for a in (att, body_attitude(yaw, 3.0, -2.0)):
+        ref = sensor.observe(sky, a, sun)
+        obs, unit, w, theta = observe_directions(sensor, sky, a, sun, [0.0], [0.0], [1.0])
+        np.testing.assert_array_equal(unit, np.arange(len(units)))
+        axes = observe_axes(sensor, sky, a, sun)
+        for f in ("radiance", "dop", "aop_unit_deg", "e_vector_sensor", "view_elevation_deg",
+                  "view_azimuth_deg"):
+            np.testing.assert_array_equal(getattr(axes, f), getattr(obs, f))
+        np.testing.assert_allclose(obs.radiance, ref.radiance, rtol=1e-12)
+        np.testing.assert_allclose(obs.dop, ref.dop, rtol=1e-12, atol=1e-14)
+        d_aop = (obs.aop_unit_deg - ref.aop_unit_deg + 90.0) % 180.0 - 90.0
+        assert np.max(np.abs(d_aop)) < 1e-9
+        dot = np.abs(np.sum(obs.e_vector_sensor * ref.e_vector_sensor, axis=-1))
+        np.testing.assert_allclose(dot, 1.0, atol=1e-12)
+        np.testing.assert_allclose(obs.view_elevation_deg, ref.view_elevation_deg, atol=1e-9)
+        d_az = (obs.view_azimuth_deg - ref.view_azimuth_deg + 180.0) % 360.0 - 180.0
+        assert np.max(np.abs(d_az)) < 1e-9
+
+
+def test_a_unit_below_the_horizon_is_named(ring):
+    """Along the axes, as in the sensor's own sampling, a unit looking below the horizon is
+    an error naming it (the quadrature's directions are dropped there instead)."""
+    from sensor.compound_eye import UnitBelowHorizonError
+    _, sky, att, sun = ring
+    low = ring_configuration(8, 5.0, photodiode=PhotodiodeModel())
+    tilted = body_attitude(np.linspace(0.0, 360.0, len(att), endpoint=False), 10.0, 0.0)
+    with pytest.raises(UnitBelowHorizonError, match="below the horizon at sample") as got:
+        observe_axes(low, sky, tilted, sun)
+    with pytest.raises(UnitBelowHorizonError) as ref:
+        low.observe(sky, tilted, sun)
+    assert str(got.value) == str(ref.value)

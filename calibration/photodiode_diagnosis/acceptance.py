@@ -48,7 +48,8 @@ from skysim.exceptions import InvalidParameterError
 
 __all__ = ["TORCH_SCAN", "PLATEAU_COUNTS", "ACCEPTANCE_HWHM_DEG", "ACCEPTANCE_ORDER",
            "HWHM_MAX_DEG", "fit_torch_scan", "acceptance", "acceptance_quadrature",
-           "quadrature_rotations_deg", "observe_directions"]
+           "quadrature_rotations_deg", "observe_directions", "observe_axes",
+           "observe_acceptance"]
 
 TORCH_SCAN = {
     "angle_deg": np.arange(-90.0, 91.0, 10.0),
@@ -206,6 +207,97 @@ def quadrature_rotations_deg(theta_deg, azimuth_deg) -> np.ndarray:
     return np.stack([t * np.cos(b), t * np.sin(b), np.zeros_like(t)], axis=-1)
 
 
+def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
+             drop_below: bool = True):
+    """Every unit's view along every direction about its axis, those below the horizon at
+    any sample dropped: the geometry and the sky's light of each kept column, with the
+    e-vector's components on the column's polarizer axes.
+
+    One rotation per direction, built once and applied after every unit's own installation
+    error (a column's unit-to-sensor matrix is the unit's times the direction's); the view
+    and the polarizer axes of every column in ENU at every sample are three ``(3n x 3) @
+    (3 x c)`` products; the local sky basis of each view comes from its vector, the sky's
+    light from one call of ``sky.field`` on all columns.
+
+    With ``drop_below`` False a column below the horizon at some sample raises
+    :class:`~sensor.compound_eye.UnitBelowHorizonError` (naming its unit and sample), as the
+    sensor's own sampling does.
+
+    Returns
+    -------
+    dict
+        ``unit``, ``weight``, ``theta`` (c,) of the kept columns; ``axes`` (c, 3, 3) their
+        unit-to-sensor matrices; ``view`` (n, 3, c) their views in ENU; ``elevation``,
+        ``azimuth`` (n, c) [deg]; ``radiance``, ``dop`` (n, c) of the sky; ``e_x``, ``e_y``
+        (n, c) the e-vector's components on each column's polarizer x and y axes.
+    """
+    from scipy.spatial.transform import Rotation
+
+    from sensor.compound_eye import UnitBelowHorizonError
+    from skysim.geometry import cos_sin_deg, elevation_azimuth
+
+    w = np.asarray(weights, float)
+    t = np.asarray(theta_deg, float)
+    k = t.size
+    turn = Rotation.from_rotvec(quadrature_rotations_deg(theta_deg, azimuth_deg),
+                                degrees=True).as_matrix()                       # (k, 3, 3)
+    axes = (sensor.unit_matrices(True)[:, None] @ turn[None]).reshape(-1, 3, 3)  # (m k, 3, 3)
+    R_ns = att.as_matrix().reshape(-1, 3, 3) @ sensor.body_installation().as_matrix()
+    n = R_ns.shape[0]
+    flat = R_ns.reshape(3 * n, 3)
+    view = (flat @ axes[:, :, 2].T).reshape(n, 3, -1)
+    keep = np.all(view[:, 2, :] >= 0.0, axis=0)
+    if not drop_below and not keep.all():
+        below = view[:, 2, :] < 0.0
+        i, c = np.argwhere(below)[0]
+        el = np.degrees(np.arcsin(np.clip(view[i, 2, c], -1.0, 1.0)))
+        raise UnitBelowHorizonError(
+            f"unit {c // k} looks {el:.2f} deg below the horizon at sample {i} "
+            f"({int(below.sum())} unit-samples in all); limit pitch/roll or tilt the unit up")
+    if not keep.any():
+        raise UnitBelowHorizonError("every direction about every unit's axis looks below the "
+                                    "horizon at some sample")
+    if not keep.all():
+        axes, view = axes[keep], view[:, :, keep]
+    unit = np.repeat(np.arange(sensor.n_units), k)[keep]
+    vx, vy, vz = view[:, 0, :], view[:, 1, :], view[:, 2, :]
+    horiz = np.sqrt(vx * vx + vy * vy)
+    el = np.degrees(np.arctan2(vz, horiz))
+    az = np.degrees(np.arctan2(vx, vy))
+    az[az < 0.0] += 360.0
+    sun_el, sun_az = elevation_azimuth(np.asarray(sun_enu, float).reshape(-1, 3))
+    fld = sky.field(np.minimum(el, 90.0), az, sun_el[:, None], sun_az[:, None])
+    # local sky basis of each view: e_el = (-sin h sin A, -sin h cos A, cos h),
+    # e_az = (cos A, -sin A, 0), with sin h, cos h, sin A, cos A read off the view vector
+    # (A = 0 straight up, as the view's azimuth is there)
+    up = horiz == 0.0
+    if up.any():
+        safe = np.where(up, 1.0, horiz)
+        sa, ca = np.where(up, 0.0, vx / safe), np.where(up, 1.0, vy / safe)
+    else:
+        inv = 1.0 / horiz
+        sa, ca = vx * inv, vy * inv
+    c, s = cos_sin_deg(fld.aop_deg)
+    out = []
+    for col in (0, 1):     # the e-vector on the columns' polarizer x, then y axes
+        a = (flat @ axes[:, :, col].T).reshape(n, 3, -1)
+        ax, ay, az_ = a[:, 0, :], a[:, 1, :], a[:, 2, :]
+        on_el = horiz * az_ - vz * (sa * ax + ca * ay)
+        on_az = ca * ax - sa * ay
+        out.append(c * on_el + s * on_az)
+    return {"unit": unit, "weight": np.tile(w, sensor.n_units)[keep],
+            "theta": np.tile(t, sensor.n_units)[keep], "axes": axes, "view": view,
+            "elevation": el, "azimuth": az, "radiance": fld.I, "dop": fld.dop,
+            "e_x": out[0], "e_y": out[1]}
+
+
+def _e_vector_sensor(cols, which) -> np.ndarray:
+    """Unit e-vectors (n, len(which), 3) in the sensor frame of the columns ``which``."""
+    ax = cols["axes"][which]
+    e = (ax[:, :, 0] * cols["e_x"][:, which, None] + ax[:, :, 1] * cols["e_y"][:, which, None])
+    return e / np.linalg.norm(e, axis=-1, keepdims=True)
+
+
 def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
     """What each unit sees along directions about its axis, those below the horizon dropped.
 
@@ -232,25 +324,86 @@ def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
     theta : ndarray (c,)
         Off-axis angle [deg] of each column.
     """
-    from dataclasses import replace
+    from sensor.compound_eye import SkySample
+    from skysim.geometry import wrap_axial_deg
 
-    from scipy.spatial.transform import Rotation
-    rot = quadrature_rotations_deg(theta_deg, azimuth_deg)
-    w = np.asarray(weights, float)
-    t = np.asarray(theta_deg, float)
-    k = rot.shape[0]
-    units = tuple(
-        replace(u, installation_error_deg=tuple(
-            (Rotation.from_rotvec(u.installation_error_deg, degrees=True)
-             * Rotation.from_rotvec(r, degrees=True)).as_rotvec(degrees=True)))
-        for u in sensor.units for r in rot)
-    wide = replace(sensor, units=units)
-    # every column's view in ENU at every sample, as the sensor computes it
-    R_ns = att.as_matrix().reshape(-1, 3, 3) @ wide.body_installation().as_matrix()
-    z = wide.view_directions_sensor(True)                                  # (c, 3)
-    up = np.einsum("nj,cj->nc", R_ns[:, 2, :], z)                          # ENU up component
-    keep = np.all(up >= 0.0, axis=0)
-    unit = np.repeat(np.arange(sensor.n_units), k)[keep]
-    kept = replace(wide, units=tuple(u for u, f in zip(units, keep) if f))
-    return (kept.observe(sky, att, sun_enu), unit, np.tile(w, sensor.n_units)[keep],
-            np.tile(t, sensor.n_units)[keep])
+    cols = _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights)
+    chi = wrap_axial_deg(np.degrees(np.arctan2(cols["e_y"], cols["e_x"])))
+    e_s = _e_vector_sensor(cols, np.arange(cols["unit"].size))
+    obs = SkySample(cols["radiance"], cols["dop"], chi, e_s, cols["elevation"],
+                    cols["azimuth"])
+    return obs, cols["unit"], cols["weight"], cols["theta"]
+
+
+def observe_axes(sensor, sky, att, sun_enu):
+    """What each unit sees along its own axis: the sensor's sampling
+    (:meth:`~sensor.compound_eye.CompoundEyeSensor.observe`, equal to rounding) by the
+    vectorised pass of :func:`observe_directions`, which reads each view's sky basis off its
+    vector.
+
+    Parameters
+    ----------
+    sensor, sky, att, sun_enu
+        As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
+
+    Returns
+    -------
+    SkySample
+        One column per unit.
+
+    Raises
+    ------
+    UnitBelowHorizonError
+        If a unit looks below the ENU horizon at some sample (names unit and sample).
+    """
+    from sensor.compound_eye import SkySample
+    from skysim.geometry import wrap_axial_deg
+
+    cols = _columns(sensor, sky, att, sun_enu, [0.0], [0.0], [1.0], drop_below=False)
+    chi = wrap_axial_deg(np.degrees(np.arctan2(cols["e_y"], cols["e_x"])))
+    return SkySample(cols["radiance"], cols["dop"], chi,
+                     _e_vector_sensor(cols, np.arange(sensor.n_units)), cols["elevation"],
+                     cols["azimuth"])
+
+
+def observe_acceptance(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
+    """What each unit's photodiodes see through an acceptance: the sky's Stokes vector
+    averaged over the directions about its axis (:func:`observe_directions`), radiance
+    included.
+
+    ``I = sum w L``, ``Q = sum w L d cos 2 chi``, ``U = sum w L d sin 2 chi`` over each
+    unit's kept directions (``chi`` in the unit's polarizer frame, carried along each
+    direction); the unit's view is the weighted mean of its directions' and its e-vector
+    in the sensor frame that of its direction nearest the axis.
+
+    Parameters
+    ----------
+    sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights
+        As for :func:`observe_directions`.
+
+    Returns
+    -------
+    SkySample
+        One column per unit.
+    """
+    from sensor.compound_eye import SkySample
+    from skysim.geometry import elevation_azimuth
+
+    cols = _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights)
+    unit, theta = cols["unit"], cols["theta"]
+    m = sensor.n_units
+    G = np.zeros((unit.size, m))
+    G[np.arange(unit.size), unit] = cols["weight"]                # (c, m): weight into unit
+    ex, ey = cols["e_x"], cols["e_y"]
+    # cos 2 chi and sin 2 chi of the e-vector (e_x, e_y), a unit vector
+    e2 = ex * ex + ey * ey
+    Lp = cols["radiance"] * cols["dop"] / e2
+    I = cols["radiance"] @ G
+    Q = (Lp * (ex * ex - ey * ey)) @ G
+    U = (Lp * (2.0 * ex * ey)) @ G
+    el, az = elevation_azimuth((cols["view"] @ G).transpose(0, 2, 1))
+    # each unit's e-vector from its direction nearest the axis (the sample's frame)
+    first = np.array([np.flatnonzero(unit == u)[np.argmin(theta[unit == u])]
+                      for u in range(m)])
+    return SkySample(I, np.hypot(Q, U) / I, 0.5 * np.degrees(np.arctan2(U, Q)),
+                     _e_vector_sensor(cols, first), el, az)

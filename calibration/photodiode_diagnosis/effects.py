@@ -98,7 +98,7 @@ from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 from ..diagnosis.errors import EffectUnavailableError
 from ..effects import UnknownEffectError
 from .acceptance import (ACCEPTANCE_HWHM_DEG, ACCEPTANCE_ORDER, HWHM_MAX_DEG,
-                         acceptance_quadrature, observe_directions)
+                         acceptance_quadrature, observe_acceptance)
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
@@ -391,23 +391,7 @@ class FieldOfView(RingEffect):
     def observe(self, sensor, sky, att, sun, p) -> SkySample:
         if p[0] <= 0.0:
             return sensor.observe(sky, att, sun)
-        theta, az, w = fov_offsets_deg(p[0])
-        obs, unit, w, theta = observe_directions(sensor, sky, att, sun, theta, az, w)
-        m = sensor.n_units
-        G = np.zeros((unit.size, m))
-        G[np.arange(unit.size), unit] = w                       # (c, m): weight into unit
-        x = np.radians(2.0 * obs.aop_unit_deg)
-        L = obs.radiance
-        I = L @ G
-        Q = (L * obs.dop * np.cos(x)) @ G
-        U = (L * obs.dop * np.sin(x)) @ G
-        v = direction_vector(obs.view_elevation_deg, obs.view_azimuth_deg)   # (n, c, 3)
-        el, az_ = elevation_azimuth(np.einsum("ncj,cm->nmj", v, G))
-        # each unit's e-vector from its direction nearest the axis (the sample's frame)
-        first = np.array([np.flatnonzero(unit == u)[np.argmin(theta[unit == u])]
-                          for u in range(m)])
-        return SkySample(I, np.hypot(Q, U) / I, 0.5 * np.degrees(np.arctan2(U, Q)),
-                         obs.e_vector_sensor[:, first], el, az_)
+        return observe_acceptance(sensor, sky, att, sun, *fov_offsets_deg(p[0]))
 
 
 def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):

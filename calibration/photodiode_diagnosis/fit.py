@@ -138,33 +138,29 @@ def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
     n, P = fwd.y.shape
     fidx = np.flatnonzero(free)
     col_of = {int(i): c for c, i in enumerate(fidx)}
+    # row and column of every usable residual: a column's support is selected among them
+    # directly (its positions in the usable residual vector are the Jacobian's rows)
+    u_row, u_col = np.divmod(usable_idx, P)
     rows, cols, vals = [], [], []
     for idx, stage, supports in _groups(fwd, free):
         t = theta.copy()
         h = step[idx]
         t[idx] += h
         r = fwd.residual(t, obs0 if stage == "output" else None)
-        d = (r - r0)
+        d = (r - r0).ravel()
         for i, hi, (kind, mask) in zip(idx, h, supports):
             if kind == "cols":
-                m = np.zeros((n, P), bool)
-                m[:, mask] = True
+                at = np.flatnonzero(mask[u_col])
             elif kind == "rows":
-                m = np.zeros((n, P), bool)
-                m[mask, :] = True
+                at = np.flatnonzero(mask[u_row])
             else:
-                m = np.ones((n, P), bool)
-            m &= fwd.usable
-            flat = np.flatnonzero(m.ravel())
-            v = d.ravel()[flat] / hi
+                at = np.arange(usable_idx.size)
+            v = d[usable_idx[at]] / hi
             nz = v != 0.0
-            rows.append(flat[nz])
+            rows.append(at[nz])
             cols.append(np.full(nz.sum(), col_of[int(i)]))
             vals.append(v[nz])
-    # map flat (n*P) row numbers to positions in the usable residual vector
-    pos = np.full(n * P, -1)
-    pos[usable_idx] = np.arange(usable_idx.size)
-    rows = pos[np.concatenate(rows)] if rows else np.zeros(0, int)
+    rows = np.concatenate(rows) if rows else np.zeros(0, int)
     return sp.csc_matrix((np.concatenate(vals) if vals else np.zeros(0),
                           (rows, np.concatenate(cols) if cols else np.zeros(0, int))),
                          shape=(usable_idx.size, fidx.size))

@@ -1,8 +1,9 @@
 """Forward model of a photodiode instrument under a sky: the base model and its parameters.
 
-Geometry (what each unit sees) comes from the project's compound-eye sensor
-(:meth:`sensor.compound_eye.CompoundEyeSensor.observe`) sampling a :class:`skysim.sky.Sky`
-along each unit's view at the body attitude of every sample; the readings from Malus's law of
+Geometry (what each unit sees) is the project's compound-eye sensor's sampling
+(:meth:`sensor.compound_eye.CompoundEyeSensor.observe`, computed to rounding by
+:func:`.acceptance.observe_axes`) of a :class:`skysim.sky.Sky` along each unit's view at the
+body attitude of every sample; the readings from Malus's law of
 the photodiode channel model (:func:`sensor.photodiode.photodiode_signal`, its formula
 without input checks in the fit's inner loop):
 
@@ -64,6 +65,7 @@ from sensor.photodiode import malus_signal
 from skysim.sky import RayleighSky
 from skysim.sun import SunTrack
 
+from .acceptance import observe_axes
 from .instrument import Instrument
 
 __all__ = ["Layout", "SunTrack", "Forward", "RELATIVE_FLOOR"]
@@ -159,7 +161,12 @@ class Forward:
         self.inst = inst
         self.polarizer_sign = float(polarizer_sign)
         self.heading_override = None
-        self._last_attitude = None
+        self._attitudes = []
+        """The last attitudes computed, ``((heading, pitch, roll), Rotation)``, newest last."""
+        self._modulations = None
+        self._additive_last = None
+        """The last additive light of the effect, ``(obs, parameters, values)``."""
+        """The last modulation terms, ``(obs, key, values)`` (:meth:`_modulation`)."""
         self.effect = effect
         if effect is not None:
             effect.bind(inst)
@@ -266,20 +273,45 @@ class Forward:
         sensor = self.pointed_sensor(theta)
         if e is not None and e.observes:
             return e.observe(sensor, sky, att, sun, pe)
-        obs = sensor.observe(sky, att, sun)
+        obs = observe_axes(sensor, sky, att, sun)
         return obs if e is None else e.modify(obs, pe, sun)
 
+    ATTITUDES_KEPT = 2
+    """Attitudes :meth:`_attitude` remembers: a fit's Jacobian samples the sky at the current
+    headings, at headings one step away and at the current ones again (the effect's
+    column)."""
+
     def _attitude(self, heading, pitch, roll):
-        """:func:`body_attitude`, remembered for the last headings and tilt (a fit's steps in
-        the pointing, polarization or effect parameters leave them unchanged)."""
+        """:func:`body_attitude`, remembered for the last :attr:`ATTITUDES_KEPT` headings and
+        tilts (a fit's steps in the pointing, polarization or effect parameters leave them
+        unchanged)."""
         key = (np.asarray(heading, float), np.asarray(pitch, float), np.asarray(roll, float))
-        last = self._last_attitude
-        if last is not None and all(a.shape == b.shape and np.array_equal(a, b)
-                                    for a, b in zip(key, last[0])):
-            return last[1]
+        for known, att in self._attitudes:
+            if all(a.shape == b.shape and np.array_equal(a, b) for a, b in zip(key, known)):
+                return att
         att = body_attitude(*key)
-        self._last_attitude = (tuple(a.copy() for a in key), att)
+        self._attitudes = (self._attitudes + [(tuple(a.copy() for a in key), att)])[
+            -self.ATTITUDES_KEPT:]
         return att
+
+    def _modulation(self, obs: SkySample, angle, s=None) -> np.ndarray:
+        """Malus's modulation ``1 + d cos 2(chi - angle)`` (n, P), ``d`` the DoP of ``obs``
+        times ``s`` (clipped to [0, 0.999]), or ``cos 2(chi - angle)`` alone without ``s``, at
+        each photodiode's unit: remembered for the last sky sample, polarizer angles and DoP
+        scale (a fit's steps in the gains and offsets leave them unchanged)."""
+        key = (np.array(angle, float), s)
+        last = self._modulations
+        if (last is not None and last[0] is obs and last[1][1] == s
+                and np.array_equal(last[1][0], key[0])):
+            return last[2]
+        u = self.inst.pd_unit
+        if s is None:
+            out = np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
+        else:
+            d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
+            out = malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle)
+        self._modulations = (obs, key, out)
+        return out
 
     def pointed_sensor(self, theta):
         """The sensor with every unit's axis at its nominal elevation and azimuth plus the
@@ -302,10 +334,8 @@ class Forward:
         L, inst = self.layout, self.inst
         u = inst.pd_unit
         s = 1.0 if self._dop_in_sky else theta[L.scale]
-        d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
         angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
-        return malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle,
-                            responsivity=np.exp(theta[L.lam]))
+        return np.exp(theta[L.lam]) * self._modulation(obs, angle, float(s))
 
     def _unit_sums(self, x) -> np.ndarray:
         """Sums of ``x`` (n, P) over the photodiodes of each profile (n, K: each unit's, or
@@ -342,10 +372,21 @@ class Forward:
         L, e = self.layout, self.effect
         off = theta[L.off] if self.fit_offsets else np.zeros(L.n_pd)
         if e is not None:
-            add = e.additive(theta[L.effect], obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+            add = self._additive(theta[L.effect], obs)
             if add is not None:
                 off = off + add
         return off
+
+    def _additive(self, pe, obs: SkySample):
+        """The effect's additive light (n, P) or None, remembered for the last sky sample and
+        effect parameters (a fit's steps in the gains, offsets and polarizer angles leave
+        them unchanged)."""
+        last = self._additive_last
+        if last is not None and last[0] is obs and np.array_equal(last[1], pe):
+            return last[2]
+        add = self.effect.additive(pe, obs, self.sun(self.inst.t_s), self.inst.pd_unit)
+        self._additive_last = (obs, np.array(pe, float), add)
+        return add
 
     def _predict_dop_free(self, theta, obs: SkySample):
         """Predictions with the polarized radiance ``I d`` of every unit and sample profiled
@@ -362,7 +403,7 @@ class Forward:
         g = np.exp(theta[L.lam])
         angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         b0 = np.broadcast_to(g, self.y.shape)
-        b1 = g * np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
+        b1 = g * self._modulation(obs, angle)
         off = self._offsets(theta, obs)
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)

@@ -9,6 +9,10 @@ session of the reference folder with its per-sample times (skipped when it is ab
 same session with every sample at its first time, and a simulated 10 Hz session of the same
 size.
 
+Goal for one evaluation of the ``fov`` candidate (its own group): the 36 directions of its
+quadrature about each of 8 units, over a 5,000-sample session, within 0.3 s (every
+candidate's fit and held-out folds evaluate it some hundred times).
+
 Goal for the ``aerosol`` candidate (its own group): the real session diagnosed with it within
 60 s, its engine tables computed in the run (none cached in the process), the Mie optics of
 its aerosol type from the on-disk cache a first run on the machine fills.
@@ -97,3 +101,24 @@ def test_photodiode_real_with_aerosol(benchmark, session):
     doc = benchmark.pedantic(diagnose_photodiodes, args=(session, ("aerosol",)),
                              setup=clear_tables_cache, rounds=1, iterations=1)
     assert doc["candidates"][0]["effect"] == "aerosol"
+
+
+@pytest.mark.benchmark(group="photodiode diagnosis 5k x 8 units, fov candidate evaluation")
+def test_fov_candidate_evaluation(benchmark):
+    from calibration.photodiode_diagnosis.acceptance import ACCEPTANCE_HWHM_DEG
+    from calibration.photodiode_diagnosis.effects import FOV_NODES, FieldOfView
+    from sensor.compound_eye import body_attitude
+    from skysim.sun import sun_vector
+    n_sweeps, per_sweep = 12, 410
+    t0 = pd.Timestamp("2022-05-12T16:00:00+02:00")
+    times = pd.DatetimeIndex([t0 + pd.Timedelta(seconds=62 * s + 0.1 * k)
+                              for s in range(n_sweeps) for k in range(per_sweep)])
+    yaw = np.tile(np.linspace(0.0, 360.0, per_sweep, endpoint=False), n_sweeps)
+    sun, _ = sun_vector(times, Site(39.258648, 8.440184, 0.0))
+    att = body_attitude(yaw, 0.0, 0.0)
+    sensor = ring_configuration(8, 45.0)
+    benchmark.extra_info.update(items=times.size, directions=FOV_NODES[0] * FOV_NODES[1],
+                                goal={"max_s": 0.3})
+    obs = benchmark(FieldOfView().observe, sensor, RayleighSky(0.5), att, sun,
+                    np.array([ACCEPTANCE_HWHM_DEG]))
+    assert obs.radiance.shape == (times.size, sensor.n_units)
