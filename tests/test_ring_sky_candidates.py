@@ -62,7 +62,8 @@ def test_multiple_scattering_sky_named_over_sweeps_90_minutes_apart(band):
     polarizer angles cannot follow
     (:func:`test_gain_imbalance_is_a_change_of_the_polarization_seen`)."""
     truth = {"tau": 0.25, "albedo": 0.1}
-    data = ring_session("multiple_scattering", truth, 31, sweep_spacing_s=5400.0)
+    data = ring_session("multiple_scattering", truth, 31, n_sweeps=3, turn_s=6.0,
+                        sweep_spacing_s=5400.0)
     if band is not None:
         data.sidecar["band"] = {"wavelength_nm": band}
         truth = {"albedo": 0.1}

@@ -1066,6 +1066,9 @@ def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
     param["value"] = total
     row["uncertainty_s"] = param["uncertainty"]
     row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
+    if "sensitivity" in row:    # the sun's shift at the refined clock, not the first fit's
+        row["sensitivity"] = clock_sensitivity(light_track(inst), float(np.mean(inst.t_s)),
+                                               inst.absolute_yaw, offset_s=total)
 
 
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
