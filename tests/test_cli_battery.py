@@ -15,7 +15,7 @@ import shutil
 from pathlib import Path
 
 import pytest
-from test_cli_errors import _fails
+from test_cli_errors import _run_cli
 
 from experiments.cli.main import main
 
@@ -190,7 +190,8 @@ def test_bad_input_is_one_line_and_loses_nothing(case, folder, capsys, monkeypat
     monkeypatch.chdir(folder)
     before = _checksums(folder)
     capsys.readouterr()
-    _fails(argv, capsys, *needles, only_line=True)
+    res = _run_cli(argv, capsys)
+    assert res.code == 2 and res.clean and res.usage_only and res.names(*needles), res.err
     assert _checksums(folder) == before
 
 

@@ -12,6 +12,7 @@ import json
 import os
 import re
 import sys
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -25,21 +26,40 @@ SUN = ["--sun-elevation", "30", "--sun-azimuth", "10"]
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def _fails(argv, capsys, *needles, only_line: bool = False) -> str:
-    """Run ``argv``; assert exit code 2, one error line with every needle, no traceback.
-    ``only_line``: nothing else on stderr but argparse's usage block before that line."""
-    assert main(argv) == 2
-    err = capsys.readouterr().err
-    assert "Traceback" not in err
-    lines = err.strip().splitlines()
-    last = lines[-1]
-    assert last.startswith("skysim"), err
-    if only_line and len(lines) > 1:
-        assert lines[0].startswith("usage: skysim ") and all(
-            line.startswith(" ") for line in lines[1:-1]), err
-    for n in needles:
-        assert n in last, f"{n!r} not in {last!r}"
-    return last
+@dataclass(frozen=True)
+class CliRun:
+    """A command's exit code and what it wrote to standard error."""
+
+    code: int
+    err: str
+
+    @property
+    def line(self) -> str:
+        """The last line of standard error: the error message."""
+        lines = self.err.strip().splitlines()
+        return lines[-1] if lines else ""
+
+    @property
+    def clean(self) -> bool:
+        """No traceback, and the last line is the program's own (``skysim ...``)."""
+        return "Traceback" not in self.err and self.line.startswith("skysim")
+
+    @property
+    def usage_only(self) -> bool:
+        """Nothing on standard error before the error line but argparse's usage block."""
+        lines = self.err.strip().splitlines()
+        return len(lines) <= 1 or (lines[0].startswith("usage: skysim ")
+                                   and all(line.startswith(" ") for line in lines[1:-1]))
+
+    def names(self, *needles: str) -> bool:
+        """Whether the error line holds every one of ``needles``."""
+        return all(n in self.line for n in needles)
+
+
+def _run_cli(argv, capsys) -> CliRun:
+    """Run the command line on ``argv``: its exit code and standard error."""
+    code = main(argv)
+    return CliRun(code, capsys.readouterr().err)
 
 
 # --------------------------------------------------------------------------- option values
@@ -70,24 +90,31 @@ def _fails(argv, capsys, *needles, only_line: bool = False) -> str:
 ])
 def test_option_values_are_checked_when_parsed(argv, needles, capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    _fails(argv, capsys, *needles)
+    res = _run_cli(argv, capsys)
+    assert res.code == 2 and res.clean and res.names(*needles), res.err
     assert list(tmp_path.iterdir()) == []
 
 
 def test_values_in_range_but_inconsistent(capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    _fails(["sample", "--out", "x.csv", "--sweeps", "2", "--duration", "600",
-            "--sweep-interval", "60"], capsys, "--sweep-interval 60", "--duration 600")
-    _fails(["sample", "--out", "x.csv", "--start", "2261-12-31T00:00+00:00", "--sweeps", "3",
-            "--sweep-interval", "1e9"], capsys, "1678-2261")
-    _fails(["sky", "--sun-elevation", "30"], capsys, "--sun-azimuth")
+    res = _run_cli(["sample", "--out", "x.csv", "--sweeps", "2", "--duration", "600",
+                    "--sweep-interval", "60"], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("--sweep-interval 60", "--duration 600")), res.err
+    res = _run_cli(["sample", "--out", "x.csv", "--start", "2261-12-31T00:00+00:00",
+                    "--sweeps", "3", "--sweep-interval", "1e9"], capsys)
+    assert res.code == 2 and res.clean and res.names("1678-2261"), res.err
+    res = _run_cli(["sky", "--sun-elevation", "30"], capsys)
+    assert res.code == 2 and res.clean and res.names("--sun-azimuth"), res.err
     assert list(tmp_path.iterdir()) == []
 
 
 def test_another_models_option_is_an_error(capsys):
-    _fails(["sky", *SUN, "--tau", "0.3"], capsys, "--tau", "--model multiple",
-           "--model rayleigh")
-    _fails(["sky", *SUN, "--model", "berry", "--albedo", "0.2"], capsys, "--albedo")
+    res = _run_cli(["sky", *SUN, "--tau", "0.3"], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("--tau", "--model multiple", "--model rayleigh")), res.err
+    res = _run_cli(["sky", *SUN, "--model", "berry", "--albedo", "0.2"], capsys)
+    assert res.code == 2 and res.clean and res.names("--albedo"), res.err
     from skysim.exceptions import InvalidParameterError
     from skysim.sky import make_sky
     with pytest.raises(InvalidParameterError, match=r"has no parameter\(s\) \['tau'\]"):
@@ -158,19 +185,22 @@ def test_unwritable_outputs_fail_before_any_work(argv, kind, inputs, tmp_path, c
         needle = str(target)
     before = sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*"))
     capsys.readouterr()
-    _fails(args, capsys, needle)
+    res = _run_cli(args, capsys)
+    assert res.code == 2 and res.clean and res.names(needle), res.err
     assert sorted(p.relative_to(tmp_path) for p in tmp_path.rglob("*")) == before
 
 
 @pytest.mark.skipif(not Path("/proc/self").is_dir(), reason="needs Linux /proc (not writable)")
 def test_a_folder_that_refuses_files(capsys, tmp_path, monkeypatch):
     """/proc accepts no new files even for root (os.access would say it does)."""
-    _fails(["sky", *SUN, "--out", "/proc/skysim-test/t.csv"], capsys, "cannot write")
+    res = _run_cli(["sky", *SUN, "--out", "/proc/skysim-test/t.csv"], capsys)
+    assert res.code == 2 and res.clean and res.names("cannot write"), res.err
     if os.geteuid() != 0:
         ro = tmp_path / "ro"
         ro.mkdir()
         ro.chmod(0o500)
-        _fails(["sample", "--out", str(ro / "s.csv")], capsys, "cannot write")
+        res = _run_cli(["sample", "--out", str(ro / "s.csv")], capsys)
+        assert res.code == 2 and res.clean and res.names("cannot write"), res.err
 
 
 def test_written_files_have_ordinary_permissions(tmp_path):
@@ -195,12 +225,15 @@ def test_written_files_have_ordinary_permissions(tmp_path):
 def test_directions_file_errors_name_file_and_row(content, needle, tmp_path, capsys):
     f = tmp_path / "d.csv"
     f.write_text(content)
-    _fails(["sky", *SUN, "--directions", str(f)], capsys, needle, "d.csv")
+    res = _run_cli(["sky", *SUN, "--directions", str(f)], capsys)
+    assert res.code == 2 and res.clean and res.names(needle, "d.csv"), res.err
 
 
 def test_directions_folder_and_missing_file(tmp_path, capsys):
-    _fails(["sky", *SUN, "--directions", str(tmp_path)], capsys, "is a folder")
-    _fails(["sky", *SUN, "--directions", str(tmp_path / "none.csv")], capsys, "no file")
+    res = _run_cli(["sky", *SUN, "--directions", str(tmp_path)], capsys)
+    assert res.code == 2 and res.clean and res.names("is a folder"), res.err
+    res = _run_cli(["sky", *SUN, "--directions", str(tmp_path / "none.csv")], capsys)
+    assert res.code == 2 and res.clean and res.names("no file"), res.err
 
 
 @pytest.mark.parametrize("content,needle", [
@@ -215,7 +248,8 @@ def test_directions_folder_and_missing_file(tmp_path, capsys):
 def test_errors_json_is_checked(content, needle, tmp_path, capsys):
     f = tmp_path / "e.json"
     f.write_text(content)
-    _fails(["sample", "--out", str(tmp_path / "s.csv"), "--errors", str(f)], capsys, needle)
+    res = _run_cli(["sample", "--out", str(tmp_path / "s.csv"), "--errors", str(f)], capsys)
+    assert res.code == 2 and res.clean and res.names(needle), res.err
     assert not (tmp_path / "s.csv").exists()
 
 
@@ -266,7 +300,8 @@ def test_bad_sidecars_are_named(kind, table, capsys):
     needle = {"list": "must be a JSON object", "folder": "is a folder",
               "not_json": "not valid JSON", "no_site": "latitude_deg",
               "daq_bits": "sensor.daq: DAQ bits must be a whole number"}[kind]
-    _fails(["calibrate", str(table)], capsys, needle)
+    res = _run_cli(["calibrate", str(table)], capsys)
+    assert res.code == 2 and res.clean and res.names(needle), res.err
 
 
 @pytest.mark.parametrize("time,needle", [
@@ -278,15 +313,17 @@ def test_bad_times_in_a_table_name_row_and_value(time, needle, table, capsys):
     t = pd.read_csv(table)
     t.loc[5, "time"] = time
     t.to_csv(table, index=False)
-    line = _fails(["calibrate", str(table)], capsys, needle, repr(time))
-    assert "You might want" not in line   # no advice relayed from pandas
+    res = _run_cli(["calibrate", str(table)], capsys)
+    assert res.code == 2 and res.clean and res.names(needle, repr(time)), res.err
+    assert "You might want" not in res.line   # no advice relayed from pandas
 
 
 def test_dead_channel_is_named(table, capsys):
     t = pd.read_csv(table)
     t["U2_V"] = 0.25
     t.to_csv(table, index=False)
-    _fails(["calibrate", str(table)], capsys, "U2_V (constant 0.25 V)")
+    res = _run_cli(["calibrate", str(table)], capsys)
+    assert res.code == 2 and res.clean and res.names("U2_V (constant 0.25 V)"), res.err
 
 
 # --------------------------------------------------------------------------- configurations
@@ -320,7 +357,8 @@ def test_failed_generate_leaves_earlier_output_and_no_data_without_manifest(
     bad.write_text("seed = 2\n" + entry.replace("[[", GOOD_MAP + "[[", 1)
                    if entry.startswith("[[") else "seed = 2\n" + entry + GOOD_MAP)
     capsys.readouterr()
-    _fails(["generate", str(bad), "--out", str(out)], capsys, needle)
+    res = _run_cli(["generate", str(bad), "--out", str(out)], capsys)
+    assert res.code == 2 and res.clean and res.names(needle), res.err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == before
 
 
@@ -329,8 +367,10 @@ def test_compare_tolerances(tmp_path, capsys):
     cfg.write_text("seed = 1\n" + GOOD_MAP)
     assert main(["generate", str(cfg), "--out", str(tmp_path / "t")]) == 0
     t = str(tmp_path / "t")
-    _fails(["compare", t, t, "--tol", "aop_deg=-1"], capsys, "'aop_deg=-1'", ">= 0")
-    _fails(["compare", t, t, "--tol", "aop_deg=tiny"], capsys, "'aop_deg=tiny'")
+    res = _run_cli(["compare", t, t, "--tol", "aop_deg=-1"], capsys)
+    assert res.code == 2 and res.clean and res.names("'aop_deg=-1'", ">= 0"), res.err
+    res = _run_cli(["compare", t, t, "--tol", "aop_deg=tiny"], capsys)
+    assert res.code == 2 and res.clean and res.names("'aop_deg=tiny'"), res.err
     assert main(["compare", t, t, "--tol", "aop_deg=0"]) == 0   # identical data, zero tolerance
 
 
@@ -350,8 +390,8 @@ def test_failed_sweep_leaves_no_state_and_the_corrected_rerun_runs(tmp_path, cap
             'noise_V = {uniform = [0.0001, 0.002]}\n')
     cfg.write_text(base + '[sky]\nmodel = "rayleigh"\ndmax = 1.5\n')
     out = tmp_path / "out"
-    _fails(["sweep", str(cfg), "--out", str(out), "--no-figures", "--no-progress"], capsys,
-           "[sky]", "1.5")
+    res = _run_cli(["sweep", str(cfg), "--out", str(out), "--no-figures", "--no-progress"], capsys)
+    assert res.code == 2 and res.clean and res.names("[sky]", "1.5"), res.err
     assert not out.exists()
     # a folder left by an older version in the same state (sweep.json, empty chunks/)
     (out / "chunks").mkdir(parents=True)
@@ -365,28 +405,34 @@ def test_failed_sweep_leaves_no_state_and_the_corrected_rerun_runs(tmp_path, cap
 
 def test_memory_is_estimated_before_allocating(capsys, tmp_path, monkeypatch):
     monkeypatch.chdir(tmp_path)
-    _fails(["sky", *SUN, "--grid-step", "0.01"], capsys, "324036000 sky directions",
-           "--grid-step")
-    _fails(["reproduce", "yang2014", "--trials", "1e9"], capsys, "1000000000 trials",
-           "--trials")
+    res = _run_cli(["sky", *SUN, "--grid-step", "0.01"], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("324036000 sky directions", "--grid-step")), res.err
+    res = _run_cli(["reproduce", "yang2014", "--trials", "1e9"], capsys)
+    assert res.code == 2 and res.clean and res.names("1000000000 trials", "--trials"), res.err
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1")
-    _fails(["sample", "--out", "s.csv", "--n", "10000"], capsys, "10000 samples",
-           "SKYSIM_MEMORY_LIMIT_MB")
+    res = _run_cli(["sample", "--out", "s.csv", "--n", "10000"], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("10000 samples", "SKYSIM_MEMORY_LIMIT_MB")), res.err
     big = tmp_path / "big.toml"
     big.write_text('seed = 1\n[[sky_map]]\nname = "a"\nsun_elevation_deg = 30.0\n'
                    'sun_azimuth_deg = 0.0\ngrid_step_deg = 0.001\n')
-    _fails(["generate", str(big), "--out", "g"], capsys, "'a': 32400360000 sky directions")
+    res = _run_cli(["generate", str(big), "--out", "g"], capsys)
+    assert res.code == 2 and res.clean and res.names("'a': 32400360000 sky directions"), res.err
     big.unlink()
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "lots")
-    _fails(["sample", "--out", "s.csv"], capsys, "'lots'")
+    res = _run_cli(["sample", "--out", "s.csv"], capsys)
+    assert res.code == 2 and res.clean and res.names("'lots'"), res.err
     assert list(tmp_path.iterdir()) == []
 
 
 @pytest.mark.parametrize("target", ["yang2014", "dark-current", "compound-eye", "jin2020"])
 def test_reproductions_refuse_trials_that_do_not_fit(target, tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
-    _fails(["reproduce", target, "--trials", "100000", "--out", str(tmp_path / "o")], capsys,
-           f"100000 trials of {target}", "--trials")
+    res = _run_cli(["reproduce", target, "--trials", "100000", "--out", str(tmp_path / "o")],
+                   capsys)
+    assert (res.code == 2 and res.clean
+            and res.names(f"100000 trials of {target}", "--trials")), res.err
     assert not (tmp_path / "o").exists()
 
 
@@ -398,7 +444,8 @@ def test_huge_sweep_is_refused_at_once_and_planned_lazily(tmp_path, capsys):
     cfg = tmp_path / "w.toml"
     cfg.write_text('[sweep]\nname = "w"\ntrials = 1000000000000\n[parameters]\n'
                    'noise_V = {uniform = [0.0001, 0.002]}\n')
-    _fails(["sweep", str(cfg), "--out", str(tmp_path / "o")], capsys, "1000000000000 trials")
+    res = _run_cli(["sweep", str(cfg), "--out", str(tmp_path / "o")], capsys)
+    assert res.code == 2 and res.clean and res.names("1000000000000 trials"), res.err
     assert not (tmp_path / "o").exists()
     c = replace(load_config(cfg), chunk_trials=64)
     plan = plan_chunks(c, tmp_path, "d", c.trials)          # constant time and memory
@@ -411,8 +458,9 @@ def test_sweep_chunks_must_fit_beside_each_other(tmp_path, capsys, monkeypatch):
     cfg.write_text('[sweep]\nname = "w"\ntrials = 100000\n[execution]\nmemory_mb = 1e9\n'
                    '[parameters]\nnoise_V = {uniform = [0.0001, 0.002]}\n')
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1000")
-    _fails(["sweep", str(cfg), "--out", str(tmp_path / "o"), "--workers", "2"], capsys,
-           "2 chunk(s) of 100000 trials x 182 stops", "memory_mb")
+    res = _run_cli(["sweep", str(cfg), "--out", str(tmp_path / "o"), "--workers", "2"], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("2 chunk(s) of 100000 trials x 182 stops", "memory_mb")), res.err
     assert not (tmp_path / "o").exists()
 
 
@@ -469,10 +517,11 @@ def test_closed_pipe_ends_quietly(monkeypatch, capsys):
 
 def test_missing_extra_gives_the_install_command_for_this_checkout(monkeypatch, capsys):
     monkeypatch.setitem(sys.modules, "sasktran2", None)   # `import sasktran2` fails
-    line = _fails(["sky", "--model", "multiple", "--tau", "0.1", *SUN], capsys,
-                  "'sasktran2'", "extra 'rt'", "pip install -e")
+    res = _run_cli(["sky", "--model", "multiple", "--tau", "0.1", *SUN], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("'sasktran2'", "extra 'rt'", "pip install -e")), res.err
     root = Path(__file__).resolve().parents[1]
-    assert f"'{root}[rt]'" in line and "install 'skysim" not in line
+    assert f"'{root}[rt]'" in res.line and "install 'skysim" not in res.line
 
 
 # --------------------------------------------------------------------------- sample
@@ -556,7 +605,8 @@ SERIES = ["sky-series", "--lat", "34.1", "--lon", "108.5", "--start",
 ])
 def test_sky_series_options(extra, needles, capsys, tmp_path):
     out = tmp_path / "s.nc"
-    _fails([*SERIES, *extra, "--out", str(out)], capsys, *needles)
+    res = _run_cli([*SERIES, *extra, "--out", str(out)], capsys)
+    assert res.code == 2 and res.clean and res.names(*needles), res.err
     assert list(tmp_path.iterdir()) == []
 
 
@@ -564,14 +614,17 @@ def test_sky_series_refuses_what_does_not_fit_before_any_work(capsys, tmp_path, 
     out = tmp_path / "s.parquet"
     # 1e8 steps of 1 s fit the years; their times alone would need ~20 GB
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "1000")
-    _fails([*SERIES, "--periods", "1e8", "--freq", "1s", "--out", str(out)], capsys,
-           "100000000 time steps x 48 directions", "--periods")
+    res = _run_cli([*SERIES, "--periods", "1e8", "--freq", "1s", "--out", str(out)], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("100000000 time steps x 48 directions", "--periods")), res.err
     monkeypatch.delenv("SKYSIM_MEMORY_LIMIT_MB")
     import shutil
     usage = shutil.disk_usage(tmp_path)
     monkeypatch.setattr(shutil, "disk_usage", lambda p: usage._replace(free=10_000))
-    _fails([*SERIES, "--periods", "100", "--out", str(out)], capsys, str(out),
-           "100 time steps x 48 directions", "only 10 kB is free")
+    res = _run_cli([*SERIES, "--periods", "100", "--out", str(out)], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names(str(out), "100 time steps x 48 directions",
+                          "only 10 kB is free")), res.err
     # the library's writer checks too
     from experiments.workflows.sky_series import write_sky_series
     from skysim.io import WriteError
@@ -602,8 +655,9 @@ def test_sky_series_failed_write_names_the_file_and_leaves_nothing(suffix, capsy
         raise OSError(errno.ENOSPC, "No space left on device")
     monkeypatch.setattr(ss, writer, full_disk)
     capsys.readouterr()
-    _fails([*SERIES, "--periods", "5", "--freq", "10min", "--out", str(out)], capsys,
-           f"writing {out} failed (No space left on device)")
+    res = _run_cli([*SERIES, "--periods", "5", "--freq", "10min", "--out", str(out)], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names(f"writing {out} failed (No space left on device)")), res.err
     assert out.read_bytes() == before
     assert sorted(p.name for p in tmp_path.iterdir()) == sorted(
         [out.name] + ([out.name + ".json"] if suffix == ".parquet" else []))
@@ -640,8 +694,9 @@ def test_an_unquoted_toml_datetime_is_the_same_time_as_a_quoted_one(tmp_path, ca
     for f in ("a.csv", "b.csv", "manifest.json"):
         assert (tmp_path / "bare" / f).read_bytes() == (tmp_path / "quoted" / f).read_bytes()
     (tmp_path / "naive.toml").write_text(text.format(t="2013-05-22T17:10:00"))
-    _fails(["generate", str(tmp_path / "naive.toml"), "--out", str(tmp_path / "n")], capsys,
-           "'2013-05-22T17:10:00'", "timezone-naive")
+    res = _run_cli(["generate", str(tmp_path / "naive.toml"), "--out", str(tmp_path / "n")], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("'2013-05-22T17:10:00'", "timezone-naive")), res.err
     assert not (tmp_path / "n").exists()
 
 
@@ -680,8 +735,10 @@ def test_an_output_never_replaces_an_input(case, inputs, tmp_path, capsys):
         cfg_in_out.write_text(cfg.read_text())
     before = victim.read_bytes()
     capsys.readouterr()
-    line = _fails(argv, capsys, "would replace the input", str(victim))
-    assert line.count(str(victim)) == 2
+    res = _run_cli(argv, capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("would replace the input", str(victim))), res.err
+    assert res.line.count(str(victim)) == 2
     assert victim.read_bytes() == before
 
 
@@ -707,17 +764,18 @@ def test_reproduction_folder_is_replaced_whole(tmp_path, capsys, monkeypatch):
     assert json.loads(full["run.json"]) == {"target": "compound-eye", "quick": False,
                                             "trials": 3, "seed": 20140601}
     # a quick run would replace the full one: refused, then allowed with --force
-    _fails(["reproduce", "compound-eye", "--quick", "--out", str(out)], capsys,
-           f"--out {out} holds a full run of compound-eye", "--force")
+    res = _run_cli(["reproduce", "compound-eye", "--quick", "--out", str(out)], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names(f"--out {out} holds a full run of compound-eye", "--force")), res.err
     assert {p.name: p.read_bytes() for p in out.iterdir()} == full
     # another target, or a folder of other files: refused
-    _fails(["reproduce", "yang2014", "--quick", "--out", str(out)], capsys,
-           "not a run of yang2014")
+    res = _run_cli(["reproduce", "yang2014", "--quick", "--out", str(out)], capsys)
+    assert res.code == 2 and res.clean and res.names("not a run of yang2014"), res.err
     other = tmp_path / "notes"
     other.mkdir()
     (other / "mine.txt").write_text("keep")
-    _fails(["reproduce", "yang2014", "--quick", "--out", str(other)], capsys,
-           f"--out {other} already holds files")
+    res = _run_cli(["reproduce", "yang2014", "--quick", "--out", str(other)], capsys)
+    assert res.code == 2 and res.clean and res.names(f"--out {other} already holds files"), res.err
     assert (other / "mine.txt").read_text() == "keep"
     # an interrupted run leaves the earlier run as it was, with nothing of its own
     _interrupting_target(monkeypatch, "compound_eye")
@@ -736,17 +794,21 @@ def test_reproduction_folder_is_replaced_whole(tmp_path, capsys, monkeypatch):
 
 
 def test_reproduction_options_that_do_not_apply(tmp_path, capsys):
-    _fails(["reproduce", "yang2014", "--data", str(tmp_path), "--out", str(tmp_path / "o")],
-           capsys, "--data applies to moonlit-sky, real-sky-compass, not yang2014")
-    _fails(["gap-benchmark", "--real", str(tmp_path / "none"), "--out", str(tmp_path / "o")],
-           capsys, "give --real DIR")
+    res = _run_cli(["reproduce", "yang2014", "--data", str(tmp_path),
+                    "--out", str(tmp_path / "o")], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("--data applies to moonlit-sky, real-sky-compass, not yang2014")), res.err
+    res = _run_cli(["gap-benchmark", "--real", str(tmp_path / "none"),
+                    "--out", str(tmp_path / "o")], capsys)
+    assert res.code == 2 and res.clean and res.names("give --real DIR"), res.err
     assert not (tmp_path / "o").exists()
 
 
 def test_gap_benchmark_size_is_refused_before_any_work(tmp_path, capsys, monkeypatch):
     monkeypatch.setenv("SKYSIM_MEMORY_LIMIT_MB", "100")
-    _fails(["gap-benchmark", "--n", "1e6", "--out", str(tmp_path / "o")], capsys,
-           "1000000 data sets of gap-benchmark", "--n")
+    res = _run_cli(["gap-benchmark", "--n", "1e6", "--out", str(tmp_path / "o")], capsys)
+    assert (res.code == 2 and res.clean
+            and res.names("1000000 data sets of gap-benchmark", "--n")), res.err
     assert not (tmp_path / "o").exists()
 
 
