@@ -103,17 +103,17 @@ def test_sky_model_spread_is_read_from_the_recorded_times(monkeypatch):
     the candidate reads it: from the recorded times (start 0), with the base's pointing; a
     start at the fitted offset would first re-read the pointing there, and that pointing has
     already taken up the offset. Hours away, the start is the fitted offset."""
-    from calibration.photodiode_diagnosis import run
+    from calibration.photodiode_diagnosis import clock
 
     starts = []
-    real = run._aop_clock_fit
+    real = clock._aop_clock_fit
 
     def spy(fe, theta_base, layout, start_s, sigma):
         starts.append(start_s)
         return real(fe, theta_base, layout, start_s, sigma)
 
-    monkeypatch.setattr(run, "_aop_clock_fit", spy)
+    monkeypatch.setattr(clock, "_aop_clock_fit", spy)
     s = ring_session(n_sweeps=3, per_sweep=60)
     doc = diagnose(s, ("neutral_points", "clock_offset"), folds=3)
-    assert abs(_clock(doc).params["clock_offset_s"]["value"]) < run.CLOCK_NEAR_S
+    assert abs(_clock(doc).params["clock_offset_s"]["value"]) < clock.CLOCK_NEAR_S
     assert starts == [0.0, 0.0]          # single scattering and the neutral-point sky

@@ -63,7 +63,7 @@ def test_verdict_with_one_held_out_block_has_no_bootstrap_se():
     assert v.gap_before_se is None and v.gap_after_se is None and v.shrink_se is None
 
 
-def test_refined_clock_carries_the_uncertainty_of_every_pass(monkeypatch):
+def test_refined_clock_carries_the_uncertainty_of_every_pass():
     """Three passes at the corrected times, as on the two-photodiode compass (steps with
     uncertainties 5,098 s, 3,411 s and 340 s): the refined offset is the first fit plus
     every step, and its uncertainty all three added in quadrature,
@@ -72,21 +72,21 @@ def test_refined_clock_carries_the_uncertainty_of_every_pass(monkeypatch):
     corrected."""
     from dataclasses import replace
 
-    from calibration.photodiode_diagnosis import instrument_from_photodiodes, run
+    from calibration.photodiode_diagnosis import clock, instrument_from_photodiodes
+    from calibration.photodiode_diagnosis.run import light_track
     inst = instrument_from_photodiodes(ring_session(n_sweeps=2, per_sweep=30), "ring")
     steps = [(3000.0, 5098.0), (400.0, 3411.0), (100.0, 340.0)]
     shifts = []
 
-    def one_pass(shifted, *, n_folds, max_iter):
+    def one_pass(shifted):
         shifts.append(float(shifted.t_s[0] - inst.t_s[0]))
         step, u = steps[len(shifts) - 1]
         return {"effect": "clock_offset", "params": {"clock_offset_s": {"value": step}},
                 "uncertainty_s": u, "by_sky": {"single_scattering": step}}
 
-    monkeypatch.setattr(run, "_clock_pass", one_pass)
     row = {"params": {"clock_offset_s": {"value": 5000.0, "uncertainty": 90.0}},
            "uncertainty_s": 90.0, "sky_model_spread_s": 700.0, "significant": True}
-    run._refine_clock(replace(inst), row, n_folds=2, seed=0, max_iter=5)
+    clock.refine_clock_offset(replace(inst), row, one_pass, light_track(inst))
     assert shifts == [5000.0, 8000.0, 8400.0]
     param = row["params"]["clock_offset_s"]
     assert param["value"] == 8500.0
