@@ -68,19 +68,17 @@ def test_session_index_marks_estimated_times(tmp_path):
     assert set(times_uncertainty(files).values()) == {0.0}
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the neutral-point sky, now fitted with the units' pointing free on the angle of "
-    "polarization, takes up part of a clock two hours off: the first clock fit under it "
-    "lands at 5,970 s, 1,214 s from the refined 7,184 s (truth 7,200 s), so the passes do "
-    "not stay within 15 min of the first fit and this branch of the rule is not reached; "
-    "reading the clock under single scattering as well and keeping the better fit would "
-    "end the coupling"))
 def test_refined_clock_keeps_the_sky_model_spread():
     """A clock hours off is refined by passes that fit it alone, under single scattering;
     when the passes stay within 15 min of the first fit, that fit read the clock under every
     sky candidate at about the right times, so the spread over those skies stays in the
     refined uncertainty: the root sum of squares of the last pass's uncertainty and the
-    first fit's ``sky_model_spread_s``, to round-off."""
+    first fit's ``sky_model_spread_s``, to round-off.
+
+    The first fit reads this far clock under single scattering in every stage
+    (:func:`calibration.photodiode_diagnosis.clock.far_clock`); read under the neutral-point
+    sky fitted at the recorded times, it would stop near 5,970 s, 1,214 s from the refined
+    value, and the passes would not stay within 15 min of it."""
     import pandas as pd
 
     from sensor.photodiodes_io import PhotodiodeData

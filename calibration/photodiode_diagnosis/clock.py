@@ -26,7 +26,7 @@ from .forward import Forward, SunTrack
 from .instrument import Instrument
 
 __all__ = ["CLOCK_NEAR_S", "CLOCK_PASSES", "CLOCK_REFINE_S", "clock_mirror", "clock_report",
-           "clock_sensitivity", "refine_clock_offset", "solar_noon_s"]
+           "clock_sensitivity", "far_clock", "refine_clock_offset", "solar_noon_s"]
 
 
 CLOCK_NEAR_S = 1800.0
@@ -42,6 +42,27 @@ CLOCK_REFINE_S = 900.0
 CLOCK_PASSES = 3
 """Most refinement passes of a clock offset; they stop once a pass moves it by less than a
 third of :data:`CLOCK_REFINE_S`."""
+
+
+def far_clock(effect, p) -> bool:
+    """True for a clock offset ``p`` (the clock candidate's parameters) farther than
+    :data:`CLOCK_REFINE_S` from the recorded times: every fit of it (from a start, after a
+    start near the recorded times walked there, and its continuation) reads the angle of
+    polarization under single scattering, not under the fold's best sky candidate.
+
+    The sky candidates are fitted about the recorded sun, so under a clock hours off their
+    skies (a neutral-point separation, an optical thickness) take up part of the clock's
+    misfit, and a clock read under them is held back towards the recorded times. On a
+    simulated three-sweep ring whose clock is 2 h off (7,200 s), the start at the recorded
+    times, read under each fold's neutral-point sky, walked to 5,940-6,006 s in the joint fit
+    with the pointing (angle-of-polarization cost 96-165) and won every fold; read again under
+    single scattering from there it reached 7,197-7,199 s at a lower cost (65-68). On a real
+    morning session recorded 2 h early, a fit under the best such sky stopped at
+    +58 +- 43 min. Whether a sky candidate explains the session is judged at the corrected
+    times (:func:`refine_clock_offset`, :func:`clock_report`).
+    """
+    return effect.name == "clock_offset" and abs(float(np.asarray(p, float)[0])) > \
+        CLOCK_REFINE_S
 
 
 def _sun_el_az(sun: SunTrack, t_s: float):

@@ -32,7 +32,7 @@ from ..diagnosis.errors import InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
 from .checks import GLARE_NEAR_DEG, motion_faults
 from .clock import (CLOCK_REFINE_S, _clock_starts, clock_mirror, clock_report,
-                    clock_sensitivity, refine_clock_offset, solar_noon_s)
+                    clock_sensitivity, far_clock, refine_clock_offset, solar_noon_s)
 from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
                          search_clock)
 from .effect_fit import (EFFECT_JOINT_ITER, EFFECT_MAX_ITER, _extend, _has_sky, _joint_aop,
@@ -94,28 +94,20 @@ def _fit_effect(fe: Forward, starts, sigma):
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
     fits, failed = [], None
-    aop_sky = fe.aop_sky
+    L = fe.layout
     for s in starts:
-        # a clock start far from the recorded time is fitted on the single-scattering AoP:
-        # the sky candidates were fitted about the recorded sun, so under a clock hours off
-        # their skies (a neutral-point separation, an optical thickness) are fitted to the
-        # wrong sky and their AoP misleads the clock (on a real morning session recorded 2 h
-        # early, a fit under the best such sky stopped at +58 +- 43 min)
-        far = fe.effect.name == "clock_offset" and abs(float(s[fe.layout.effect][0])) > \
-            CLOCK_REFINE_S
-        fe.aop_sky = None if far else aop_sky
         try:
-            pair = fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
-                              geometry=geometric, covariance=geometric)
-            if getattr(fe.effect, "joint_pointing", False):
-                pair = _joint_geometry(fe, pair, sigma)
+            pair = _fit_start(fe, s, sigma)
+            if fe.aop_sky is not None and not far_clock(fe.effect, s[L.effect]) and \
+                    far_clock(fe.effect, pair[0].theta[L.effect]):
+                # a clock that walked far under a sky candidate's angle of polarization is
+                # read again under single scattering from where it stopped
+                pair = _fit_start(fe, pair[0].theta, sigma)
             fits.append(pair)
         except InvalidParameterError as exc:
             # a start outside the model's valid range (the recorded clock putting the sun
             # below the twilight limit, while a start hours away holds): the others decide
             failed = exc
-        finally:
-            fe.aop_sky = aop_sky
     if not fits:
         raise failed
 
@@ -126,11 +118,29 @@ def _fit_effect(fe: Forward, starts, sigma):
     if fe.effect.name != "clock_offset":
         chosen = min(fits, key=cost)
     else:
-        L = fe.layout
         close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
         chosen = min(close, key=lambda f: float(np.sum(np.abs(
             f[0].theta[L.effect] - np.asarray(fe.effect.null)))))
     return chosen
+
+
+def _fit_start(fe: Forward, start, sigma):
+    """The fit from one start (:func:`fit_pinned`, then :func:`_joint_geometry` for an effect
+    fitted with the pointing); a clock start far from the recorded times
+    (:func:`.clock.far_clock`) reads the angle of polarization under single scattering, not
+    under ``fe.aop_sky``. Returns ``(fit, aop_fit)``."""
+    geometric = fe.effect.geometric
+    offered = fe.aop_sky
+    if far_clock(fe.effect, start[fe.layout.effect]):
+        fe.aop_sky = None
+    try:
+        pair = fit_pinned(fe, start, sigma=sigma, max_iter=EFFECT_MAX_ITER,
+                          geometry=geometric, covariance=geometric)
+        if getattr(fe.effect, "joint_pointing", False):
+            pair = _joint_geometry(fe, pair, sigma)
+    finally:
+        fe.aop_sky = offered
+    return pair
 
 
 def _joint_geometry(fe: Forward, pair, sigma):
@@ -197,17 +207,22 @@ that can matter to the verdict, :func:`_continue_pending`)."""
 
 def _continued(fe: Forward, pair, sigma, aop_sky):
     """The chosen start's ``(fit, aop_fit)``, continued from where it stopped when it did
-    not converge (kept as it was when the continuation leaves the model's valid range)."""
+    not converge (kept as it was when the continuation leaves the model's valid range); the
+    angle of polarization read under ``aop_sky``, or under single scattering for a clock
+    far from the recorded times (:func:`.clock.far_clock`), as :func:`_fit_effect` read it."""
     fit_, aop = pair
     if fit_.converged:
         return pair
     geometric = fe.effect.geometric
-    fe.aop_sky = aop_sky
+    offered = fe.aop_sky
+    fe.aop_sky = None if far_clock(fe.effect, fit_.theta[fe.layout.effect]) else aop_sky
     try:
         more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
                           geometry=geometric, covariance=geometric)
     except InvalidParameterError:
         return pair
+    finally:
+        fe.aop_sky = offered
     return more if (more[1] if geometric else more[0]).cost <= \
         (aop if geometric else fit_).cost * (1 + 1e-9) or more[0].converged else pair
 
@@ -634,8 +649,12 @@ def _candidate_rows(s: _Session, held: judge.HeldOut, cand, floor: float, n_cal:
         if e.geometric:
             row["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
                                 "best-fitting sky candidate of each fold, then held")
+            if e.name == "clock_offset":
+                row["fitted_on"] += (f"; a clock more than {CLOCK_REFINE_S:g} s from the "
+                                     "recorded times under single scattering")
             row["aop_sky_by_fold"] = [f.state.aop_sky for f in fits
-                                      if f.state.aop_sky is not None]
+                                      if f.state.aop_sky is not None
+                                      and not far_clock(e, f.params)]
         if e.name == "clock_offset":
             report, why = core.run_candidate(
                 clock_report, s.work, e, s.theta, s.layout, s.sun, s.sign, s.sigma,
