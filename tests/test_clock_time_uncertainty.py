@@ -68,19 +68,17 @@ def test_session_index_marks_estimated_times(tmp_path):
     assert set(times_uncertainty(files).values()) == {0.0}
 
 
-@pytest.mark.xfail(strict=True, reason=(
-    "the neutral-point sky, now fitted with the units' pointing free on the angle of "
-    "polarization, takes up part of a clock two hours off: the first clock fit under it "
-    "lands at 5,970 s, 1,214 s from the refined 7,184 s (truth 7,200 s), so the passes do "
-    "not stay within 15 min of the first fit and this branch of the rule is not reached; "
-    "reading the clock under single scattering as well and keeping the better fit would "
-    "end the coupling"))
 def test_refined_clock_keeps_the_sky_model_spread():
     """A clock hours off is refined by passes that fit it alone, under single scattering;
     when the passes stay within 15 min of the first fit, that fit read the clock under every
     sky candidate at about the right times, so the spread over those skies stays in the
     refined uncertainty: the root sum of squares of the last pass's uncertainty and the
-    first fit's ``sky_model_spread_s``, to round-off."""
+    first fit's ``sky_model_spread_s``, to round-off.
+
+    The first fit reads this far clock under single scattering in every stage
+    (:func:`calibration.photodiode_diagnosis.clock.far_clock`); read under the neutral-point
+    sky fitted at the recorded times, it would stop near 5,970 s, 1,214 s from the refined
+    value, and the passes would not stay within 15 min of it."""
     import pandas as pd
 
     from sensor.photodiodes_io import PhotodiodeData
@@ -103,17 +101,17 @@ def test_sky_model_spread_is_read_from_the_recorded_times(monkeypatch):
     the candidate reads it: from the recorded times (start 0), with the base's pointing; a
     start at the fitted offset would first re-read the pointing there, and that pointing has
     already taken up the offset. Hours away, the start is the fitted offset."""
-    from calibration.photodiode_diagnosis import run
+    from calibration.photodiode_diagnosis import clock
 
     starts = []
-    real = run._aop_clock_fit
+    real = clock._aop_clock_fit
 
     def spy(fe, theta_base, layout, start_s, sigma):
         starts.append(start_s)
         return real(fe, theta_base, layout, start_s, sigma)
 
-    monkeypatch.setattr(run, "_aop_clock_fit", spy)
+    monkeypatch.setattr(clock, "_aop_clock_fit", spy)
     s = ring_session(n_sweeps=3, per_sweep=60)
     doc = diagnose(s, ("neutral_points", "clock_offset"), folds=3)
-    assert abs(_clock(doc).params["clock_offset_s"]["value"]) < run.CLOCK_NEAR_S
+    assert abs(_clock(doc).params["clock_offset_s"]["value"]) < clock.CLOCK_NEAR_S
     assert starts == [0.0, 0.0]          # single scattering and the neutral-point sky

@@ -1,11 +1,8 @@
-"""The method written once (:mod:`calibration.diagnosis.judge`) and the ring's clock
-refinement as an outer step: bookkeeping checked against values worked out by hand."""
-
-import math
+"""The method written once (:mod:`calibration.diagnosis.judge`): bookkeeping checked against
+values worked out by hand (the ring's clock refinement: ``test_clock_refinement.py``)."""
 
 import numpy as np
 import pytest
-from ring_sessions import ring_session
 
 from calibration.diagnosis import judge
 
@@ -61,39 +58,3 @@ def test_verdict_with_one_held_out_block_has_no_bootstrap_se():
     assert v.gap_before == pytest.approx(g0, rel=1e-12)
     assert v.gap_after == pytest.approx(ga, rel=1e-12)
     assert v.gap_before_se is None and v.gap_after_se is None and v.shrink_se is None
-
-
-def test_refined_clock_carries_the_uncertainty_of_every_pass(monkeypatch):
-    """Three passes at the corrected times, as on the two-photodiode compass (steps with
-    uncertainties 5,098 s, 3,411 s and 340 s): the refined offset is the first fit plus
-    every step, and its uncertainty all three added in quadrature,
-    sqrt(5098^2 + 3411^2 + 340^2) = 6143.3 s, not the last pass's 340 s; so an offset of
-    8,500 s is no longer significant. Each pass is fitted at the times the ones before
-    corrected."""
-    from dataclasses import replace
-
-    from calibration.photodiode_diagnosis import instrument_from_photodiodes, run
-    inst = instrument_from_photodiodes(ring_session(n_sweeps=2, per_sweep=30), "ring")
-    steps = [(3000.0, 5098.0), (400.0, 3411.0), (100.0, 340.0)]
-    shifts = []
-
-    def one_pass(shifted, *, n_folds, max_iter):
-        shifts.append(float(shifted.t_s[0] - inst.t_s[0]))
-        step, u = steps[len(shifts) - 1]
-        return {"effect": "clock_offset", "params": {"clock_offset_s": {"value": step}},
-                "uncertainty_s": u, "by_sky": {"single_scattering": step}}
-
-    monkeypatch.setattr(run, "_clock_pass", one_pass)
-    row = {"params": {"clock_offset_s": {"value": 5000.0, "uncertainty": 90.0}},
-           "uncertainty_s": 90.0, "sky_model_spread_s": 700.0, "significant": True}
-    run._refine_clock(replace(inst), row, n_folds=2, seed=0, max_iter=5)
-    assert shifts == [5000.0, 8000.0, 8400.0]
-    param = row["params"]["clock_offset_s"]
-    assert param["value"] == 8500.0
-    # the passes ended 3,500 s from the first fit: its sky-model spread is not kept
-    assert param["uncertainty"] == pytest.approx(math.sqrt(5098 ** 2 + 3411 ** 2 + 340 ** 2),
-                                                 rel=1e-12)
-    assert row["uncertainty_s"] == param["uncertainty"]
-    assert row["significant"] is False
-    assert [p["uncertainty_s"] for p in row["refinement"]["passes"]] == [5098.0, 3411.0,
-                                                                           340.0]

@@ -8,13 +8,15 @@ candidate's report and refinement, heading decoding, slices); the method that ru
 (folds, held-out scores, the paired judge, the verdict and the shrink) is every
 instrument's, :mod:`calibration.diagnosis.judge`, with the ring's thresholds
 :data:`RING_THRESHOLDS`. A clock hours off is searched before the diagnosis
-(:mod:`.dark_clock`) and refined after the candidates' fits (:func:`_refine_clock`): both
-shift the times and fit again, neither diagnoses the session twice.
+(:mod:`.dark_clock`) and refined after the candidates' fits
+(:func:`.clock.refine_clock_offset`): both shift the times and fit again, neither diagnoses
+the session twice.
 """
 
 from __future__ import annotations
 
 from dataclasses import dataclass, replace
+from functools import partial
 
 import numpy as np
 
@@ -26,11 +28,15 @@ from skysim.validation import TWILIGHT_LIMIT_DEG
 
 from ..diagnosis import core, judge
 from ..diagnosis.core import Thresholds
-from ..diagnosis.errors import DiagnosisError, InsufficientDataError
+from ..diagnosis.errors import InsufficientDataError
 from ..diagnosis.report import LEGACY_SCHEMA, Candidate, DiagnosisReport, Verdict
 from .checks import GLARE_NEAR_DEG, motion_faults
+from .clock import (CLOCK_REFINE_S, _clock_starts, clock_mirror, clock_report,
+                    clock_sensitivity, far_clock, refine_clock_offset, solar_noon_s)
 from .dark_clock import (CLOCK_START_MARGIN_DEG, CLOCK_TIE, NOMINAL_DOP_SCALE, clock_found,
                          search_clock)
+from .effect_fit import (EFFECT_JOINT_ITER, EFFECT_MAX_ITER, _extend, _has_sky, _joint_aop,
+                         _nominal_instrument)
 from .effects import RING_EFFECT_NAMES, RingEffect, get_ring_effect
 from .errors import InstrumentDataError, PointingCalibrationError, SunTooLowError
 from .faults import bright_glare, malus_outliers, rotating_units, screen
@@ -40,7 +46,7 @@ from .forward import Forward, SunTrack
 from .instrument import Instrument, instrument_from_photodiodes
 
 __all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "orient",
-           "decode_headings", "clock_mirror", "solar_noon_s"]
+           "decode_headings", "clock_mirror", "clock_sensitivity", "solar_noon_s"]
 
 RING_THRESHOLDS = Thresholds(block_consistency=0.75, block_name="sweeps")
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.decide`):
@@ -52,59 +58,6 @@ held-out sweeps. A real sky is never reproduced to the noise floor by one effect
 clouds, the instrument's own optics all add), so a smaller share is reported as
 ``partly_explained`` with the share rather than named; the sweep-by-sweep consistency keeps a
 candidate that wins on a few sweeps only from being named."""
-
-
-EFFECT_MAX_ITER = 12
-"""Iterations of a candidate's fit (it starts from the fold's base fit and its best coarse
-start, so its descent is short); a fit stopped here is reported ``converged: false``."""
-
-
-def _extend(theta_base, fwd_base: Forward, fwd: Forward, p_eff) -> np.ndarray:
-    t = np.zeros(fwd.layout.size)
-    t[:fwd_base.layout.size] = theta_base[:fwd_base.layout.size]
-    t[fwd.layout.effect] = p_eff
-    return t
-
-
-
-
-def _nominal_instrument(theta, L, groups) -> np.ndarray:
-    """``theta`` with the instrument parameter ``groups`` (slices of the layout ``L``) at
-    their nominal value 0: a start that does not carry what a base fit under a strongly
-    different sky or clock took up into gains, offsets and angles."""
-    out = np.array(theta, float)
-    for sl in groups:
-        out[sl] = 0.0
-    return out
-
-
-def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
-    """Starts of the clock offset: no offset, and the two best of the whole and half hours
-    (each with the per-sweep headings carried by the sun's azimuth change)."""
-    L = fwd.layout
-    sun = fwd.sun
-    t0 = float(np.mean(fwd.inst.t_s))
-    _, az0 = _sun_el_az(sun, t0)
-    scored = []
-    sky = fwd.aop_sky if fwd.aop_sky is not None else fwd._sky
-    lowest = sky.min_sun_elevation_deg + CLOCK_START_MARGIN_DEG
-    for dt in effect.COARSE_S:
-        el, az = _sun_el_az(sun, t0 + dt)
-        if el <= lowest or dt == 0.0:
-            continue
-        t = _extend(theta_base, fwd_base, fwd, [dt])
-        t[L.heading] = theta_base[fwd_base.layout.heading] + (az - az0)
-        # scored on the nominal instrument (unit gains, no offsets or angle deviations,
-        # nominal pointing, a typical DoP scale): a clock hours off corrupts every parameter
-        # the base fitted under it (on a simulated ring 2.5 h off, pointing at its -20 deg
-        # bound and a DoP scale of 0.99), and the scores with them
-        nominal = _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.pointing))
-        nominal[L.scale] = NOMINAL_DOP_SCALE
-        scored.append((float(np.sum(fwd.residual(nominal) ** 2)), t))
-    scored.sort(key=lambda x: x[0])
-    return [_extend(theta_base, fwd_base, fwd, [0.0])] + [t for _, t in scored[:2]]
-
-
 
 
 def _fit_and_hold_out(fe: Forward, theta_base, base_train: Forward, effect, sigma, held_inst,
@@ -141,28 +94,20 @@ def _fit_effect(fe: Forward, starts, sigma):
     geometric = fe.effect.geometric
     starts = starts if isinstance(starts, list) else [starts]
     fits, failed = [], None
-    aop_sky = fe.aop_sky
+    L = fe.layout
     for s in starts:
-        # a clock start far from the recorded time is fitted on the single-scattering AoP:
-        # the sky candidates were fitted about the recorded sun, so under a clock hours off
-        # their skies (a neutral-point separation, an optical thickness) are fitted to the
-        # wrong sky and their AoP misleads the clock (on a real morning session recorded 2 h
-        # early, a fit under the best such sky stopped at +58 +- 43 min)
-        far = fe.effect.name == "clock_offset" and abs(float(s[fe.layout.effect][0])) > \
-            CLOCK_REFINE_S
-        fe.aop_sky = None if far else aop_sky
         try:
-            pair = fit_pinned(fe, s, sigma=sigma, max_iter=EFFECT_MAX_ITER,
-                              geometry=geometric, covariance=geometric)
-            if getattr(fe.effect, "joint_pointing", False):
-                pair = _joint_geometry(fe, pair, sigma)
+            pair = _fit_start(fe, s, sigma)
+            if fe.aop_sky is not None and not far_clock(fe.effect, s[L.effect]) and \
+                    far_clock(fe.effect, pair[0].theta[L.effect]):
+                # a clock that walked far under a sky candidate's angle of polarization is
+                # read again under single scattering from where it stopped
+                pair = _fit_start(fe, pair[0].theta, sigma)
             fits.append(pair)
         except InvalidParameterError as exc:
             # a start outside the model's valid range (the recorded clock putting the sun
             # below the twilight limit, while a start hours away holds): the others decide
             failed = exc
-        finally:
-            fe.aop_sky = aop_sky
     if not fits:
         raise failed
 
@@ -173,11 +118,29 @@ def _fit_effect(fe: Forward, starts, sigma):
     if fe.effect.name != "clock_offset":
         chosen = min(fits, key=cost)
     else:
-        L = fe.layout
         close = [f for f in fits if cost(f) <= best * (1 + CLOCK_TIE)]
         chosen = min(close, key=lambda f: float(np.sum(np.abs(
             f[0].theta[L.effect] - np.asarray(fe.effect.null)))))
     return chosen
+
+
+def _fit_start(fe: Forward, start, sigma):
+    """The fit from one start (:func:`fit_pinned`, then :func:`_joint_geometry` for an effect
+    fitted with the pointing); a clock start far from the recorded times
+    (:func:`.clock.far_clock`) reads the angle of polarization under single scattering, not
+    under ``fe.aop_sky``. Returns ``(fit, aop_fit)``."""
+    geometric = fe.effect.geometric
+    offered = fe.aop_sky
+    if far_clock(fe.effect, start[fe.layout.effect]):
+        fe.aop_sky = None
+    try:
+        pair = fit_pinned(fe, start, sigma=sigma, max_iter=EFFECT_MAX_ITER,
+                          geometry=geometric, covariance=geometric)
+        if getattr(fe.effect, "joint_pointing", False):
+            pair = _joint_geometry(fe, pair, sigma)
+    finally:
+        fe.aop_sky = offered
+    return pair
 
 
 def _joint_geometry(fe: Forward, pair, sigma):
@@ -233,29 +196,6 @@ ALTERNATION_GAIN = 1e-3
 """A turn that lowers the AoP cost by less than this fraction is the last."""
 
 
-def _joint_aop(fe: Forward, aop, sigma):
-    """The AoP fit ``aop`` (pointing held) continued with the pointing free beside the effect
-    and everything else but the DoP scale, with its covariance (:func:`_joint_geometry`);
-    ``aop`` itself when that does not lower its cost or leaves the model's valid range."""
-    L = fe.layout
-    free = np.ones(L.size, bool)
-    free[L.scale] = False
-    fe.dop_free = True
-    try:
-        joint = fit(fe, aop.theta, free, sigma=sigma, max_iter=EFFECT_JOINT_ITER,
-                    covariance=True)
-    except InvalidParameterError:
-        return aop
-    finally:
-        fe.dop_free = False
-    return aop if joint.cost > aop.cost * (1 + 1e-9) else joint
-
-
-EFFECT_JOINT_ITER = 40
-"""Iterations of :func:`_joint_geometry`'s AoP fit (it starts from the pinned fit's optimum;
-on simulated rings it converged in fewer)."""
-
-
 EFFECT_CONTINUE_ITER = 150
 """Further iterations of the winning start's fit when :data:`EFFECT_MAX_ITER` stopped it: a
 verdict names only a candidate whose fit converged, and the short descent that suffices to
@@ -267,17 +207,22 @@ that can matter to the verdict, :func:`_continue_pending`)."""
 
 def _continued(fe: Forward, pair, sigma, aop_sky):
     """The chosen start's ``(fit, aop_fit)``, continued from where it stopped when it did
-    not converge (kept as it was when the continuation leaves the model's valid range)."""
+    not converge (kept as it was when the continuation leaves the model's valid range); the
+    angle of polarization read under ``aop_sky``, or under single scattering for a clock
+    far from the recorded times (:func:`.clock.far_clock`), as :func:`_fit_effect` read it."""
     fit_, aop = pair
     if fit_.converged:
         return pair
     geometric = fe.effect.geometric
-    fe.aop_sky = aop_sky
+    offered = fe.aop_sky
+    fe.aop_sky = None if far_clock(fe.effect, fit_.theta[fe.layout.effect]) else aop_sky
     try:
         more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
                           geometry=geometric, covariance=geometric)
     except InvalidParameterError:
         return pair
+    finally:
+        fe.aop_sky = offered
     return more if (more[1] if geometric else more[0]).cost <= \
         (aop if geometric else fit_).cost * (1 + 1e-9) or more[0].converged else pair
 
@@ -355,54 +300,6 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     return picked
 
 
-def clock_sensitivity(sun: SunTrack, t_s: float, absolute_yaw: bool,
-                      offset_s: float | None = None, half_step_s: float = 300.0) -> dict:
-    """What pins a clock offset in a session: the sun's elevation and azimuth rates at ``t_s``.
-
-    A clock offset moves the sun along its daily path. With relative yaw the per-sweep heading
-    offsets absorb the sun's azimuth, so the clock is read from the sun's elevation alone and
-    ``s_per_deg_of_sun_elevation`` (= 3600 / |elevation rate|) is how far a misfit of one
-    degree between the sky model and the real sky in the sun's apparent elevation moves the
-    fitted clock; near the sun's culmination that runs to hours. Given a fitted
-    ``offset_s``, ``sun_elevation_shift_deg`` is the change of the sun's elevation that it
-    makes: with relative yaw, a clock error and a sky whose sun appears that much higher
-    (or lower) than the ephemeris's are the same to the data.
-
-    Parameters
-    ----------
-    sun : SunTrack
-    t_s : float
-        Time [s since epoch, UTC].
-    absolute_yaw : bool
-    offset_s : float, optional
-        A fitted clock offset [s] (true minus recorded time).
-    half_step_s : float
-        Half-width of the central difference [s] (the rates change by < 1 % over 10 min).
-
-    Returns
-    -------
-    dict
-        ``sun_elevation_rate_deg_per_h``, ``sun_azimuth_rate_deg_per_h``, ``read_from`` and
-        ``s_per_deg_of_sun_elevation`` (None when the elevation rate is below 1e-6 deg/h),
-        and ``sun_elevation_shift_deg`` with ``offset_s``.
-    """
-    e1, a1 = _sun_el_az(sun, t_s + half_step_s)
-    e0, a0 = _sun_el_az(sun, t_s - half_step_s)
-    k = 3600.0 / (2.0 * half_step_s)
-    rate_el, rate_az = (e1 - e0) * k, float(wrap_deg(a1 - a0)) * k
-    out = {"sun_elevation_rate_deg_per_h": rate_el, "sun_azimuth_rate_deg_per_h": rate_az,
-           "absolute_yaw": bool(absolute_yaw),
-           "read_from": ("the sun's elevation and azimuth" if absolute_yaw else
-                         "the sun's elevation only (relative yaw: the per-sweep heading "
-                         "offsets absorb its azimuth)"),
-           "s_per_deg_of_sun_elevation": (3600.0 / abs(rate_el) if abs(rate_el) > 1e-6
-                                          else None)}
-    if offset_s is not None:
-        out["sun_elevation_shift_deg"] = (_sun_el_az(sun, t_s + offset_s)[0]
-                                          - _sun_el_az(sun, t_s)[0])
-    return out
-
-
 def conversion_rows(inst: Instrument) -> np.ndarray:
     """Row (n, U) of the conversion each unit's reading holds at every sample (the sample
     itself where the reading is fresh; see
@@ -426,12 +323,6 @@ def instrument_output(inst: Instrument) -> Instrument:
     ok = ~inst.flagged[conv, np.arange(inst.readings.shape[1])[None, :]]
     ok &= inst.sweep[conv] == inst.sweep[:, None]
     return replace(inst, flagged=~ok)
-
-
-def _sun_el_az(sun: SunTrack, t_s: float):
-    from skysim.geometry import elevation_azimuth
-    el, az = elevation_azimuth(sun(np.array([t_s])))
-    return float(el[0]), float(az[0])
 
 
 def _shared_mask(layout) -> np.ndarray:
@@ -758,8 +649,12 @@ def _candidate_rows(s: _Session, held: judge.HeldOut, cand, floor: float, n_cal:
         if e.geometric:
             row["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
                                 "best-fitting sky candidate of each fold, then held")
+            if e.name == "clock_offset":
+                row["fitted_on"] += (f"; a clock more than {CLOCK_REFINE_S:g} s from the "
+                                     "recorded times under single scattering")
             row["aop_sky_by_fold"] = [f.state.aop_sky for f in fits
-                                      if f.state.aop_sky is not None]
+                                      if f.state.aop_sky is not None
+                                      and not far_clock(e, f.params)]
         if e.name == "clock_offset":
             report, why = core.run_candidate(
                 clock_report, s.work, e, s.theta, s.layout, s.sun, s.sign, s.sigma,
@@ -800,7 +695,8 @@ def _diagnose_once(inst: Instrument, effects, *, n_folds: int, seed: int, max_it
     # true 2 h came out as +58 +- 43 min
     if refine_clock and clock is not None and \
             abs(clock["params"]["clock_offset_s"]["value"]) > CLOCK_REFINE_S:
-        _refine_clock(inst, clock, n_folds=n_folds, seed=seed, max_iter=max_iter)
+        refine_clock_offset(inst, clock, partial(_clock_pass, n_folds=n_folds,
+                                                 max_iter=max_iter), sun)
     for e, row in zip(cand, rows):
         # a clock offset within twice its uncertainty is no finding, however it fits; nor
         # is an effect fitted at its null in every fold (its refit found a better optimum
@@ -966,23 +862,10 @@ def _no_signal_report(inst: Instrument, scr, why: str, seed: int) -> DiagnosisRe
         thresholds=RING_THRESHOLDS.to_dict(), seed=seed)
 
 
-CLOCK_NEAR_S = 1800.0
-"""Offsets [s] nearer the recorded times than this (the nearest coarse start, half an hour)
-are read under each sky model from the recorded times (:func:`clock_report`); farther ones
-from the fitted offset, with the pointing re-read there."""
-
-CLOCK_REFINE_S = 900.0
-"""A clock offset larger than this [s] is refined (:func:`_refine_clock`)."""
-
-CLOCK_PASSES = 3
-"""Most refinement passes of a clock offset; they stop once a pass moves it by less than a
-third of :data:`CLOCK_REFINE_S`."""
-
-
 def _clock_pass(inst: Instrument, *, n_folds: int, max_iter: int) -> dict | None:
     """The clock candidate's row on a session at its times (one pass of
-    :func:`_refine_clock`): screen, base fit, the clock's fold fits and its report, as the
-    diagnosis makes them; None when no unit reads a usable sky.
+    :func:`.clock.refine_clock_offset`): screen, base fit, the clock's fold fits and its
+    report, as the diagnosis makes them; None when no unit reads a usable sky.
 
     Raises
     ------
@@ -1007,70 +890,6 @@ def _clock_pass(inst: Instrument, *, n_folds: int, max_iter: int) -> dict | None
     return _candidate_rows(s, held, [clock], white, n_cal)[0]
 
 
-def _refine_clock(inst: Instrument, row: dict, *, n_folds: int, seed: int,
-                  max_iter: int) -> None:
-    """Refine a large clock offset: shift the times by it, fit the clock again there
-    (:func:`_clock_pass`) and add the offset that pass finds, until a pass moves it by less
-    than ``CLOCK_REFINE_S / 3``; updates ``row`` (value, uncertainty, ``significant``,
-    ``refinement``).
-
-    The refined offset is the sum of the first fit and every pass's step, each read at the
-    times the ones before corrected; its uncertainty is that of all the passes, their
-    uncertainties added in quadrature (the last pass's alone would claim a precision the
-    passes before it did not have). The passes fit the clock alone, under single
-    scattering; when they end within ``CLOCK_REFINE_S`` of the first fit, whose sky
-    candidates were then fitted near the right times, its ``sky_model_spread_s`` is added
-    in quadrature too.
-
-    Under a clock hours off, everything read from the base fit's residuals is read wrong: the
-    glare screen finds no brightness at which the residuals grow (they are large everywhere)
-    and keeps the unit-samples the sun's glare spoils, the noise floor grows (on a real
-    session 2 h off, 0.016 against 0.0044) and the instrument's parameters come from another
-    minimum. A fit of the clock alone from there stopped 22 min to 42 min from the truth; a
-    pass at the corrected times screens and fits as on a session with a right clock.
-    """
-    param = row["params"]["clock_offset_s"]
-    total, passes = float(param["value"]), []
-    for _ in range(CLOCK_PASSES):
-        try:
-            c = _clock_pass(replace(inst, t_s=inst.t_s + total), n_folds=n_folds,
-                            max_iter=max_iter)
-        except (DiagnosisError, InvalidParameterError) as exc:
-            row["refinement_error"] = str(exc)
-            break
-        if c is None or not c.get("available", True):
-            row["refinement_error"] = (c or {}).get("error", "no clock fit at the corrected "
-                                                             "times")
-            break
-        step = float(c["params"]["clock_offset_s"]["value"])
-        total += step
-        passes.append({"offset_s": step, "uncertainty_s": float(c["uncertainty_s"]),
-                       "by_sky": c["by_sky"]})
-        if abs(step) < CLOCK_REFINE_S / 3.0:
-            break
-    if not passes:
-        return
-    row["refinement"] = {"first_fit_s": float(param["value"]), "passes": passes,
-                         "method": "clock fitted again at the corrected times (screen, base "
-                                   "fit, clock candidate); uncertainty of all passes in "
-                                   "quadrature"}
-    param["uncertainty"] = float(np.sqrt(sum(p["uncertainty_s"] ** 2 for p in passes)))
-    if abs(total - float(param["value"])) <= CLOCK_REFINE_S:
-        # the passes read the clock under single scattering alone; a first fit this close
-        # to the corrected times had its sky candidates fitted to about the right sky, so
-        # the spread of the clock over them still holds (on a real session an hour past
-        # culmination, 745 s that the passes would drop)
-        spread = float(row.get("sky_model_spread_s", 0.0))
-        param["uncertainty"] = float(np.hypot(param["uncertainty"], spread))
-        row["refinement"]["sky_model_spread_kept_s"] = spread
-    param["value"] = total
-    row["uncertainty_s"] = param["uncertainty"]
-    row["significant"] = bool(abs(total) > 2.0 * param["uncertainty"])
-    if "sensitivity" in row:    # the sun's shift at the refined clock, not the first fit's
-        row["sensitivity"] = clock_sensitivity(light_track(inst), float(np.mean(inst.t_s)),
-                                               inst.absolute_yaw, offset_s=total)
-
-
 def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds: int = 3,
                         seed: int = 0, max_iter: int = 25, pointing=None,
                         refine_clock: bool = True) -> DiagnosisReport:
@@ -1093,8 +912,8 @@ def diagnose_instrument(inst: Instrument, effects=RING_EFFECT_NAMES, *, n_folds:
         fits them all on this session (where a common elevation offset and a clock error
         trade one for the other, :mod:`.pointing`).
     refine_clock : bool
-        Refine a clock offset found (:func:`_refine_clock`) and search the clock of a dark
-        session.
+        Refine a clock offset found (:func:`.clock.refine_clock_offset`) and search the clock
+        of a dark session.
 
     Returns
     -------
@@ -1448,120 +1267,6 @@ def _fold_params(effect, P, sds) -> dict:
             out[n]["uncertainty"] = float(np.sqrt(np.mean(np.square(sd))
                                                   + np.var(P[:, j])))
     return out
-
-
-def _has_sky(effect) -> bool:
-    """True for an effect that replaces the sky model (its own DoP and AoP)."""
-    return type(effect).sky is not RingEffect.sky
-
-
-def clock_report(inst, effect, theta_base, layout, sun, sign, sigma, param: dict, rows,
-                 cand) -> dict:
-    """What the clock candidate reports beside its fit: what pins it (``sensitivity``), how
-    far it moves when the angle of polarization is read under each sky model fitted here
-    (``by_sky``: single scattering and every sky candidate at its fold-mean parameters, on the
-    whole session, each read from the recorded times with the base's pointing held, or from
-    the fitted offset when that is :data:`CLOCK_NEAR_S` or more away; half their range is
-    ``sky_model_spread_s``, a systematic the noise does not show), the resulting
-    ``uncertainty_s`` (root sum of squares of the statistical uncertainty, that spread and
-    the recorded times' own uncertainty,
-    :attr:`Instrument.time_uncertainty_s`) and the mirror time about the sun's culmination
-    (:func:`clock_mirror`). The parameter's ``uncertainty`` is updated to ``uncertainty_s``."""
-    offset = param["value"]
-    fe = Forward(_thin(inst), effect, sun=sun, polarizer_sign=sign)
-    skies = {"single_scattering": None}
-    for e in cand:
-        row = next((r for r in rows if r["effect"] == e.name), None)
-        if _has_sky(e) and row is not None and row.get("available", True):
-            p = np.array([row["params"][n]["value"] for n in e.parameter_names])
-            skies[e.name] = e.sky(p, RayleighSky(1.0), fe.sun(fe.inst.t_s))
-    by_sky, errors = {}, {}
-    # read as the candidate reads an offset within its nearest coarse start: from the
-    # recorded times, with the pointing where the base's AoP fit put it. A start at the
-    # fitted offset re-reads the pointing there first (as a clock hours off needs), and that
-    # pointing, having taken up the offset, hides how far the sky alone moves the clock (on
-    # a real session an hour past culmination the three skies' clocks spanned 7.5 min read
-    # from the fitted -20 min, 25 min read from the recorded times)
-    start = offset if abs(offset) >= CLOCK_NEAR_S else 0.0
-    for name, sky in skies.items():
-        fe.aop_sky = sky
-        try:
-            by_sky[name] = _aop_clock_fit(fe, theta_base, layout, start, sigma)
-        except InvalidParameterError as exc:   # this sky does not hold at the fitted time
-            by_sky[name], errors[name] = None, str(exc)
-    fe.aop_sky = None
-    values = np.array([v for v in by_sky.values() if v is not None] or [offset])
-    spread = 0.5 * float(np.ptp(values))
-    stat = float(param.get("uncertainty", param["fold_spread"]))
-    times = float(inst.time_uncertainty_s)
-    param["uncertainty"] = float(np.sqrt(stat ** 2 + spread ** 2 + times ** 2))
-    out = {"sensitivity": clock_sensitivity(sun, float(np.mean(inst.t_s)), inst.absolute_yaw,
-                                            offset_s=offset),
-           "by_sky": {k: None if v is None else float(v) for k, v in by_sky.items()},
-           "by_sky_errors": errors, "sky_model_spread_s": spread, "statistical_uncertainty_s": stat,
-           "recorded_times_uncertainty_s": times,
-           "uncertainty_s": param["uncertainty"],
-           "significant": bool(abs(offset) > 2.0 * param["uncertainty"])}
-    out["mirror"] = clock_mirror(inst, effect, theta_base, layout, sun, sign, sigma, offset)
-    return out
-
-
-def _aop_clock_fit(fe: Forward, theta_base, layout, start_s, sigma) -> float:
-    """Clock offset [s] from the clock candidate's AoP fit (:func:`fit_pinned`: the
-    instrument re-read from the AoP at ``start_s``, then the clock; then the clock and the
-    pointing together, :func:`_joint_aop`) started at ``start_s``, on the sky
-    ``fe.aop_sky``."""
-    t = np.zeros(fe.layout.size)
-    t[:layout.size] = theta_base[:layout.size]
-    t[fe.layout.effect] = start_s
-    _, aop = fit_pinned(fe, t, sigma=sigma, max_iter=EFFECT_MAX_ITER, full=False)
-    if getattr(fe.effect, "joint_pointing", False):
-        aop = _joint_aop(fe, aop, sigma)
-    return float(aop.theta[fe.layout.effect][0])
-
-
-def solar_noon_s(sun: SunTrack, t_s: float) -> float:
-    """Time [s since epoch, UTC] of the sun's culmination nearest ``t_s`` (highest elevation
-    on a 60-s grid over +-12 h, refined by a parabola through the top three)."""
-    from skysim.geometry import elevation_azimuth
-    t = t_s + np.arange(-12 * 3600.0, 12 * 3600.0 + 60.0, 60.0)
-    el, _ = elevation_azimuth(sun(t))
-    i = int(np.clip(np.argmax(el), 1, t.size - 2))
-    a, b, c = el[i - 1], el[i], el[i + 1]
-    den = a - 2 * b + c
-    return float(t[i] + (0.5 * (a - c) / den * 60.0 if den != 0 else 0.0))
-
-
-def clock_mirror(inst: Instrument, effect, theta_base, layout, sun, sign, sigma,
-                 offset_s: float) -> dict:
-    """The clock offset that mirrors the fitted one about the sun's culmination, and how well
-    it fits: with relative yaw the per-sweep headings absorb the sun's azimuth, and the sun
-    stands at the same elevation at ``t`` and ``2 t_noon - t``, so near culmination both
-    clocks fit the angle of polarization alike and the data cannot choose. Both are scored
-    by an AoP fit (DoP profiled out) of the instrument and headings at that clock, on the
-    session thinned as for fits.
-    """
-    t_mid = float(np.mean(inst.t_s))
-    noon = solar_noon_s(sun, t_mid)
-    mirror = 2.0 * (noon - t_mid) - offset_s
-    fe = Forward(_thin(inst), effect, sun=sun, polarizer_sign=sign)
-    costs = []
-    for dt in (offset_s, mirror):
-        t = np.zeros(fe.layout.size)
-        t[:layout.size] = theta_base[:layout.size]
-        t[fe.layout.effect] = dt
-        free = np.ones(fe.layout.size, bool)     # the instrument re-read at each clock
-        free[fe.layout.scale] = False
-        free[fe.layout.effect] = False
-        fe.dop_free = True
-        try:
-            costs.append(fit(fe, t, free, sigma=sigma, max_iter=EFFECT_MAX_ITER).cost)
-        finally:
-            fe.dop_free = False
-    ratio = costs[1] / max(costs[0], 1e-300)
-    return {"solar_noon_utc": str(np.datetime64(int(round(noon)), "s")) + "Z",
-            "mirror_offset_s": float(mirror), "cost_ratio": float(ratio),
-            "fits_as_well": bool(ratio <= 1.0 + CLOCK_TIE)}
 
 
 def _sweep_headings(theta, L, inst, rows, base_train):
