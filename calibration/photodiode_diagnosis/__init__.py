@@ -5,8 +5,9 @@ saturated, zero, duplicated and non-Malus channels), :mod:`.forward` (compound-e
 under a sky, Malus's law, profiled radiance), :mod:`.fit` (grouped-Jacobian
 Levenberg-Marquardt), :mod:`.pointing` (unit pointing calibrated on other sessions),
 :mod:`.effects` (multiple scattering, field of view, occlusion, yaw
-scale, clock offset, tilt) and :mod:`.run` (held-out gap, where, which, how far, heading
-error). Method and report: ``docs/diagnosis.md``.
+scale, clock offset, tilt), :mod:`.effect_fit` (what fitting one candidate shares),
+:mod:`.clock` (the clock's starts, sensitivity, sky-model spread, mirror time and
+refinement) and :mod:`.run` (held-out gap, where, which, how far, heading error). Method and report: ``docs/diagnosis.md``.
 """
 
 from skysim._lazy import lazy_namespace
