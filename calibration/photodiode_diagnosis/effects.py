@@ -384,6 +384,10 @@ class FieldOfView(RingEffect):
     prior_sd = (30.0,)
     fd_step = (0.05,)
     observes = True
+    pointing_under_effect: ClassVar[bool] = True
+    """The units' pointing is read again from the angle of polarization under the fitted
+    acceptance, in turns with the width (:func:`.run._pointing_under_effect`): the base
+    model's pointing, read under a pencil beam, takes up part of a wide acceptance."""
 
     def starts(self, ctx) -> list:
         return [np.array([ACCEPTANCE_HWHM_DEG]), np.array([8.0])]
