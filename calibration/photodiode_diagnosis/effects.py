@@ -388,6 +388,10 @@ class FieldOfView(RingEffect):
     """The units' pointing is read again from the angle of polarization under the fitted
     acceptance, in turns with the width (:func:`.run._pointing_under_effect`): the base
     model's pointing, read under a pencil beam, takes up part of a wide acceptance."""
+    two_step_sd: ClassVar[bool] = True
+    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the width
+    trades with the DoP scale and the gains, and with the pointing read from the angle of
+    polarization."""
 
     def starts(self, ctx) -> list:
         return [np.array([ACCEPTANCE_HWHM_DEG]), np.array([8.0])]
