@@ -423,6 +423,10 @@ class Occlusion(RingEffect):
     the edge at this bound, which keeps the occlusion from being named for it."""
     prior_sd = (np.inf, np.inf, 1.0, np.inf)
     fd_step = (0.2, 0.2, 1e-3, 0.05)
+    two_step_sd: ClassVar[bool] = True
+    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the model
+    covariance, scaled by the white-noise RMS of all readings, was several times the
+    spread of its errors on simulated rings."""
     n_fits: ClassVar[int] = 3
     """Short fits from this many of the best-scoring distinct starts (a sector near the sun
     can at first look like the sky's own misfit there)."""
