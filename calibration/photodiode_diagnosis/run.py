@@ -1233,7 +1233,9 @@ def _effect_sd(fe: Forward, fr, fr_aop, sigma: float) -> list:
     has its covariance), else from the full model's posterior covariance at the fit, the
     held pointing profiled (:func:`.fit.fit`, ``profiled``): the trade of an effect's
     parameters with the DoP scale, the gains and the offsets is in it (an overcast's
-    thickness and the DoP scale correlate at 0.998 on a simulated ring)."""
+    thickness and the DoP scale correlate at 0.998 on a simulated ring). An effect with
+    ``two_step_sd`` (the acceptance's width, the occlusion) takes the two-step sandwich over
+    samples instead (:func:`_two_step_sd`)."""
     L = fe.layout
     if getattr(fe.effect, "two_step_sd", False):
         return _two_step_sd(fe, fr.theta, sigma)
