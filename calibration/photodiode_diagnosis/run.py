@@ -231,12 +231,12 @@ def _joint_geometry(fe: Forward, pair, sigma):
 
 def _pointing_under_effect(fe: Forward, pair, sigma):
     """A non-geometric fit that held the base model's pointing, continued by turns of the
-    units' pointing (and the sweeps' headings) read from the angle of polarization under
-    the effect's fitted value (the DoP profiled out; the effect, gains, offsets and
-    polarizer angles held) and the full model with that pointing held, until a turn changes
-    the full model's cost by less than :data:`ALTERNATION_GAIN` of it; returns the last
-    turn's ``(fit, aop_fit)`` (the fit as it was when a turn leaves the model's valid
-    range).
+    pointing read from the angle of polarization under the effect's fitted value (the DoP
+    profiled out, the effect held, as in :func:`.fit.fit_pinned`'s first stage, the
+    pointing tied to the base model's reading by :data:`POINTING_TURN_SD_DEG`) and the full
+    model with that pointing held, until a turn changes the full model's cost by less than
+    :data:`ALTERNATION_GAIN` of it; returns the last turn's ``(fit, aop_fit)`` (the fit as
+    it was when a turn leaves the model's valid range).
 
     The base model reads the pointing under a pencil beam; for an effect that changes what
     each unit sees (a wide acceptance, :class:`.effects.FieldOfView`) that pointing is off
@@ -246,10 +246,7 @@ def _pointing_under_effect(fe: Forward, pair, sigma):
     pointing (0.01 deg from the truth) held, the width fitted 28.6 deg; read in turns under
     the fitted width, the pointing moved by 0.02 deg and the width fitted 29.98 deg. The
     pointing stays the angle of polarization's, as in the base model, so a DoP profile the
-    sky model lacks is not taken up by it. The AoP turn holds the output stage at the full
-    model's values: with the gains and polarizer angles free in it as well, the turns on a
-    real session's fold ran the width from 35 to the 60-deg bound, the full model's cost
-    rising."""
+    sky model lacks is not taken up by it."""
     from .fit import Priors
     L = fe.layout
     aop_free = np.ones(L.size, bool)
