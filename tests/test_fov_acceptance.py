@@ -228,3 +228,26 @@ def test_a_unit_below_the_horizon_is_named(ring):
     with pytest.raises(UnitBelowHorizonError) as ref:
         low.observe(sky, tilted, sun)
     assert str(got.value) == str(ref.value)
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("hwhm, seed", [(30.0, 35), (15.0, 36)])
+def test_the_width_of_a_simulated_ring_is_recovered_within_its_uncertainty(hwhm, seed):
+    """On a simulated ring of twelve sweeps whose units weigh the sky by the measured
+    acceptance (sampled by the generator's own rule), the diagnosis's width is within 3 of
+    its reported uncertainty of the truth. The uncertainty is calibrated: over seeds 31-34
+    at HWHM 15 and 30 deg the z-scores (fitted - true) / uncertainty have an RMS near 1
+    (docs/diagnosis.md), so a calibrated uncertainty exceeds 3 in 0.3 % of cases; the
+    candidate's quadrature differs from the generator's rule by 0.02 deg at 15 deg (0.3 of
+    the uncertainty), and fitted with the base model's pencil-beam pointing held the width
+    was 1.4 deg short at 30 deg, 57 of the uncertainty the fit then reported. Seeds other
+    than the calibration's."""
+    from calibration import diagnose
+    from calibration.diagnosis.identifiability import ring_session
+    rep = diagnose(ring_session("fov", {"hwhm_deg": hwhm}, seed=seed), ("fov",), folds=3)
+    (cand,) = [c for c in rep.candidates if c.effect == "fov"]
+    p = cand.params["hwhm_deg"]
+    assert cand.converged and not cand.at_bound
+    # the width is read to better than 1 % of itself (0.07 deg at 15, 0.03 at 30)
+    assert 0.0 < p["uncertainty"] < 0.01 * hwhm
+    assert abs(p["value"] - hwhm) < 3.0 * p["uncertainty"]

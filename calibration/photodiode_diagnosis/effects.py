@@ -384,6 +384,14 @@ class FieldOfView(RingEffect):
     prior_sd = (30.0,)
     fd_step = (0.05,)
     observes = True
+    pointing_under_effect: ClassVar[bool] = True
+    """The units' pointing is read again from the angle of polarization under the fitted
+    acceptance, in turns with the width (:func:`.run._pointing_under_effect`): the base
+    model's pointing, read under a pencil beam, takes up part of a wide acceptance."""
+    two_step_sd: ClassVar[bool] = True
+    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the width
+    trades with the DoP scale and the gains, and with the pointing read from the angle of
+    polarization."""
 
     def starts(self, ctx) -> list:
         return [np.array([ACCEPTANCE_HWHM_DEG]), np.array([8.0])]
@@ -415,6 +423,10 @@ class Occlusion(RingEffect):
     the edge at this bound, which keeps the occlusion from being named for it."""
     prior_sd = (np.inf, np.inf, 1.0, np.inf)
     fd_step = (0.2, 0.2, 1e-3, 0.05)
+    two_step_sd: ClassVar[bool] = True
+    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the model
+    covariance, scaled by the white-noise RMS of all readings, was several times the
+    spread of its errors on simulated rings."""
     n_fits: ClassVar[int] = 3
     """Short fits from this many of the best-scoring distinct starts (a sector near the sun
     can at first look like the sky's own misfit there)."""
