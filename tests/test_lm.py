@@ -201,3 +201,18 @@ def test_iteration_limit_and_start_cost():
                                       + np.sum(((start - mu)[:2] / sd[:2]) ** 2), rel=1e-12)
     one = levenberg_marquardt(*fns, start, mu, sd, sigma=SIGMA, max_iter=1)
     assert one.n_iter == 1 and not one.converged and one.cost < zero.cost
+
+
+@pytest.mark.parametrize("kwargs,message", [
+    ({"prior_sd": [1.0, 0.0, 1.0, 1.0]}, "prior_sd 0.0 of parameter 1"),
+    ({"prior_mean": [0.0, 0.0]}, "prior_mean has 2 values for 4 parameters"),
+    ({"lower": [0.0, 2.0, 0.0, 0.0], "upper": [1.0, 1.0, 1.0, 1.0]},
+     "upper bound 1.0 of parameter 1 is below its lower bound 2.0"),
+    ({"sigma": -0.1}, "sigma -0.1"),
+])
+def test_bad_input_named(kwargs, message):
+    X, y, mu, sd = _linear()
+    args = {"prior_mean": mu, "prior_sd": sd, **kwargs}
+    residual, jacobian = _linear_fns(X, y)
+    with pytest.raises(InvalidParameterError, match=message):
+        levenberg_marquardt(residual, jacobian, np.zeros(4), **args)

@@ -95,6 +95,14 @@ def _prior_weight(sd) -> np.ndarray:
     return np.where(np.isfinite(sd), 1.0 / np.asarray(sd, float) ** 2, 0.0)
 
 
+def _vector(values, p: int, name: str, dtype=float) -> np.ndarray:
+    """``values`` as a vector of one entry per parameter, or a one-line error naming it."""
+    v = np.asarray(values, dtype).ravel()
+    if v.size != p:
+        raise InvalidParameterError(f"{name} has {v.size} values for {p} parameters")
+    return v
+
+
 def levenberg_marquardt(residual: Callable[[np.ndarray], tuple[np.ndarray, Any]],
                         jacobian: Callable[[np.ndarray, np.ndarray, Any, np.ndarray], Any],
                         theta0, prior_mean, prior_sd, *, lower=None, upper=None, free=None,
@@ -154,15 +162,25 @@ def levenberg_marquardt(residual: Callable[[np.ndarray], tuple[np.ndarray, Any]]
         iterations taken, ``converged`` (False when ``max_iter`` was reached),
         ``covariance`` (free parameters, in order; None unless asked) and ``free``.
     """
-    theta = np.asarray(theta0, float).copy()
+    theta = np.asarray(theta0, float).ravel().copy()
     p = theta.size
-    mu = np.asarray(prior_mean, float)
-    lower = np.full(p, -np.inf) if lower is None else np.asarray(lower, float)
-    upper = np.full(p, np.inf) if upper is None else np.asarray(upper, float)
-    free = np.ones(p, bool) if free is None else np.asarray(free, bool).copy()
+    mu, sd = _vector(prior_mean, p, "prior_mean"), _vector(prior_sd, p, "prior_sd")
+    lower = np.full(p, -np.inf) if lower is None else _vector(lower, p, "lower")
+    upper = np.full(p, np.inf) if upper is None else _vector(upper, p, "upper")
+    free = np.ones(p, bool) if free is None else _vector(free, p, "free", bool).copy()
+    if not sigma > 0.0:
+        raise InvalidParameterError(f"sigma {sigma} must be positive")
+    bad = np.flatnonzero(~(sd > 0.0))
+    if bad.size:
+        raise InvalidParameterError(f"prior_sd {sd[bad[0]]} of parameter {bad[0]} must be "
+                                    "positive")
+    bad = np.flatnonzero(~(upper >= lower))
+    if bad.size:
+        raise InvalidParameterError(f"upper bound {upper[bad[0]]} of parameter {bad[0]} is "
+                                    f"below its lower bound {lower[bad[0]]}")
     theta = np.clip(theta, lower, upper)
     fidx = np.flatnonzero(free)
-    w_prior = _prior_weight(np.asarray(prior_sd, float)[fidx])
+    w_prior = _prior_weight(sd[fidx])
 
     def cost_of(t, r):
         dp = (t[fidx] - mu[fidx])
@@ -218,8 +236,7 @@ def levenberg_marquardt(residual: Callable[[np.ndarray], tuple[np.ndarray, Any]]
         if profiled is not None:
             joint |= np.asarray(profiled, bool)
         jidx = np.flatnonzero(joint)
-        A = information(jacobian(theta, r, state, joint), sigma,
-                        _prior_weight(np.asarray(prior_sd, float)[jidx]))
+        A = information(jacobian(theta, r, state, joint), sigma, _prior_weight(sd[jidx]))
         dof = max(r.size - fidx.size, 1)
         chi2 = float(np.sum(r ** 2) / sigma ** 2) / dof
         keep = np.flatnonzero(free[jidx])     # the free parameters' rows of the joint one
