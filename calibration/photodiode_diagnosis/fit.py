@@ -219,6 +219,8 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     usable_idx = np.flatnonzero(fwd.usable.ravel())
 
     def residual(t):
+        # a trial outside the model's valid range (a clock that puts the sun below the
+        # horizon, a unit that looks below it) raises InvalidParameterError: damped, retried
         obs = fwd.observe(t)
         r = fwd.residual(t, obs)
         return r.ravel()[usable_idx], (r, obs)
