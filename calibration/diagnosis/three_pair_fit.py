@@ -16,6 +16,7 @@ References
 
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import ClassVar
 
 import numpy as np
@@ -23,6 +24,7 @@ import numpy as np
 from ..effects import BASE_NAMES, Context, Effect, geometry, jacobians, outputs
 from ..solve import solve_pair
 from .fit_result import FitResult
+from .lm import levenberg_marquardt
 
 __all__ = ["BASE_UNITS", "N_BASE", "RelativeExtinction", "base_parameters",
            "effect_parameters", "fit_form", "fit_model", "predict"]
@@ -181,13 +183,15 @@ def _initial_base(U, valid, shape) -> np.ndarray:
 def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=None,
               effect0=None, sigma_V: float = 5e-4, max_iter: int = 100,
               tol: float = 1e-8) -> FitResult:
-    """Levenberg-Marquardt [2]_ MAP fit of the base model plus one effect.
+    """Levenberg-Marquardt [2]_ MAP fit of the base model plus one effect
+    (:func:`calibration.diagnosis.lm.levenberg_marquardt`).
 
     Minimises ``sum(r^2) / sigma_V^2 + sum(((theta - mu) / sd)^2)`` over the valid readings,
     with the weak prior of the base parameters (mounting errors 5 deg, ``f`` 0.2, ``s`` 1) and
-    the effect's own prior; effect parameters are clipped into their bounds after each step.
-    Geometry-stage parameters recompute stage 1 for their Jacobian columns, the others only
-    stage 2 (:mod:`calibration.effects`).
+    the effect's own prior; effect parameters are kept within their bounds. The Jacobian is
+    analytic where the effect provides its columns (:func:`calibration.effects.jacobians`);
+    otherwise the effect's columns are forward differences, geometry-stage parameters
+    recomputing stage 1 and the others only stage 2 (:mod:`calibration.effects`).
 
     Parameters
     ----------
@@ -213,76 +217,39 @@ def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=Non
     prior_sd = np.r_[_BASE_PRIOR_SD, [] if effect is None else effect.prior_sd]
     steps = np.r_[np.ones(10), [] if effect is None else effect.fd_step]
     small = np.r_[_BASE_STEP_TOL, [] if effect is None else 1e-3 * effect.fd_step]
+    unbounded = np.full(10, np.inf)
+    lower = np.r_[-unbounded, [] if effect is None else effect.bounds[:, 0]]
+    upper = np.r_[unbounded, [] if effect is None else effect.bounds[:, 1]]
     geo_param = np.r_[np.zeros(10, bool),
                       np.full(k, effect is not None and effect.stage == "geometry")]
 
     def split(theta):
         return theta[:10], (theta[10:] if k else None)
 
-    def evaluate(theta, geo=None):
+    def residual(theta, geo=None):
         b, p = split(theta)
         if geo is None:
             geo = geometry(ctx, effect, p)
-        r = (outputs(ctx, geo[0], geo[1], b, effect, p)[valid] - y) / sigma_V
-        return np.r_[r, (theta - prior_mu) / prior_sd], geo
+        return outputs(ctx, geo[0], geo[1], b, effect, p)[valid] - y, geo
 
-    def jacobian(theta, geo, r0):
-        J = np.zeros((r0.size, theta.size))
+    def jacobian(theta, r0, geo, columns):
         b, p = split(theta)
-        m = int(valid.sum())
         Jb, Je = jacobians(ctx, geo[0], geo[1], b, effect, p)
-        J[:m, :10] = Jb[valid] / sigma_V
-        J[m:, :] = np.diag(1.0 / prior_sd)
+        J = np.zeros((r0.size, theta.size))
+        J[:, :10] = Jb[valid]
         if Je is not None:
-            J[:m, 10:] = Je[valid] / sigma_V
-            return J
-        for j in range(10, theta.size):  # effect columns by forward differences
-            t = theta.copy()
-            t[j] += steps[j]
-            rj, _ = evaluate(t, None if geo_param[j] else geo)
-            J[:, j] = (rj - r0) / steps[j]
-        return J
+            J[:, 10:] = Je[valid]
+        else:
+            for j in range(10, theta.size):  # effect columns by forward differences
+                t = theta.copy()
+                t[j] += steps[j]
+                J[:, j] = (residual(t, None if geo_param[j] else geo)[0] - r0) / steps[j]
+        return J[:, columns]
 
-    def run(theta, iters):
-        r, geo = evaluate(theta)
-        cost = r @ r
-        lam = 1e-3
-        it, converged = 0, False
-        for it in range(1, iters + 1):
-            J = jacobian(theta, geo, r)
-            JtJ = J.T @ J
-            g = J.T @ r
-            # active set: effect parameters held at a bound the descent direction points out of
-            free = np.ones(theta.size, bool)
-            if k:
-                lo, hi = effect.bounds[:, 0], effect.bounds[:, 1]
-                pe = theta[10:]
-                free[10:] = ~(((pe <= lo) & (g[10:] > 0)) | ((pe >= hi) & (g[10:] < 0)))
-            Jf = JtJ[np.ix_(free, free)]
-            improved = False
-            for _ in range(12):
-                delta = np.zeros(theta.size)
-                A = Jf + lam * np.diag(np.diag(Jf) + 1e-12)
-                delta[free] = -np.linalg.solve(A, g[free])
-                trial = theta + delta
-                if k:
-                    trial[10:] = effect.clip(trial[10:])
-                r_t, geo_t = evaluate(trial)
-                cost_t = r_t @ r_t
-                if cost_t <= cost:
-                    improved = True
-                    break
-                lam *= 10.0
-            if not improved:
-                converged = True  # no descent direction left at this damping: a minimum
-                break
-            rel = (cost - cost_t) / max(cost, 1e-300)
-            theta, r, geo, cost = trial, r_t, geo_t, cost_t
-            lam = max(lam / 10.0, 1e-9)
-            if rel < tol or np.all(np.abs(delta) < small):
-                converged = True
-                break
-        return theta, cost, it, converged, r, geo
+    def run(theta, iters, covariance=False):
+        return levenberg_marquardt(residual, jacobian, theta, prior_mu, prior_sd, lower=lower,
+                                   upper=upper, sigma=sigma_V, max_iter=iters, tol=tol,
+                                   step_tol=small, covariance=covariance)
 
     starts = [np.r_[b0]] if effect is None else [
         np.r_[b0, effect.clip(s)] for s in ([effect0] if effect0 is not None
@@ -291,19 +258,11 @@ def fit_model(ctx: Context, U, valid, effect: Effect | None = None, *, base0=Non
         # screen a coarse grid (e.g. whole and half hours of a clock offset) at zero
         # iterations and keep the best three as starts
         grid = effect.coarse_starts(ctx, b0)
-        costs = [run(g, 0)[1] for g in grid]
+        costs = [run(g, 0).cost for g in grid]
         starts = starts + [grid[i] for i in np.argsort(costs)[:3]]
     if len(starts) > 1:  # a few iterations from each start, then continue the best
-        trials = [run(s, 2) for s in starts]
-        best = min(trials, key=lambda t: t[1])[0]
+        best = min((run(s, 2) for s in starts), key=lambda f: f.cost).theta
     else:
         best = starts[0]
-    theta, cost, it, converged, r, geo = run(best, max_iter)
-    J = jacobian(theta, geo, r)
-    m = int(valid.sum())
-    dof = max(m - theta.size, 1)
-    chi2 = float(np.sum(r[:m] ** 2))
-    cov = np.linalg.pinv(J.T @ J) * max(1.0, chi2 / dof)
-    return FitResult(theta.copy(), float(cost), float(np.sqrt(chi2 / max(m, 1)) * sigma_V), it,
-                     converged, cov, None, slice(N_BASE, theta.size))
-
+    return replace(run(best, max_iter, covariance=True), free=None,
+                   effect=slice(N_BASE, best.size))

@@ -4,10 +4,11 @@ The Jacobian is formed by forward differences, several columns per model evaluat
 columns touch disjoint readings (Curtis, Powell & Reid 1974 [1]_): the gains and offsets of the
 k-th photodiode of every unit in one evaluation, all polarizer offsets in one, all per-sweep
 heading offsets in one. Output-stage columns reuse the sky sampled at the current point; only
-heading and effect columns sample the sky again. The step solves the damped normal equations
-of the maximum a-posteriori objective ``sum(r^2) / sigma^2 + sum(((theta - mu) / sd)^2)``
-(Marquardt 1963 [2]_), the weak prior fixing directions the data leave free (a unit's common
-gain, which the profiled radiance absorbs); parameters are clipped into their bounds.
+heading and effect columns sample the sky again. The fit is the Levenberg-Marquardt (Marquardt
+1963 [2]_) maximum a-posteriori fit of :func:`calibration.diagnosis.lm.levenberg_marquardt`,
+objective ``sum(r^2) / sigma^2 + sum(((theta - mu) / sd)^2)``, the weak prior fixing
+directions the data leave free (a unit's common gain, which the profiled radiance absorbs);
+parameters are kept within their bounds.
 
 References
 ----------
@@ -27,9 +28,8 @@ from dataclasses import dataclass, replace
 import numpy as np
 import scipy.sparse as sp
 
-from skysim.exceptions import InvalidParameterError
-
 from ..diagnosis.fit_result import FitResult
+from ..diagnosis.lm import TRUST_REGION, levenberg_marquardt
 from .forward import Forward
 from .instrument import Instrument
 
@@ -208,7 +208,6 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     FitResult
         ``converged`` is False when ``max_iter`` was reached (reported by the caller).
     """
-    theta = np.asarray(theta0, float).copy()
     L = fwd.layout
     free = np.ones(L.size, bool) if free is None else np.asarray(free, bool).copy()
     free &= _not_calibrated(fwd)             # calibrated pointing: held
@@ -216,70 +215,28 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
     # readings, the DoP scale of normalised ones) is held: free, it would follow its prior
     # or wander to a bound, and be reported as a finding
     free &= ~(fwd.held_by_readings() | fwd.absorbed_by_profile())
-    pri = priors or Priors.for_model(fwd, theta)
-    theta = np.clip(theta, pri.lower, pri.upper)
+    pri = priors or Priors.for_model(fwd, np.asarray(theta0, float))
     usable_idx = np.flatnonzero(fwd.usable.ravel())
-    fidx = np.flatnonzero(free)
-    w_prior = np.where(np.isfinite(pri.sd[fidx]), 1.0 / pri.sd[fidx] ** 2, 0.0)
 
-    def cost_of(t, r):
-        dp = (t[fidx] - pri.mu[fidx])
-        return float(np.sum(r.ravel()[usable_idx] ** 2) / sigma ** 2 + np.sum(w_prior * dp ** 2))
+    def residual(t):
+        # a trial outside the model's valid range (a clock that puts the sun below the
+        # horizon, a unit that looks below it) raises InvalidParameterError: damped, retried
+        obs = fwd.observe(t)
+        r = fwd.residual(t, obs)
+        return r.ravel()[usable_idx], (r, obs)
 
-    obs = fwd.observe(theta)
-    r = fwd.residual(theta, obs)
-    cost = cost_of(theta, r)
-    lam, converged, it = 1e-3, False, 0
-    for it in range(1, max_iter + 1):
-        J = _jacobian(fwd, theta, r, obs, free, pri.step, usable_idx)
-        A = (J.T @ J).toarray() / sigma ** 2 + np.diag(w_prior)
-        g = J.T @ r.ravel()[usable_idx] / sigma ** 2 + w_prior * (theta[fidx] - pri.mu[fidx])
-        improved = False
-        for _ in range(10):
-            M = A + lam * np.diag(np.maximum(np.diag(A), 1e-12))
-            try:
-                delta = -np.linalg.solve(M, g)
-            except np.linalg.LinAlgError:
-                lam *= 10.0
-                continue
-            t_new = theta.copy()
-            t_new[fidx] += delta
-            t_new = np.clip(t_new, pri.lower, pri.upper)
-            try:
-                obs_new = fwd.observe(t_new)
-            except InvalidParameterError:
-                # the step left the model's valid range (a clock that puts the sun below the
-                # horizon, a unit that looks below it): a failed step, damp and retry
-                lam *= 4.0
-                continue
-            r_new = fwd.residual(t_new, obs_new)
-            c_new = cost_of(t_new, r_new)
-            if c_new < cost:
-                rel = (cost - c_new) / max(cost, 1e-300)
-                theta, obs, r, cost = t_new, obs_new, r_new, c_new
-                lam = max(lam / 3.0, 1e-9)
-                improved = True
-                break
-            lam *= 4.0
-        if not improved or rel < tol:
-            converged = True
-            break
-    cov = None
-    if covariance:
-        joint = free.copy()
-        if profiled is not None:
-            joint |= (np.asarray(profiled, bool) & _not_calibrated(fwd)
-                      & ~fwd.held_by_readings() & ~fwd.absorbed_by_profile())
-        jidx = np.flatnonzero(joint)
-        J = _jacobian(fwd, theta, r, obs, joint, pri.step, usable_idx)
-        w_joint = np.where(np.isfinite(pri.sd[jidx]), 1.0 / pri.sd[jidx] ** 2, 0.0)
-        A = (J.T @ J).toarray() / sigma ** 2 + np.diag(w_joint)
-        dof = max(usable_idx.size - fidx.size, 1)
-        chi2 = float(np.sum(r.ravel()[usable_idx] ** 2) / sigma ** 2) / dof
-        keep = np.flatnonzero(free[jidx])     # the free parameters' rows of the joint one
-        cov = (np.linalg.pinv(A) * max(chi2, 1.0))[np.ix_(keep, keep)]
-    rms = float(np.sqrt(np.mean(r.ravel()[usable_idx] ** 2))) if usable_idx.size else np.nan
-    return FitResult(theta, cost, rms, it, converged, cov, free)
+    def jacobian(t, _, state, columns):
+        return _jacobian(fwd, t, state[0], state[1], columns, pri.step, usable_idx)
+
+    if profiled is not None:
+        profiled = (np.asarray(profiled, bool) & _not_calibrated(fwd)
+                    & ~fwd.held_by_readings() & ~fwd.absorbed_by_profile())
+    # the schedule and the bound handling with which the ring's diagnoses and identifiability
+    # matrix are measured: a trust-region schedule, trials clipped into the bounds
+    return levenberg_marquardt(residual, jacobian, theta0, pri.mu, pri.sd, lower=pri.lower,
+                               upper=pri.upper, free=free, sigma=sigma, max_iter=max_iter,
+                               tol=tol, damping=TRUST_REGION, hold_at_bounds=False,
+                               covariance=covariance, profiled=profiled)
 
 
 def geometry_mask(fwd: Forward) -> np.ndarray:
