@@ -44,7 +44,9 @@ def test_readme_python_blocks_run_in_order(tmp_path, monkeypatch, capsys):
 
 @pytest.mark.parametrize("block", python_blocks(), ids=lambda b: b.splitlines()[0][:40])
 def test_readme_python_blocks_compile(block):
+    """Each README python block is valid Python: it compiles to a module code object."""
     try:
-        compile(block, "README.md", "exec")
+        code = compile(block, "README.md", "exec")
     except SyntaxError as exc:
         pytest.fail(f"README python block does not compile: {exc}")
+    assert code.co_filename == "README.md"
