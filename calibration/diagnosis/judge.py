@@ -29,7 +29,7 @@ from . import core
 from .errors import InsufficientDataError
 from .report import Verdict
 
-__all__ = ["FoldFit", "HeldOut", "cross_validate", "score", "verdict"]
+__all__ = ["FoldFit", "HeldOut", "cross_validate", "fold_mean_se", "score", "verdict"]
 
 
 @dataclass
@@ -55,6 +55,56 @@ class FoldFit:
     converged: bool = True
     sd: list | None = None
     state: object = None
+
+
+def fold_mean_se(values, sds=None) -> tuple[float | None, float | None, float | None]:
+    """Standard error of a parameter's mean over ``k`` cross-validation folds, each fitted
+    on the other ``k - 1`` blocks of data.
+
+    The mean over folds stands for a fit of every block. Its SE is the larger of two:
+
+    - the model's, ``sqrt(mean(sd_f^2) (k - 1) / k)``: each fold's posterior SD ``sd_f`` is
+      that of a fit on ``(k - 1) / k`` of the data, and a fit on all of it has that variance
+      times ``(k - 1) / k``;
+    - the delete-a-group jackknife's over the folds, ``sqrt((k - 1) / k sum_f (v_f -
+      mean v)^2)`` (Efron & Stein 1981; Shao & Tu 1995, sect. 2.1): each fold's value is the
+      estimate with one group deleted. It reads the spread between blocks that a form wrong
+      for these data leaves, which the model's SD does not see. For two folds (disjoint
+      halves) it is the SE of the mean of two independent fits, ``std_f / sqrt(2)``.
+
+    Under noise alone both estimate the same variance and the larger one gives z-scores with
+    an RMS of ``sqrt(1 - 1/e + E1(1))`` = 0.92 for three folds of a linear-Gaussian
+    estimator (the jackknife's variance there is the model's times an Exp(1) variate);
+    adding the two in quadrature counts the same noise twice (RMS 0.72).
+
+    Parameters
+    ----------
+    values : array (k,)
+        The parameter as each fold fitted it.
+    sds : sequence of float or None, optional
+        Each fold's posterior SD (None where its fit gives none; the model's SE is read
+        from the folds that give one).
+
+    Returns
+    -------
+    se, model_se, jackknife_se : float or None
+        The SE, and the two it is the larger of (None where it cannot be read: the model's
+        when no fold has an SD, the jackknife's for one fold). ``se`` is None when neither
+        can be read.
+
+    References
+    ----------
+    .. [1] B. Efron and C. Stein, "The jackknife estimate of variance", Ann. Statist. 9,
+       586-596 (1981).
+    .. [2] J. Shao and D. Tu, *The Jackknife and Bootstrap* (Springer, 1995).
+    """
+    v = np.asarray(values, float)
+    k = v.size
+    sd = [s for s in (sds or []) if s is not None]
+    model = float(np.sqrt(np.mean(np.square(sd)) * max(k - 1, 1) / k)) if k and sd else None
+    jack = float(np.sqrt((k - 1) / k * np.sum((v - v.mean()) ** 2))) if k > 1 else None
+    known = [x for x in (model, jack) if x is not None]
+    return (max(known) if known else None), model, jack
 
 
 @dataclass

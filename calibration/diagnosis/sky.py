@@ -507,22 +507,16 @@ def _fold_params(eff: SkyCandidate, fits: list) -> dict:
     """A candidate's parameters over its fold fits.
 
     One fold (a given split): its fit's values and standard errors. ``k`` folds (each case
-    held out once): the mean over folds, with the larger of two standard errors, (a) that of
-    a fit on every case, ``sqrt(mean(se_f^2) (k - 1) / k)`` (each fold fits ``(k - 1) / k``
-    of the cases: exact for two disjoint folds), and (b) the spread of the fold values,
-    ``std_f / sqrt(k)``, which a candidate whose form is wrong for these data widens beyond
-    (a): it disagrees between suns.
+    held out once): the mean over folds, with the larger of the SE of a fit on every case and
+    the folds' jackknife SE (:func:`.judge.fold_mean_se`), which a candidate whose form is
+    wrong for these data widens beyond the first: it disagrees between suns.
     """
     P = np.array([f.params for f in fits], float)
     k = len(fits)
     out = {}
     for j, (name, unit) in enumerate(zip(eff.parameter_names, eff.units)):
-        sds = [f.sd[j] for f in fits if f.sd is not None and f.sd[j] is not None]
-        se = None
-        if len(sds) == k:
-            se = float(np.sqrt(np.mean(np.square(sds)) * (max(k - 1, 1) / k)))
-            if k > 1:
-                se = max(se, float(np.std(P[:, j], ddof=1) / np.sqrt(k)))
+        sds = [f.sd[j] if f.sd is not None else None for f in fits]
+        se = judge.fold_mean_se(P[:, j], sds)[0] if None not in sds else None
         out[name] = {"value": float(P[:, j].mean()), "unit": unit, "se": se}
         if k > 1:
             out[name]["fold_values"] = P[:, j].tolist()

@@ -1426,16 +1426,18 @@ def _at_null(effect, P) -> bool:
 
 def _fold_params(effect, P, sds) -> dict:
     """Mean over folds of each effect parameter, its spread over folds and its uncertainty:
-    the root sum of squares of the mean posterior SD of the folds' fits (:func:`_effect_sd`)
-    and the spread between folds."""
+    the SE of the fold mean (:func:`.judge.fold_mean_se`), the larger of the folds' posterior
+    SD (:func:`_effect_sd`) scaled to a fit of every sweep and the folds' jackknife SE, each
+    reported beside it."""
     out = {}
     for j, (n, un) in enumerate(zip(effect.parameter_names, effect.units)):
         out[n] = {"value": float(np.mean(P[:, j])), "fold_spread": float(np.std(P[:, j])),
                   "unit": un}
         sd = [f[j] for f in sds if f[j] is not None]
         if sd:
-            out[n]["uncertainty"] = float(np.sqrt(np.mean(np.square(sd))
-                                                  + np.var(P[:, j])))
+            se, model, jack = judge.fold_mean_se(P[:, j], sd)
+            out[n].update(uncertainty=se, uncertainty_model=model,
+                          uncertainty_jackknife=jack)
     return out
 
 
