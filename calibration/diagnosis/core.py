@@ -158,7 +158,9 @@ class Thresholds:
     aureole and stray light
     (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there);
     the three-pair sensor ``min_share=0.9``
-    (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`).
+    (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`); the sky field the ground
+    albedo confusable with the multiple-scattering sky
+    (:data:`calibration.diagnosis.sky.DEFAULT_THRESHOLDS`).
 
     Raises
     ------
