@@ -6,6 +6,8 @@ set-up (a closed loop), so the stream count changes neither side's consistency, 
 (tau, albedo, sun) in the process, so the cases below share most calls.
 """
 
+import dataclasses
+
 import numpy as np
 import pytest
 
@@ -238,8 +240,17 @@ def test_ground_albedo_within_two_se_of_black_is_not_named(monkeypatch, albedo_s
                 "se": {"tau": 1e-3, "albedo": albedo_se}, "gap": FLOOR,
                 "engine_evaluations": 0, "seconds": 0.0}
     monkeypatch.setattr(sky, "fit_tau", fit)
+    # the null rule alone: thresholds without the sky's confusable table
+    alone = dataclasses.replace(sky.DEFAULT_THRESHOLDS, confusable=())
     d = diagnose_sky(c, [0], candidates=("d_max", "ground_albedo"), noise_floor=FLOOR,
-                     settings=settings)
+                     settings=settings, thresholds=alone)
     assert d.verdict.effect == verdict, d.verdict.reason
     if verdict == "unexplained":
         assert "indistinguishable from its null" in d.verdict.reason
+    else:
+        # with the sky's table the ground is not named alone while the multiple-scattering
+        # sky it can be mistaken for was not tried
+        v = diagnose_sky(c, [0], candidates=("d_max", "ground_albedo"), noise_floor=FLOOR,
+                         settings=settings).verdict
+        assert (v.effect, v.group) == ("group", ["ground_albedo", "multiple_scattering"])
+        assert "multiple_scattering, which was not tried" in v.reason

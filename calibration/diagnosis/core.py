@@ -53,7 +53,16 @@ candidate effect on held-out data; everything that turns them into a verdict is 
    ``min_share`` (0.5) of the excess. Otherwise the verdict is ``group`` (the candidates
    within 2 paired SE of the best, with what would separate them where they say),
    ``partly_explained`` (the best removes a significant share below ``min_share``) or
-   ``unexplained``. Two options of the rule for instruments that need them:
+   ``unexplained``. Where an instrument's identifiability matrix shows that the data can
+   make one candidate stand in for another (simulated with the one, diagnosed without it,
+   the other was named), :attr:`Thresholds.confusable` lists the pair, and a candidate is
+   named alone only when each candidate it can be mistaken for was tried (among the
+   candidates and applicable) and lost (beaten by more than 2 paired SE, or no better than
+   the base model): a verdict cannot rule out an effect it did not try, and an effect that
+   was tried and not beaten is as good an explanation. Otherwise the verdict is a ``group``
+   of the best and those confusers, and a confuser left so joins the list of every
+   ``group`` or ``partly_explained`` verdict. Two options of the rule for instruments that
+   need them:
    ``block_consistency`` also requires the candidate to lower the held-out sum of squares in
    at least that fraction of the held-out blocks (:func:`blocks_improved`), and an adapter
    that can tell a fitted effect from its null (the ring's clock offset against its
@@ -93,6 +102,7 @@ References
 
 from __future__ import annotations
 
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -136,16 +146,28 @@ class Thresholds:
         part may come from a few blocks alone (one sweep the fit happens to suit); a
         candidate that removes nearly all the excess lowers every block's gap anyway.
 
-    The ring (photodiode) instruments use ``block_consistency=0.75``
+    confusable : mapping ``name -> tuple of names``
+        Per candidate, the candidates the instrument's identifiability matrix showed it can
+        be mistaken for (``{"aureole": ("stray_light",)}``: with the stray light withheld,
+        a stray-light sky was named ``aureole``). A candidate is then named alone only when
+        each of these was tried and lost (:func:`decide`). Given as any mapping (or as
+        ``(name, names)`` pairs); kept as sorted ``(name, tuple of names)`` pairs so that the
+        thresholds stay frozen and hashable (:meth:`confusers` reads it). Default: none.
+
+    The ring (photodiode) instruments use ``block_consistency=0.75`` and the confusable
+    aureole and stray light
     (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there);
     the three-pair sensor ``min_share=0.9``
-    (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`).
+    (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`); the sky field the ground
+    albedo confusable with the multiple-scattering sky
+    (:data:`calibration.diagnosis.sky.DEFAULT_THRESHOLDS`).
 
     Raises
     ------
     ThresholdsError
-        For a negative margin, or a ``residual_excess`` or ``block_consistency`` outside
-        [0, 1].
+        For a negative margin, a ``residual_excess`` or ``block_consistency`` outside
+        [0, 1], or a ``confusable`` that is not a mapping of candidate names to tuples of
+        other candidate names.
     """
 
     none_margin: float = 0.10
@@ -159,8 +181,11 @@ class Thresholds:
     paired_se: float = 2.0
     """Paired standard errors by which a named effect beats every other candidate and the
     base model (2: a one-sided ~2 % chance that noise alone orders two equal candidates)."""
+    confusable: tuple = ()
+    """``((name, (other, ...)), ...)``: the candidates each can be mistaken for (above)."""
 
     def __post_init__(self):
+        object.__setattr__(self, "confusable", _frozen_confusable(self.confusable))
         for name in ("none_margin", "explained_margin"):
             if not getattr(self, name) >= 0:
                 raise ThresholdsError(f"Thresholds.{name}={getattr(self, name)!r}: expected "
@@ -172,6 +197,10 @@ class Thresholds:
                 raise ThresholdsError(f"Thresholds.{name}={getattr(self, name)!r}: expected "
                                       "a fraction in [0, 1]")
 
+    def confusers(self, name: str) -> tuple[str, ...]:
+        """The candidates ``name`` can be mistaken for (empty when none is listed)."""
+        return dict(self.confusable).get(name, ())
+
     def for_blocks(self, n_blocks: int) -> Thresholds:
         """These thresholds with ``paired_se`` applied as Student's t for ``n_blocks``
         held-out blocks (:func:`paired_margin`): what the verdict applies and the report
@@ -182,7 +211,44 @@ class Thresholds:
         return {"none_margin": self.none_margin, "explained_margin": self.explained_margin,
                 "residual_excess": self.residual_excess,
                 "block_consistency": self.block_consistency, "min_share": self.min_share,
-                "paired_se": self.paired_se}
+                "paired_se": self.paired_se,
+                "confusable": {name: list(others) for name, others in self.confusable}}
+
+
+def _frozen_confusable(value) -> tuple:
+    """``value`` (a mapping ``name -> names``, or ``(name, names)`` pairs) as sorted
+    ``(name, tuple of names)`` pairs, names without repeats; :class:`ThresholdsError`
+    naming the offending entry otherwise."""
+    if isinstance(value, Mapping):
+        pairs = list(value.items())
+    else:
+        try:
+            pairs = [tuple(p) for p in value]
+        except TypeError:
+            pairs = None
+        if (isinstance(value, (str, bytes)) or pairs is None
+                or any(len(p) != 2 for p in pairs)):
+            raise ThresholdsError(f"Thresholds.confusable={value!r}: expected a mapping "
+                                  "of candidate name -> tuple of candidate names")
+    out = {}
+    for name, others in pairs:
+        if not isinstance(name, str) or not name:
+            raise ThresholdsError(f"Thresholds.confusable key {name!r}: expected a "
+                                  "candidate name (a non-empty string)")
+        if isinstance(others, (str, bytes)) or not isinstance(others, Iterable):
+            raise ThresholdsError(f"Thresholds.confusable[{name!r}]={others!r}: expected a "
+                                  "tuple of candidate names (one name is ('name',))")
+        others = tuple(dict.fromkeys(others))
+        for o in others:
+            if not isinstance(o, str) or not o or o == name:
+                raise ThresholdsError(
+                    f"Thresholds.confusable[{name!r}] lists {o!r}: expected the name of "
+                    f"another candidate than {name!r}")
+        if name in out:
+            raise ThresholdsError(f"Thresholds.confusable lists {name!r} twice")
+        if others:
+            out[name] = others
+    return tuple(sorted(out.items()))
 
 
 def paired_margin(paired_se: float, n_blocks: int) -> float:
@@ -796,12 +862,19 @@ def decide(candidates, gap_before: float, floor: float,
         standard errors, (b)
         converged with no parameter at a bound, (c) removes at least
         ``thresholds.min_share`` of the excess held-out variance (and meets the instrument's
-        options: ``block_consistency``, a null excluded); otherwise ``none``, ``group``,
-        ``partly_explained`` or ``unexplained``, with the reason.
+        options: ``block_consistency``, a null excluded) and (d) every candidate
+        ``thresholds.confusable`` lists for it was tried and lost: it is among
+        ``candidates``, applicable, and beaten by more than ``paired_se`` paired SE or no
+        better than the base model by that margin. Otherwise ``none``, ``group``,
+        ``partly_explained`` or ``unexplained``, with the reason. A confuser that fails (d)
+        joins the candidates a ``group`` or ``partly_explained`` verdict lists, whichever
+        path it takes, and the reason says which one was not tried, not applicable or not
+        beaten.
     """
     t = thresholds or Thresholds()
     if gap_before <= floor * (1 + t.none_margin):
         return Decision("none", "held-out gap within the noise floor")
+    candidates = list(candidates)
     rows = rank([c for c in candidates if c.available])
     if not rows:
         return Decision("unexplained", "no candidate effect was applicable")
@@ -821,22 +894,30 @@ def decide(candidates, gap_before: float, floor: float,
     # its range has the wrong form for these data, as a ground albedo pressed to 0)
     group = [best.effect] + [c.effect for c in rows[1:]
                              if not _beaten(c, k) and _beats_base(c, k) and not c.at_bound]
+    # the candidates the identifiability matrix showed the listed ones can be mistaken for,
+    # where they were not tried here or not beaten: they join the list (the data did not
+    # rule them out), in every verdict that lists candidates
+    untold = _untold_confusers(group, candidates, k, t)
+    listed = group + [e for e, _, _ in untold]
+    confused = "".join(
+        f"; the instrument's identifiability matrix shows that {of} can be mistaken for {e}, "
+        f"which {why}" for e, of, why in untold)
     separate = {c.effect: c.details["separated_by"] for c in rows
-                if c.effect in group and c.details.get("separated_by")}
+                if c.effect in listed and c.details.get("separated_by")}
+    how = "; ".join(f"{e}: {m}" for e, m in separate.items())
     if share < t.min_share:
         return Decision("partly_explained", (
             f"{best.effect} removes {share_txt} of the excess held-out variance over the "
             f"noise floor, less than the {100 * t.min_share:.0f} % needed to name it"
             + (f"; indistinguishable from {', '.join(group[1:])} within {k:g} paired SE"
-               if len(group) > 1 else "")), group if len(group) > 1 else [], share,
-            share_se, separate)
+               if len(group) > 1 else "") + confused), listed if len(listed) > 1 else [],
+            share, share_se, separate)
     if len(group) > 1:
-        how = "; ".join(f"{e}: {m}" for e, m in separate.items())
         return Decision("group", (
             f"{', '.join(group)} lower the held-out gap alike: none beats the others by more "
             f"than {k:g} paired standard errors ({best.effect} removes {share_txt} of the "
-            "excess)" + (f"; to separate them: {how}" if how else "")), group, share,
-            share_se, separate)
+            "excess)" + confused + (f"; to separate them: {how}" if how else "")), listed,
+            share, share_se, separate)
     if best.at_bound:
         return Decision("unexplained", (
             f"best candidate {best.effect} removes {share_txt} of the excess but its fitted "
@@ -858,12 +939,53 @@ def decide(candidates, gap_before: float, floor: float,
             f"best candidate {best.effect} removes {share_txt} of the excess but lowers the "
             f"gap in fewer than {100 * t.block_consistency:.0f} % of the held-out "
             f"{t.block_name}"), share=share, share_se=share_se)
+    if untold:
+        return Decision("group", (
+            f"{best.effect} beats the base model and every other candidate tried that "
+            f"improves on it by more than {k:g} paired standard errors and removes "
+            f"{share_txt} of the excess, but it is not named alone" + confused
+            + (f"; to separate them: {how}" if how else "")), listed, share, share_se,
+            separate)
     return Decision(best.effect, (
         f"{best.effect} beats the base model and every other candidate that improves on it "
         f"by more than {k:g} paired standard errors on the same held-out {t.block_name} and "
         "removes "
         f"{share_txt} of the excess held-out variance over the noise floor (at least "
         f"{100 * t.min_share:.0f} % needed)"), [], share, share_se)
+
+
+def _untold_confusers(members, candidates, k: float, t: Thresholds) -> list:
+    """``(name, of, why)`` for each candidate that ``t.confusable`` says a listed one
+    (``members``, then those added, in turn) can be mistaken for, and that was not tried
+    here (not among ``candidates``, or not applicable) or was tried and not beaten: it does
+    not lose to the best by more than ``k`` paired SE and it improves on the base model by
+    more than ``k`` (:func:`_beats_base`). A tried confuser at a bound of its range is not
+    beaten by that: the bound says its form or range does not suit these data, not that
+    the other effect is the one present. ``of`` is the listed candidate it is mistaken
+    for, ``why`` completes "which ..." in the verdict's reason."""
+    if not t.confusable:
+        return []
+    tried = {c.effect: c for c in candidates}
+    listed, out = list(members), []
+    for of in listed:                       # grows as confusers join
+        for e in t.confusers(of):
+            if e in listed:
+                continue
+            c = tried.get(e)
+            if c is None:
+                why = "was not tried (not among the candidates)"
+            elif not c.available:
+                na = c.not_applicable or f"not applicable: {c.error or 'unavailable'}"
+                why = f"was not tried ({na})"
+            elif _beaten(c, k) or not _beats_base(c, k):
+                continue                    # tried and lost
+            else:
+                why = (f"was tried and not beaten by more than {k:g} paired standard errors"
+                       + (f" (fitted at a bound of its range: {', '.join(c.at_bound)})"
+                          if c.at_bound else ""))
+            listed.append(e)
+            out.append((e, of, why))
+    return out
 
 
 def _beats_base(c, k: float) -> bool:
@@ -906,8 +1028,10 @@ class Decision:
         A candidate's name, ``none``, ``group``, ``partly_explained`` or ``unexplained``.
     reason : str
     group : list of str
-        The candidates the data cannot tell apart (the best first), for ``group`` and, when
-        more than one, ``partly_explained``.
+        The candidates the data cannot tell apart (the best first), then those the
+        instrument's identifiability matrix shows a listed one can be mistaken for and that
+        were not tried or not beaten (:attr:`Thresholds.confusable`), for ``group`` and,
+        when more than one, ``partly_explained``.
     share, share_se : float or None
         The best candidate's ``explained_share`` and its jackknife SE.
     separated_by : dict
@@ -1049,8 +1173,11 @@ def judge(rows, held: dict, block, floor: float, thresholds: Thresholds | None =
         for c in avail[1:]:
             c.paired_difference, c.paired_difference_se = paired_difference(
                 scaled, c.effect, best, block)
+    # ``explained``: the candidate's own fit meets the rule (a)-(c); whether another effect
+    # could stand in for it (``confusable``) is the verdict's question, not this column's
+    solo = replace(t, confusable=())
     for c in avail:
-        alone = decide([c], gap_before, floor, t)
+        alone = decide([c], gap_before, floor, solo)
         c.explained = alone.effect == c.effect
     decision = decide(rows, gap_before, floor, t)
     if single and decision.effect != "none":

@@ -110,7 +110,11 @@ _ALBEDO_NODES = (0.0, 0.5, 1.0)
 PARAMETER_BOUNDS = {"d_max": (0.0, 1.0), "tau": TAU_BOUNDS, "albedo": (0.0, 1.0)}
 """Range searched for each sky parameter (a fit at a bound: the candidate's form is wrong
 for these data or the range too narrow)."""
-DEFAULT_THRESHOLDS = Thresholds(block_name="cases")
+DEFAULT_THRESHOLDS = Thresholds(
+    block_name="cases",
+    # what the sky's identifiability matrix measured (docs/diagnosis.md, "sky"): a
+    # multiple-scattering sky diagnosed without its candidate was named ground_albedo
+    confusable={"ground_albedo": ("multiple_scattering",)})
 NULL_SE = 2.0
 """Standard errors by which a fitted albedo must exceed 0 (a black ground, where the
 ``ground_albedo`` sky is the ``multiple_scattering`` one) for the ground to be a finding; a

@@ -48,7 +48,12 @@ from .instrument import Instrument, instrument_from_photodiodes
 __all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "orient",
            "decode_headings", "clock_mirror", "clock_sensitivity", "solar_noon_s"]
 
-RING_THRESHOLDS = Thresholds(block_consistency=0.75, block_name="sweeps")
+RING_THRESHOLDS = Thresholds(
+    block_consistency=0.75, block_name="sweeps",
+    # what the ring's identifiability matrix measured (docs/diagnosis.md, "ring"): both
+    # brighten the sky near the sun, a strong stray light is the group of the two, and with
+    # the stray light withheld the aureole is named alone
+    confusable={"aureole": ("stray_light",), "stray_light": ("aureole",)})
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.decide`):
 a candidate is named when it beats every other and the base by more than 2 paired SE on the
 same held-out sweeps (applied as Student's t for the number of sweeps,
