@@ -332,6 +332,22 @@ def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
     return out
 
 
+def _best_dop_scale(fwd: Forward, t, obs) -> tuple:
+    """``(cost, t)`` with the DoP scale of ``t`` at the least squared residual of the
+    readings under the sky sample ``obs`` (a bounded scalar search over (0, 1], to 1e-4)."""
+    from scipy.optimize import minimize_scalar
+    L = fwd.layout
+
+    def at(sc):
+        tt = t.copy()
+        tt[L.scale] = sc
+        return tt
+
+    res = minimize_scalar(lambda sc: float(np.sum(fwd.residual(at(sc), obs) ** 2)),
+                          bounds=(1e-3, 1.0), method="bounded", options={"xatol": 1e-4})
+    return float(res.fun), at(float(res.x))
+
+
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
     list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
@@ -370,6 +386,12 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
         o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
         for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
             scored.append((float(np.sum(fwd.residual(tt, o) ** 2)), tt))
+        if getattr(effect, "nominal_starts", False):
+            # the base fit's offsets, gains and DoP scale may have taken up much of the
+            # effect (unpolarized light near the sun read as dark offsets of -0.2): each start
+            # is scored on the nominal instrument too, each at its best DoP scale
+            for tb in (t, _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))):
+                scored.append(_best_dop_scale(fwd, tb, o))
     scored.sort(key=lambda x: x[0])
     n_fits = getattr(effect, "n_fits", 1)
     if n_fits == 1:
