@@ -185,6 +185,8 @@ def test_ring_thresholds_pair_the_aureole_and_the_stray_light():
     """The ring's table is the pair its identifiability matrix confused, both ways."""
     assert RING_THRESHOLDS.confusers("aureole") == ("stray_light",)
     assert RING_THRESHOLDS.confusers("stray_light") == ("aureole",)
+    assert RING_THRESHOLDS.confusers("fov") == ("neutral_points",)
+    assert RING_THRESHOLDS.confusers("neutral_points") == ("fov",)
     assert RING_THRESHOLDS.block_consistency == 0.75
 
 

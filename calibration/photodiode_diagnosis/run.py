@@ -50,10 +50,13 @@ __all__ = ["RING_THRESHOLDS", "diagnose_instrument", "diagnose_photodiodes", "or
 
 RING_THRESHOLDS = Thresholds(
     block_consistency=0.75, block_name="sweeps",
-    # what the ring's identifiability matrix measured (docs/diagnosis.md, "ring"): both
-    # brighten the sky near the sun, a strong stray light is the group of the two, and with
-    # the stray light withheld the aureole is named alone
-    confusable={"aureole": ("stray_light",), "stray_light": ("aureole",)})
+    # what the ring's identifiability matrix measured (docs/diagnosis.md, "ring"): the
+    # aureole and the stray light both brighten the sky near the sun (with the stray light
+    # withheld the aureole was named alone); a wide acceptance flattens the DoP as the
+    # neutral-point sky does (an acceptance of HWHM 45 deg is their group, and with the
+    # width withheld the neutral-point sky was named alone)
+    confusable={"aureole": ("stray_light",), "stray_light": ("aureole",),
+                "fov": ("neutral_points",), "neutral_points": ("fov",)})
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.decide`):
 a candidate is named when it beats every other and the base by more than 2 paired SE on the
 same held-out sweeps (applied as Student's t for the number of sweeps,
