@@ -330,7 +330,10 @@ def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
     list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
-    ``n_fits > 1``)."""
+    ``n_fits > 1``: the best starts at distinct centres, :func:`_distinct_centres`, taken in
+    turn from the ranking under the base fit's instrument and, for an effect on the sky the
+    base fit observed, from that under the nominal instrument at the best DoP scale of
+    :data:`DOP_SCALE_STARTS`)."""
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
