@@ -354,7 +354,10 @@ def _best_dop_scale(fwd: Forward, t, obs) -> tuple:
 def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     """Best start of an effect: its coarse candidates scored with the headings carried (a
     list of starts for the clock offset, see :func:`_clock_starts`, and for effects with
-    ``n_fits > 1``)."""
+    ``n_fits > 1``: the best starts at distinct centres, :func:`_distinct_centres`, taken in
+    turn from the ranking under the base fit's instrument and, for an effect on the sky the
+    base fit observed, from that under the nominal instrument at the best DoP scale of
+    :data:`DOP_SCALE_STARTS`)."""
     L = fwd.layout
     starts = effect.starts(None)
     if effect.name == "clock_offset":
@@ -399,8 +402,39 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     n_fits = getattr(effect, "n_fits", 1)
     if n_fits == 1:
         return scored[0][1]
-    picked = []      # the best starts that differ in their first parameter (a sector centre)
-    for _, t in scored:
+    if own_sky or effect.dop_scale_in_sky or resamples:
+        return _distinct_centres([t for _, t in scored], L, n_fits)
+    # the base fit's instrument took up part of the effect (a partly depolarizing sector:
+    # dark offsets of a third of the median reading and the DoP scale at its bound), so the
+    # starts are also scored under the nominal instrument with the best of a few DoP scales,
+    # and the picks alternate between the two rankings
+    nominal = []
+    for p in starts:
+        o = effect.modify(obs0, p, sun)
+        t = _nominal_instrument(_extend(theta_base, fwd_base, fwd, p), L,
+                                (L.lam, L.off, L.angle, L.delta))
+        nominal.append(min(_with_dop_scales(fwd, t, o), key=lambda x: x[0]))
+    nominal.sort(key=lambda x: x[0])
+    return _distinct_centres([t for pair in zip(scored, nominal) for _, t in pair], L, n_fits)
+
+
+def _with_dop_scales(fwd: Forward, t, obs):
+    """``(cost, theta)`` of ``t`` at each DoP scale of :data:`DOP_SCALE_STARTS`, the sky
+    sample ``obs`` held."""
+    L = fwd.layout
+    out = []
+    for sc in DOP_SCALE_STARTS:
+        tt = t.copy()
+        tt[L.scale] = sc
+        out.append((float(np.sum(fwd.residual(tt, obs) ** 2)), tt))
+    return out
+
+
+def _distinct_centres(ranked, L, n_fits: int) -> list:
+    """The first ``n_fits`` of the ``ranked`` starts whose first effect parameter (a sector
+    centre [deg]) lies more than 45 deg from that of every start kept before."""
+    picked = []
+    for t in ranked:
         if all(abs(wrap_deg(t[L.effect][0] - q[L.effect][0])) > 45.0 for q in picked):
             picked.append(t)
         if len(picked) == n_fits:
