@@ -28,7 +28,9 @@ def test_aureole_recovered_from_a_start_on_the_nominal_instrument(amplitude):
     """An aureole of 0.5 and 2 times the sky's radiance at the sun, falling off over 15 deg
     (the matrix's two strengths), diagnosed with the aureole alone: fitted converged, off
     its bounds, both parameters within 3 SE (measured 0.5014 +- 0.020 and 14.94 +- 0.36 deg;
-    1.9966 +- 0.051 and 15.005 +- 0.23 deg), and named. The base fit takes the strong
+    1.9966 +- 0.051 and 15.005 +- 0.23 deg), and the best candidate. Named alone it is not:
+    the stray light, which the ring's identifiability matrix confuses with it, was not tried,
+    so the verdict is their group with the aureole first. The base fit takes the strong
     aureole up in dark offsets near -0.2 and a DoP scale of 0.49 (truth 0.6): started on
     that instrument the fit ran to the amplitude's bound (50, at 5.5 deg), started on the
     nominal one at its best DoP scale it reaches the truth."""
@@ -39,4 +41,6 @@ def test_aureole_recovered_from_a_start_on_the_nominal_instrument(amplitude):
     z = {k: abs(c.params[k]["value"] - v) / c.params[k]["uncertainty"]
          for k, v in truth.items()}
     assert max(z.values()) <= Z_MAX, (z, c.params)
-    assert rep.verdict.effect == "aureole", (rep.verdict.effect, rep.verdict.group)
+    assert rep.verdict.best_candidate == "aureole"
+    assert (rep.verdict.effect, rep.verdict.group) == ("group", ["aureole", "stray_light"])
+    assert "stray_light" in rep.verdict.reason and "not tried" in rep.verdict.reason
