@@ -65,7 +65,10 @@ held-out variance over the floor, and lowers the held-out gap in at least 75 % o
 held-out sweeps. A real sky is never reproduced to the noise floor by one effect (aerosols,
 clouds, the instrument's own optics all add), so a smaller share is reported as
 ``partly_explained`` with the share rather than named; the sweep-by-sweep consistency keeps a
-candidate that wins on a few sweeps only from being named."""
+candidate that wins on a few sweeps only from being named. The pairs the ring's
+identifiability matrix confused (the aureole and the stray light, the field of view and the
+neutral-point sky) are named alone only when the other of the pair was tried and lost
+(``confusable``)."""
 
 
 def _fit_and_hold_out(fe: Forward, theta_base, base_train: Forward, effect, sigma, held_inst,
