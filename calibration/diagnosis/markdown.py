@@ -53,7 +53,7 @@ def report_markdown(r) -> str:
         lines.append(f"- share of the excess held-out variance removed by "
                      f"`{v.best_candidate}`: {100 * v.explained_share:.0f}{se} %")
     if v.group:
-        lines.append("- indistinguishable candidates: " + ", ".join(f"`{g}`" for g in v.group)
+        lines.append("- candidates not told apart: " + ", ".join(f"`{g}`" for g in v.group)
                      + "".join(f"; to separate `{e}`: {m}"
                                for e, m in (v.separated_by or {}).items()))
     he = r.extra.get("heading_error") or {}

@@ -211,7 +211,8 @@ class Verdict:
     params : dict
         The named effect's parameters (empty unless an effect is named).
     group : list of str
-        The indistinguishable candidates, best first (``group``; ``partly_explained`` when
+        The candidates the data cannot tell apart, best first, and any candidate the best
+        can be mistaken for that was not tried (``group``; ``partly_explained`` when
         several share the best's place).
     explained_share, explained_share_se : float or None
         Share of the base model's excess held-out variance over the noise floor that the
