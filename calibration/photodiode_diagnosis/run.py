@@ -340,7 +340,9 @@ def _carry_dop_scale(fwd: Forward, t, obs, base_dop: float) -> np.ndarray:
 
 def _best_dop_scale(fwd: Forward, t, obs) -> tuple:
     """``(cost, t)`` with the DoP scale of ``t`` at the least squared residual of the
-    readings under the sky sample ``obs`` (a bounded scalar search over (0, 1], to 1e-4)."""
+    readings under the sky sample ``obs`` (a bounded scalar search over (0, 1], to 1e-4):
+    for effects with few starts (the aureole's six), where the grid of
+    :func:`_with_dop_scales` would leave a start's cost off by the scale's step."""
     from scipy.optimize import minimize_scalar
     L = fwd.layout
 
@@ -386,11 +388,8 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
             # best of a few scales (each a new sky)
             # the base fit's instrument may have absorbed much of a strong effect, so
             # the nominal instrument is tried as well
-            for tb in (t, _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))):
-                for sc in DOP_SCALE_STARTS:
-                    tt = tb.copy()
-                    tt[L.scale] = sc
-                    scored.append((float(np.sum(fwd.residual(tt) ** 2)), tt))
+            for tb in (t, _nominal(t, L)):
+                scored.extend(_with_dop_scales(fwd, tb))
             continue
         o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
         for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
@@ -399,7 +398,7 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
             # the base fit's offsets, gains and DoP scale may have taken up much of the
             # effect (unpolarized light near the sun read as dark offsets of -0.2): each start
             # is scored on the nominal instrument too, each at its best DoP scale
-            for tb in (t, _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))):
+            for tb in (t, _nominal(t, L)):
                 scored.append(_best_dop_scale(fwd, tb, o))
     scored.sort(key=lambda x: x[0])
     n_fits = getattr(effect, "n_fits", 1)
@@ -414,16 +413,25 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
     nominal = []
     for p in starts:
         o = effect.modify(obs0, p, sun)
-        t = _nominal_instrument(_extend(theta_base, fwd_base, fwd, p), L,
-                                (L.lam, L.off, L.angle, L.delta))
+        t = _nominal(_extend(theta_base, fwd_base, fwd, p), L)
         nominal.append(min(_with_dop_scales(fwd, t, o), key=lambda x: x[0]))
     nominal.sort(key=lambda x: x[0])
     return _distinct_centres([t for pair in zip(scored, nominal) for _, t in pair], L, n_fits)
 
 
-def _with_dop_scales(fwd: Forward, t, obs):
-    """``(cost, theta)`` of ``t`` at each DoP scale of :data:`DOP_SCALE_STARTS`, the sky
-    sample ``obs`` held."""
+def _nominal(t, L) -> np.ndarray:
+    """``t`` with the instrument's gains, dark offsets, polarizer angles and 0/90 imbalance
+    at their nominal 0 (:func:`.effect_fit._nominal_instrument`): a start that does not carry
+    what the base fit, made without the effect, took up of it."""
+    return _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))
+
+
+def _with_dop_scales(fwd: Forward, t, obs=None):
+    """``(cost, theta)`` of ``t`` at each DoP scale of :data:`DOP_SCALE_STARTS`: the sky
+    sample ``obs`` held, or (``None``) seen anew at each scale, for an effect whose sky takes
+    the scale (:attr:`~.effects.RingEffect.dop_scale_in_sky`). The grid, not
+    :func:`_best_dop_scale`'s search, for effects with many starts (an occlusion's dozens:
+    five residuals a start instead of some twenty)."""
     L = fwd.layout
     out = []
     for sc in DOP_SCALE_STARTS:
