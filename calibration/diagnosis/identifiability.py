@@ -622,8 +622,9 @@ def _stray_level(R, shape, S, tol: float = 1e-9, max_iter: int = 100) -> float:
     with the stray light in it, the unit the ``stray_light`` candidate's strengths are in
     (its fit divides the recorded readings by their median); a truth stated in the median
     of ``R`` alone, 1.3 % lower at ``S = 0.2``, is that much above every strength the
-    candidate can fit (0.8 of its SE on a simulated ring). Fixed-point iteration from ``median(R)``: the map's slope is ``shape`` at the
-    median reading, below ``S``.
+    candidate can fit (0.003, twice the strengths' SE on a simulated ring). Fixed-point
+    iteration from ``median(R)``: the map's slope is ``shape`` at the median reading,
+    below ``S``.
 
     Raises
     ------
