@@ -525,7 +525,8 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING
         A ring candidate's name, or None for clean data.
     truth : dict
         The effect's parameters, by the candidate's parameter names (``stray_light``:
-        ``S`` (one strength for every photodiode) and ``scale_deg``).
+        ``S`` (one strength for every photodiode, in units of the session's median reading
+        with the stray light in it, as the candidate's) and ``scale_deg``).
     seed : int
         Noise seed.
     n_sweeps, per_sweep : int
