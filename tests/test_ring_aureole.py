@@ -27,8 +27,8 @@ Z_MAX = 3.0
 def test_aureole_recovered_from_a_start_on_the_nominal_instrument(amplitude):
     """An aureole of 0.5 and 2 times the sky's radiance at the sun, falling off over 15 deg
     (the matrix's two strengths), diagnosed with the aureole alone: fitted converged, off
-    its bounds, both parameters within 3 SE (measured 0.5014 +- 0.020 and 14.94 +- 0.36 deg;
-    1.9966 +- 0.051 and 15.005 +- 0.23 deg), and the best candidate. Named alone it is not:
+    its bounds, both parameters within 3 SE (measured 0.5014 +- 0.009 and 14.94 +- 0.16 deg;
+    1.9966 +- 0.006 and 15.005 +- 0.022 deg), and the best candidate. Named alone it is not:
     the stray light, which the ring's identifiability matrix confuses with it, was not tried,
     so the verdict is their group with the aureole first. The base fit takes the strong
     aureole up in dark offsets near -0.2 and a DoP scale of 0.49 (truth 0.6): started on

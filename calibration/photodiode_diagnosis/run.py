@@ -1158,8 +1158,8 @@ def _effect_sd(fe: Forward, fr, fr_aop, sigma: float) -> list:
     held pointing profiled (:func:`.fit.fit`, ``profiled``): the trade of an effect's
     parameters with the DoP scale, the gains and the offsets is in it (an overcast's
     thickness and the DoP scale correlate at 0.998 on a simulated ring). An effect with
-    ``two_step_sd`` (the acceptance's width, the occlusion) takes the two-step sandwich over
-    samples instead (:func:`_two_step_sd`)."""
+    ``two_step_sd`` (the acceptance's width, the occlusion, the aureole, the stray light)
+    takes the two-step sandwich over samples instead (:func:`_two_step_sd`)."""
     L = fe.layout
     if getattr(fe.effect, "two_step_sd", False):
         return _two_step_sd(fe, fr.theta, sigma)
@@ -1257,9 +1257,12 @@ def _sample_scores(fe: Forward, theta, free, sigma: float, dop_free: bool):
 def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
     """SD of the effect parameters of a fit whose units' pointing is read from the angle of
     polarization (the DoP profiled out, the effect held) and held in the full model's fit
-    (:func:`.fit.fit_pinned`, :func:`_pointing_under_effect`): the sandwich of the two-step
-    estimator (Newey & McFadden 1994, sect. 6 [1]_; Murphy & Topel 1985 [2]_), clustered by
-    sample.
+    (:func:`.fit.fit_pinned`, :func:`_pointing_under_effect`; for an effect that leaves the
+    angle of polarization as the base model has it, an aureole that lowers the DoP alone or
+    unpolarized stray light, which the profiled radiance takes up where it reaches a unit's
+    photodiodes alike, the base fit's reading is that of the effect's model): the sandwich
+    of the two-step estimator (Newey & McFadden 1994, sect. 6 [1]_; Murphy & Topel 1985
+    [2]_), clustered by sample.
 
     Each sample's influence on an effect parameter is its score in the full model times the
     row of the inverse information (the gains, offsets, polarizer angles, headings and DoP
@@ -1270,8 +1273,11 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
     carry most of the information at a lower relative noise and the model covariance
     ``sigma^2 A^-1`` (``sigma`` the white-noise RMS of all readings) is too wide (on
     simulated rings eight times for the acceptance's width, several times for an
-    occlusion). And the pointing's own error enters: at a ring's noise a hundredth of a
-    degree of every unit's elevation moves an acceptance of HWHM 30 deg by 0.7 deg.
+    occlusion, 3-11 times for an aureole, about three times for stray light's strengths;
+    over 40 noise draws of a short ring the aureole's and the stray light's errors spread
+    0.7-1.05 times this SD). And the pointing's own error enters: at a ring's noise a
+    hundredth of a degree of every unit's elevation moves an acceptance of HWHM 30 deg by
+    0.7 deg.
 
     References
     ----------
