@@ -242,10 +242,13 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
     from skysim.geometry import cos_sin_deg, elevation_azimuth
 
     m = sensor.n_units
-    if np.ndim(theta_deg) == 1:
-        sets = [(theta_deg, azimuth_deg, weights)] * m
-    else:
+    if isinstance(theta_deg, (list, tuple)) and theta_deg and np.ndim(theta_deg[0]) == 1:
         sets = list(zip(theta_deg, azimuth_deg, weights))
+        if len(sets) != m:
+            raise InvalidParameterError(
+                f"{len(sets)} sets of directions for a sensor of {m} units")
+    else:
+        sets = [(theta_deg, azimuth_deg, weights)] * m
     t = np.concatenate([np.asarray(s_[0], float) for s_ in sets])
     b = np.concatenate([np.asarray(s_[1], float) for s_ in sets])
     w = np.concatenate([np.asarray(s_[2], float) for s_ in sets])
