@@ -454,9 +454,10 @@ RING_START = "2022-05-12T16:01:00+02:00"
 """Start of the simulated ring sessions (afternoon sun, about 40 deg high)."""
 RING_DMAX = 0.6
 RING_CAP = (48, 24)
-"""Equal-area rings x directions per ring over which a unit's acceptance is sampled in the
-simulated field-of-view sessions (the candidate's fit uses 6 x 6 Gauss-Legendre directions:
-the generator is not the fitter's quadrature)."""
+"""Rings x directions per ring over which a unit's acceptance is sampled in the simulated
+field-of-view sessions (:func:`_cone_readings`: that many rings on the part of the
+acceptance above the horizon and as many on the band the horizon cuts; the candidate's fit
+uses Gauss-Legendre rules of 6 nodes: the generator is not the fitter's quadrature)."""
 
 
 def _modified_sky(base, kind: str, truth: dict):
