@@ -324,9 +324,9 @@ def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
         is applied after them).
     sky, att, sun_enu
         As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
-    theta_deg, azimuth_deg, weights : array_like (k,)
+    theta_deg, azimuth_deg, weights : array_like (k,), or a list of one per unit
         Directions about each unit's axis [deg] and their weights
-        (:func:`acceptance_quadrature`).
+        (:func:`acceptance_quadrature`, or :func:`horizon_quadrature`'s per-unit sets).
 
     Returns
     -------
