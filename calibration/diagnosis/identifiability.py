@@ -454,9 +454,10 @@ RING_START = "2022-05-12T16:01:00+02:00"
 """Start of the simulated ring sessions (afternoon sun, about 40 deg high)."""
 RING_DMAX = 0.6
 RING_CAP = (48, 24)
-"""Equal-area rings x directions per ring over which a unit's acceptance is sampled in the
-simulated field-of-view sessions (the candidate's fit uses 6 x 6 Gauss-Legendre directions:
-the generator is not the fitter's quadrature)."""
+"""Rings x directions per ring over which a unit's acceptance is sampled in the simulated
+field-of-view sessions (:func:`_cone_readings`: that many rings on the part of the
+acceptance above the horizon and as many on the band the horizon cuts; the candidate's fit
+uses Gauss-Legendre rules of 6 nodes: the generator is not the fitter's quadrature)."""
 
 
 def _modified_sky(base, kind: str, truth: dict):
@@ -655,22 +656,58 @@ def _cone_readings(sensor, sky, att, sun, hwhm_deg: float) -> np.ndarray:
 
     Each photodiode's Malus reading is averaged over :data:`RING_CAP` equal-area directions
     (equal steps in the cosine of the off-axis angle out to where the acceptance falls to
-    1e-8, equal steps in azimuth), each weighted by the acceptance: a rule of its own, not
-    the candidate's Gauss-Legendre one, and about thirty times finer."""
+    1e-8; on each ring, equal steps in azimuth over the part of it above the horizon, found
+    from the unit's elevation), each weighted by the acceptance and the visible part of its
+    ring, and normalised by the whole acceptance (a photodiode sees the dark ground as no
+    light): a rule of its own, not the candidate's Gauss-Legendre one, and about fourteen
+    times finer."""
     from calibration.photodiode_diagnosis.acceptance import (ACCEPTANCE_ORDER, acceptance,
-                                                             observe_directions)
+                                                             observe_directions,
+                                                             unit_up_vectors)
     K, M = RING_CAP
     t_max = min(90.0, hwhm_deg * (np.log(1e8) / np.log(2.0)) ** (1.0 / ACCEPTANCE_ORDER))
-    cos_t = 1.0 - (np.arange(K) + 0.5) / K * (1.0 - np.cos(np.radians(t_max)))
-    theta = np.repeat(np.degrees(np.arccos(cos_t)), M)
-    az = (360.0 * (np.arange(M) + 0.5 * (np.arange(K)[:, None] % 2)) / M).ravel()
-    w = acceptance(theta, hwhm_deg)
-    obs, unit, w, _ = observe_directions(sensor, sky, att, sun, theta, az, w / w.sum())
+    mid_k, mid_m = (np.arange(K) + 0.5) / K, (np.arange(M) + 0.5) / M
+
+    def rings(t0):
+        """Ring angles [deg] and solid-angle weights [sr / rad of azimuth] on [0, t_max]:
+        K equal-area rings over [0, t0], where every direction is above the horizon,
+        and K rings at t0 + (t_max - t0) s^2, equal steps in s, over the cut band, where
+        the visible arc shrinks as sqrt(theta - t0) (smooth in s)."""
+        t0 = min(t0, t_max)
+        c0 = np.cos(np.radians(t0))
+        cap = np.degrees(np.arccos(1.0 - mid_k * (1.0 - c0)))
+        w_cap = np.full(K, (1.0 - c0) / K)
+        if t0 >= t_max:
+            return cap, w_cap
+        band = t0 + (t_max - t0) * mid_k ** 2
+        w_band = np.sin(np.radians(band)) * 2.0 * np.radians(t_max - t0) * mid_k / K
+        return np.concatenate([cap, band]), np.concatenate([w_cap, w_band])
+
+    sets = ([], [], [])
+    for up in unit_up_vectors(sensor, att):
+        # a direction theta off the axis at azimuth beta from the axis's upward tilt looks
+        # at elevation arcsin(sin e cos theta + cos e sin theta cos beta)
+        sin_e, cos_e = up[2], np.hypot(up[0], up[1])
+        theta, dw = rings(90.0 - np.degrees(np.arcsin(sin_e)))
+        a = acceptance(theta, hwhm_deg) * dw
+        s_t = np.sin(np.radians(theta))
+        with np.errstate(divide="ignore", invalid="ignore"):
+            lim = np.where(cos_e * s_t > 0.0,
+                           -sin_e * np.cos(np.radians(theta)) / (cos_e * s_t), -np.inf)
+        half = np.arccos(np.clip(lim, -1.0, 1.0))                     # (rings,) [rad]
+        beta = np.degrees(half[:, None] * (2.0 * mid_m[None, :] - 1.0))
+        # the rotation about (cos b, sin b, 0) tilts the axis along (sin b, -cos b)
+        b = (beta + np.degrees(np.arctan2(up[1], up[0])) + 90.0) % 360.0
+        sets[0].append(np.repeat(theta, M))
+        sets[1].append(b.ravel())
+        # normalised by the whole acceptance (the ground dark)
+        sets[2].append(np.repeat(a * 2.0 * half / M / (2.0 * np.pi * a.sum()), M))
+    obs, unit, w, _ = observe_directions(sensor, sky, att, sun, *sets)
     out = []
     for i, u in enumerate(sensor.units):
         cols = unit == i
-        for a in u.photodiodes_deg:
-            chi = np.radians(obs.aop_unit_deg[:, cols] - a)
+        for ang in u.photodiodes_deg:
+            chi = np.radians(obs.aop_unit_deg[:, cols] - ang)
             out.append((obs.radiance[:, cols] * (1.0 + obs.dop[:, cols] * np.cos(2 * chi)))
                        @ w[cols])
     return np.stack(out, axis=1)

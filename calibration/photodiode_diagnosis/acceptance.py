@@ -49,7 +49,8 @@ from skysim.exceptions import InvalidParameterError
 __all__ = ["TORCH_SCAN", "PLATEAU_COUNTS", "ACCEPTANCE_HWHM_DEG", "ACCEPTANCE_ORDER",
            "HWHM_MAX_DEG", "fit_torch_scan", "acceptance", "acceptance_quadrature",
            "quadrature_rotations_deg", "observe_directions", "observe_axes",
-           "observe_acceptance"]
+           "observe_acceptance", "unit_up_vectors", "horizon_quadrature",
+           "observe_cut_acceptance"]
 
 TORCH_SCAN = {
     "angle_deg": np.arange(-90.0, 91.0, 10.0),
@@ -208,7 +209,7 @@ def quadrature_rotations_deg(theta_deg, azimuth_deg) -> np.ndarray:
 
 
 def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
-             drop_below: bool = True):
+             drop_below: bool = True, dark_below: bool = False):
     """Every unit's view along every direction about its axis, those below the horizon at
     any sample dropped: the geometry and the sky's light of each kept column, with the
     e-vector's components on the column's polarizer axes.
@@ -221,13 +222,17 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
 
     With ``drop_below`` False a column below the horizon at some sample raises
     :class:`~sensor.compound_eye.UnitBelowHorizonError` (naming its unit and sample), as the
-    sensor's own sampling does.
+    sensor's own sampling does. With ``dark_below`` every column is kept and ``visible``
+    says at which samples it looks above the horizon (the ground dark there only).
+
+    ``theta_deg``, ``azimuth_deg``, ``weights`` are either one set of directions (k,) shared
+    by every unit or a sequence of one set per unit (lengths may differ).
 
     Returns
     -------
     dict
-        ``unit``, ``weight``, ``theta`` (c,) of the kept columns; ``axes`` (c, 3, 3) their
-        unit-to-sensor matrices; ``view`` (n, 3, c) their views in ENU; ``elevation``,
+        ``unit``, ``weight``, ``theta`` (c,) of the kept columns; ``visible`` (n, c) bool;
+        ``axes`` (c, 3, 3) their unit-to-sensor matrices; ``view`` (n, 3, c) their views in ENU; ``elevation``,
         ``azimuth`` (n, c) [deg]; ``radiance``, ``dop`` (n, c) of the sky; ``e_x``, ``e_y``
         (n, c) the e-vector's components on each column's polarizer x and y axes.
     """
@@ -236,37 +241,48 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
     from sensor.compound_eye import UnitBelowHorizonError
     from skysim.geometry import cos_sin_deg, elevation_azimuth
 
-    w = np.asarray(weights, float)
-    t = np.asarray(theta_deg, float)
-    k = t.size
-    turn = Rotation.from_rotvec(quadrature_rotations_deg(theta_deg, azimuth_deg),
-                                degrees=True).as_matrix()                       # (k, 3, 3)
-    axes = (sensor.unit_matrices(True)[:, None] @ turn[None]).reshape(-1, 3, 3)  # (m k, 3, 3)
+    m = sensor.n_units
+    if isinstance(theta_deg, (list, tuple)) and theta_deg and np.ndim(theta_deg[0]) == 1:
+        sets = list(zip(theta_deg, azimuth_deg, weights))
+        if len(sets) != m:
+            raise InvalidParameterError(
+                f"{len(sets)} sets of directions for a sensor of {m} units")
+    else:
+        sets = [(theta_deg, azimuth_deg, weights)] * m
+    t = np.concatenate([np.asarray(s_[0], float) for s_ in sets])
+    b = np.concatenate([np.asarray(s_[1], float) for s_ in sets])
+    w = np.concatenate([np.asarray(s_[2], float) for s_ in sets])
+    sizes = np.array([np.size(s_[0]) for s_ in sets])
+    unit = np.repeat(np.arange(m), sizes)
+    turn = Rotation.from_rotvec(quadrature_rotations_deg(t, b),
+                                degrees=True).as_matrix()                       # (c, 3, 3)
+    axes = sensor.unit_matrices(True)[unit] @ turn                             # (c, 3, 3)
     R_ns = att.as_matrix().reshape(-1, 3, 3) @ sensor.body_installation().as_matrix()
     n = R_ns.shape[0]
     flat = R_ns.reshape(3 * n, 3)
     view = (flat @ axes[:, :, 2].T).reshape(n, 3, -1)
-    keep = np.all(view[:, 2, :] >= 0.0, axis=0)
+    visible = view[:, 2, :] >= 0.0
+    keep = np.ones(unit.size, bool) if dark_below else np.all(visible, axis=0)
     if not drop_below and not keep.all():
-        below = view[:, 2, :] < 0.0
+        below = ~visible
         i, c = np.argwhere(below)[0]
         el = np.degrees(np.arcsin(np.clip(view[i, 2, c], -1.0, 1.0)))
         raise UnitBelowHorizonError(
-            f"unit {c // k} looks {el:.2f} deg below the horizon at sample {i} "
+            f"unit {unit[c]} looks {el:.2f} deg below the horizon at sample {i} "
             f"({int(below.sum())} unit-samples in all); limit pitch/roll or tilt the unit up")
-    if not keep.any():
+    if not keep.any() or (dark_below and not visible.any()):
         raise UnitBelowHorizonError("every direction about every unit's axis looks below the "
                                     "horizon at some sample")
     if not keep.all():
-        axes, view = axes[keep], view[:, :, keep]
-    unit = np.repeat(np.arange(sensor.n_units), k)[keep]
+        axes, view, visible = axes[keep], view[:, :, keep], visible[:, keep]
+    unit, w, t = unit[keep], w[keep], t[keep]
     vx, vy, vz = view[:, 0, :], view[:, 1, :], view[:, 2, :]
     horiz = np.sqrt(vx * vx + vy * vy)
     el = np.degrees(np.arctan2(vz, horiz))
     az = np.degrees(np.arctan2(vx, vy))
     az[az < 0.0] += 360.0
     sun_el, sun_az = elevation_azimuth(np.asarray(sun_enu, float).reshape(-1, 3))
-    fld = sky.field(np.minimum(el, 90.0), az, sun_el[:, None], sun_az[:, None])
+    fld = sky.field(np.clip(el, 0.0, 90.0), az, sun_el[:, None], sun_az[:, None])
     # local sky basis of each view: e_el = (-sin h sin A, -sin h cos A, cos h),
     # e_az = (cos A, -sin A, 0), with sin h, cos h, sin A, cos A read off the view vector
     # (A = 0 straight up, as the view's azimuth is there)
@@ -285,8 +301,8 @@ def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
         on_el = horiz * az_ - vz * (sa * ax + ca * ay)
         on_az = ca * ax - sa * ay
         out.append(c * on_el + s * on_az)
-    return {"unit": unit, "weight": np.tile(w, sensor.n_units)[keep],
-            "theta": np.tile(t, sensor.n_units)[keep], "axes": axes, "view": view,
+    return {"unit": unit, "weight": w, "theta": t, "visible": visible, "axes": axes,
+            "view": view,
             "elevation": el, "azimuth": az, "radiance": fld.I, "dop": fld.dop,
             "e_x": out[0], "e_y": out[1]}
 
@@ -308,9 +324,9 @@ def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
         is applied after them).
     sky, att, sun_enu
         As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
-    theta_deg, azimuth_deg, weights : array_like (k,)
+    theta_deg, azimuth_deg, weights : array_like (k,), or a list of one per unit
         Directions about each unit's axis [deg] and their weights
-        (:func:`acceptance_quadrature`).
+        (:func:`acceptance_quadrature`, or :func:`horizon_quadrature`'s per-unit sets).
 
     Returns
     -------
@@ -373,8 +389,8 @@ def observe_acceptance(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
 
     ``I = sum w L``, ``Q = sum w L d cos 2 chi``, ``U = sum w L d sin 2 chi`` over each
     unit's kept directions (``chi`` in the unit's polarizer frame, carried along each
-    direction); the unit's view is the weighted mean of its directions' and its e-vector
-    in the sensor frame that of its direction nearest the axis.
+    direction); the unit's view is the weighted mean of its directions above the horizon and
+    its e-vector in the sensor frame that of its direction nearest the axis.
 
     Parameters
     ----------
@@ -386,24 +402,180 @@ def observe_acceptance(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weight
     SkySample
         One column per unit.
     """
+    cols = _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights)
+    return _stokes_average(cols, sensor.n_units)
+
+
+def _stokes_average(cols, m):
+    """One column per unit: the Stokes average of ``cols`` (:func:`_columns`), a column
+    contributing no light at the samples where it looks below the horizon."""
     from sensor.compound_eye import SkySample
     from skysim.geometry import elevation_azimuth
 
-    cols = _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights)
     unit, theta = cols["unit"], cols["theta"]
-    m = sensor.n_units
     G = np.zeros((unit.size, m))
     G[np.arange(unit.size), unit] = cols["weight"]                # (c, m): weight into unit
     ex, ey = cols["e_x"], cols["e_y"]
     # cos 2 chi and sin 2 chi of the e-vector (e_x, e_y), a unit vector
     e2 = ex * ex + ey * ey
-    Lp = cols["radiance"] * cols["dop"] / e2
-    I = cols["radiance"] @ G
+    L = np.where(cols["visible"], cols["radiance"], 0.0)
+    Lp = L * cols["dop"] / e2
+    I = L @ G
     Q = (Lp * (ex * ex - ey * ey)) @ G
     U = (Lp * (2.0 * ex * ey)) @ G
-    el, az = elevation_azimuth((cols["view"] @ G).transpose(0, 2, 1))
+    # the view: the weighted mean of the directions above the horizon at each sample
+    el, az = elevation_azimuth(((cols["view"] * cols["visible"][:, None, :]) @ G)
+                               .transpose(0, 2, 1))
     # each unit's e-vector from its direction nearest the axis (the sample's frame)
     first = np.array([np.flatnonzero(unit == u)[np.argmin(theta[unit == u])]
                       for u in range(m)])
     return SkySample(I, np.hypot(Q, U) / I, 0.5 * np.degrees(np.arctan2(U, Q)),
                      _e_vector_sensor(cols, first), el, az)
+
+
+def unit_up_vectors(sensor, att) -> np.ndarray:
+    """The local vertical (ENU up) in each unit's frame (m, 3), averaged over the samples and
+    normalised: its z component is the sine of the unit's axis elevation, its x, y components
+    point along the unit's axis's upward tilt (installation errors included).
+
+    Parameters
+    ----------
+    sensor : sensor.compound_eye.CompoundEyeSensor
+    att : scipy.spatial.transform.Rotation
+        Body-to-ENU attitudes (n).
+
+    Returns
+    -------
+    ndarray (m, 3)
+    """
+    R_ns = att.as_matrix().reshape(-1, 3, 3) @ sensor.body_installation().as_matrix()
+    up_s = R_ns[:, 2, :].mean(axis=0)                   # ENU up in the sensor frame
+    up = np.einsum("mij,i->mj", sensor.unit_matrices(True), up_s)
+    return up / np.linalg.norm(up, axis=-1, keepdims=True)
+
+
+def horizon_quadrature(hwhm_deg: float, up, order: float = ACCEPTANCE_ORDER, *,
+                       n_polar: int = 6, n_azimuth: int = 6, n_arc: int | None = None):
+    """Directions and weights that average a field over the acceptance of a unit whose view
+    the horizon cuts, the ground dark: ``sum(w f) -> int_sky a f dOmega / int a dOmega``
+    (the normalisation is the whole acceptance: a photodiode sees the dark ground as no
+    light, so a cut acceptance collects less light, with the sky's polarization of its
+    visible part).
+
+    With the unit's axis at elevation ``e`` and the direction ``theta`` off it at azimuth
+    ``beta`` about it (from the axis's upward tilt), the direction looks at elevation
+    ``arcsin(sin e cos theta + cos e sin theta cos beta)``: above the horizon for every
+    ``beta`` out to ``theta_0 = 90 - e``, and beyond it on the arc
+    ``|beta| <= arccos(-tan e cot theta)``. The rule resolves that step exactly: on
+    ``[0, theta_0]`` the rule of :func:`acceptance_quadrature` (Gauss-Legendre in ``theta``,
+    midpoints in the azimuth); on ``[theta_0, theta_max]`` Gauss-Legendre in ``s`` with
+    ``theta = theta_0 + (theta_max - theta_0) s^2`` (the arc's half-width falls from 180 deg
+    as ``sqrt(theta - theta_0)``, which is smooth in ``s``) times Gauss-Legendre on the arc.
+    Where the acceptance ends before the horizon (``theta_max <= theta_0``) this is the rule
+    of :func:`acceptance_quadrature`.
+
+    Parameters
+    ----------
+    hwhm_deg, order : float
+        The acceptance (:func:`acceptance`).
+    up : array_like (3,) or (m, 3)
+        The local vertical in each unit's frame (:func:`unit_up_vectors`).
+    n_polar : int
+        Gauss-Legendre nodes in ``theta`` on each of the two stretches.
+    n_azimuth, n_arc : int
+        Azimuth nodes on the full circles of the visible cap and on the arcs of the cut band
+        (``n_arc`` None: ``n_azimuth``).
+
+    Returns
+    -------
+    theta_deg, azimuth_deg, weights : list of ndarray
+        One set per unit: off-axis angle [deg], azimuth about the axis [deg] (the convention
+        of :func:`quadrature_rotations_deg`) and weight of each direction.
+
+    Raises
+    ------
+    InvalidParameterError
+        For a width or order out of range, node counts below 1, or a unit whose axis looks
+        below the horizon.
+    """
+    h, n = _check_width(hwhm_deg, order)
+    th0, az0, w0 = acceptance_quadrature(h, n, n_polar=n_polar, n_azimuth=n_azimuth)
+    t_max = min(90.0, h * (np.log(1.0 / _CUT) / np.log(2.0)) ** (1.0 / n))
+    # the whole acceptance's integral of a sin(theta) dtheta dbeta (radians), for the weights
+    xg, wg = np.polynomial.legendre.leggauss(64)
+    tg = 0.5 * t_max * (xg + 1.0)
+    total = 2.0 * np.pi * np.sum(wg * acceptance(tg, h, n) * np.sin(np.radians(tg))) \
+        * 0.5 * np.radians(t_max)
+    x, gw = np.polynomial.legendre.leggauss(int(n_polar))
+    n_arc = int(n_azimuth if n_arc is None else n_arc)
+    if n_arc < 1:
+        raise InvalidParameterError(f"n_arc {n_arc!r} must be a positive integer")
+    xb, gb = np.polynomial.legendre.leggauss(n_arc)
+    out_t, out_b, out_w = [], [], []
+    for u in np.atleast_2d(np.asarray(up, float)):
+        sin_e = float(np.clip(u[2], -1.0, 1.0))
+        if not sin_e > 0.0:
+            raise InvalidParameterError(
+                f"a unit's axis looks {-np.degrees(np.arcsin(sin_e)):.2f} deg below the "
+                f"horizon (up vector {u.tolist()!r} in its frame): its acceptance needs the "
+                f"axis above it")
+        e = np.degrees(np.arcsin(sin_e))
+        t0 = 90.0 - e
+        if t0 >= t_max:
+            out_t.append(th0), out_b.append(az0), out_w.append(w0)
+            continue
+        # the fully visible cap [0, t0]: Gauss-Legendre x midpoints
+        t_a = 0.5 * t0 * (x + 1.0)
+        w_a = gw * 0.5 * np.radians(t0) * acceptance(t_a, h, n) * np.sin(np.radians(t_a)) \
+            * 2.0 * np.pi / n_azimuth
+        b = 360.0 * (np.arange(n_azimuth) + 0.5) / n_azimuth
+        b_a = (b[None, :] + 180.0 / n_azimuth * (np.arange(n_polar) % 2)[:, None]) % 360.0
+        # the cut band [t0, t_max], theta = t0 + (t_max - t0) s^2, on the visible arc
+        s_ = 0.5 * (x + 1.0)
+        t_b = t0 + (t_max - t0) * s_ ** 2
+        dt = gw * 0.5 * 2.0 * np.radians(t_max - t0) * s_            # dtheta = 2 (..) s ds
+        tan_e = sin_e / np.sqrt(max(1.0 - sin_e ** 2, 0.0)) if sin_e < 1.0 else np.inf
+        with np.errstate(divide="ignore", invalid="ignore"):
+            c_lim = -tan_e / np.tan(np.radians(t_b))
+        half = np.arccos(np.clip(c_lim, -1.0, 1.0))                    # (n_polar,) [rad]
+        beta = np.degrees(half[:, None] * xb[None, :])
+        w_b = (dt * acceptance(t_b, h, n) * np.sin(np.radians(t_b)) * half)[:, None] \
+            * gb[None, :]
+        # beta from the upward tilt: the direction's tilt psi = beta + phi_up, and
+        # b = psi + 90 deg (the tilt of a rotation about (cos b, sin b, 0) is along
+        # (sin b, -cos b))
+        phi = np.degrees(np.arctan2(u[1], u[0])) if np.hypot(u[0], u[1]) > 0 else 0.0
+        b_b = (beta + phi + 90.0) % 360.0
+        out_t.append(np.concatenate([np.repeat(t_a, n_azimuth), np.repeat(t_b, n_arc)]))
+        out_b.append(np.concatenate([b_a.ravel(), b_b.ravel()]))
+        out_w.append(np.concatenate([np.repeat(w_a, n_azimuth), w_b.ravel()]) / total)
+    return out_t, out_b, out_w
+
+
+def observe_cut_acceptance(sensor, sky, att, sun_enu, hwhm_deg: float,
+                           order: float = ACCEPTANCE_ORDER, *, n_polar: int = 6,
+                           n_azimuth: int = 6, n_arc: int | None = None):
+    """What each unit's photodiodes see through an acceptance that the horizon may cut, the
+    ground dark: the Stokes average of :func:`observe_acceptance` on the rule of
+    :func:`horizon_quadrature` for each unit's mean vertical (:func:`unit_up_vectors`); a
+    direction that looks below the horizon at some sample (a tilting platform) adds no light
+    at that sample only.
+
+    Parameters
+    ----------
+    sensor, sky, att, sun_enu
+        As for :meth:`~sensor.compound_eye.CompoundEyeSensor.observe`.
+    hwhm_deg, order : float
+        The acceptance (:func:`acceptance`).
+    n_polar, n_azimuth, n_arc : int
+        Nodes of :func:`horizon_quadrature`.
+
+    Returns
+    -------
+    SkySample
+        One column per unit.
+    """
+    t, b, w = horizon_quadrature(hwhm_deg, unit_up_vectors(sensor, att), order,
+                                 n_polar=n_polar, n_azimuth=n_azimuth, n_arc=n_arc)
+    cols = _columns(sensor, sky, att, sun_enu, t, b, w, dark_below=True)
+    return _stokes_average(cols, sensor.n_units)

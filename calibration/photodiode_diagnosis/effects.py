@@ -98,7 +98,7 @@ from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 from ..diagnosis.errors import EffectUnavailableError
 from ..effects import UnknownEffectError
 from .acceptance import (ACCEPTANCE_HWHM_DEG, ACCEPTANCE_ORDER, HWHM_MAX_DEG,
-                         acceptance_quadrature, observe_acceptance)
+                         acceptance_quadrature, observe_cut_acceptance)
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
            "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
@@ -396,10 +396,23 @@ class FieldOfView(RingEffect):
     def starts(self, ctx) -> list:
         return [np.array([ACCEPTANCE_HWHM_DEG]), np.array([8.0])]
 
+    nodes: ClassVar[tuple] = (FOV_NODES[0], FOV_NODES[1], 8)
+    """Nodes of its rule (:func:`.acceptance.horizon_quadrature`): Gauss-Legendre in the
+    off-axis angle on the visible cap and on the band the horizon cuts, midpoints in the
+    azimuth on the cap's full circles, Gauss-Legendre on the band's visible arcs. Against a
+    200 x 200 equal-area grid that drops every direction below the horizon at each sample,
+    on the single-scattering sky seen by units at 45 deg elevation, its ``Q/I`` and ``U/I``
+    differ by at most 4e-5 at a HWHM of 40-60 deg and its radiance by 1.6e-4 (6 nodes on
+    the arcs: 4e-4 in ``Q/I``; the rule that drops whole directions: 4e-3 to 8e-3); below
+    a HWHM of about 23 deg the horizon does not cut the acceptance and the rule is
+    :data:`FOV_NODES` (tested in ``tests/test_fov_horizon.py``)."""
+
     def observe(self, sensor, sky, att, sun, p) -> SkySample:
         if p[0] <= 0.0:
             return sensor.observe(sky, att, sun)
-        return observe_acceptance(sensor, sky, att, sun, *fov_offsets_deg(p[0]))
+        n_polar, n_azimuth, n_arc = self.nodes
+        return observe_cut_acceptance(sensor, sky, att, sun, p[0], n_polar=n_polar,
+                                      n_azimuth=n_azimuth, n_arc=n_arc)
 
 
 def occlusion_weight(azimuth_deg, center_deg, width_deg, edge_deg: float = 3.0):
