@@ -176,8 +176,10 @@ def test_ring_session_design_is_a_real_sessions():
 @pytest.mark.xfail(strict=True, reason=(
     "measured on seed 31, the default candidates, twelve one-turn sweeps over 12 min: every "
     "strong effect named or in the named group, clean data none, no single effect named "
-    "with the truth withheld; missed: the z RMS of the neutral-point separation (1.81), "
-    "the clock (0.20) and the aureole (0.06), one or two z-scores each"))
+    "with the truth withheld; missed: the z RMS of the acceptance's width (fitted 39.72 +- "
+    "0.031 deg for 45: the pointing turns stop short of a wide acceptance the horizon cuts) "
+    "and of the aureole (0.45 on this seed, 0.67 over seeds 31-38), one or two z-scores "
+    "each"))
 def test_ring_matrix_meets_the_goals():
     """The strong strengths over one seed (each ring diagnosis takes about 70 s of CPU)."""
     spec = matrix_spec("ring")
