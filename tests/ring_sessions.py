@@ -33,3 +33,16 @@ def ring_session(n_sweeps=3, per_sweep=90, start="2022-05-12T10:00:00+02:00", se
     t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
     side = dict(data.sidecar, yaw_sense="counterclockwise")
     return PhotodiodeData(t, side)
+
+
+def base_fit_and_effect(inst, effect: str):
+    """The diagnosis's base fit of ``inst`` (screen, pinned fit, noise: ``run._fit_session``
+    with 25 iterations) and the forward model of the candidate ``effect`` on the instrument
+    it kept: ``(session, Forward, effect, sun track)``."""
+    from calibration.photodiode_diagnosis.effects import get_ring_effect
+    from calibration.photodiode_diagnosis.forward import Forward
+    from calibration.photodiode_diagnosis.run import _fit_session, light_track
+    sun = light_track(inst)
+    s, _ = _fit_session(inst, sun, 25)
+    e = get_ring_effect(effect)
+    return s, Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign), e, sun

@@ -17,16 +17,14 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ring_sessions import base_fit_and_effect
+
 from calibration.diagnosis.identifiability import ring_session
-from calibration.photodiode_diagnosis.effects import get_ring_effect
-from calibration.photodiode_diagnosis.forward import Forward
 from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
 from calibration.photodiode_diagnosis.run import (
     _extend,
     _fit_effect,
-    _fit_session,
     _start_effect,
-    light_track,
 )
 
 SECTOR = {"width_deg": 90.0, "edge_deg": 5.0}
@@ -42,10 +40,7 @@ def test_occlusion_search_reaches_the_fit_from_the_truth(center_deg, depolarizat
     ends."""
     truth = {"center_deg": center_deg, "depolarization": depolarization, **SECTOR}
     inst = instrument_from_photodiodes(ring_session("occlusion", truth, seed=31))
-    sun = light_track(inst)
-    s, _ = _fit_session(inst, sun, 25)
-    e = get_ring_effect("occlusion")
-    fe = Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign)
+    s, fe, e, _ = base_fit_and_effect(inst, "occlusion")
     L = fe.layout
     searched, _ = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
     p_true = np.array([truth[n] for n in e.parameter_names])

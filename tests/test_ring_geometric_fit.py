@@ -13,26 +13,21 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ring_sessions import base_fit_and_effect
+
 from calibration.diagnosis.identifiability import ring_session
-from calibration.photodiode_diagnosis.effects import get_ring_effect
 from calibration.photodiode_diagnosis.fit import fit_pinned
-from calibration.photodiode_diagnosis.forward import Forward
 from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
 from calibration.photodiode_diagnosis.run import (
     _extend,
     _fit_effect,
-    _fit_session,
     _start_effect,
-    light_track,
 )
 
 
 def _fitted(effect: str, key: str, value: float, seed: int):
     inst = instrument_from_photodiodes(ring_session(effect, {key: value}, seed))
-    sun = light_track(inst)
-    s, _ = _fit_session(inst, sun, 25)
-    e = get_ring_effect(effect)
-    fe = Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign)
+    s, fe, e, _ = base_fit_and_effect(inst, effect)
     L = fe.layout
     _, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
     _, held = fit_pinned(fe, _extend(s.theta, s.base, fe, e.null), sigma=s.sigma,

@@ -19,6 +19,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from ring_sessions import base_fit_and_effect
+
 from calibration.diagnosis.identifiability import ring_session
 from calibration.photodiode_diagnosis.effects import get_ring_effect
 from calibration.photodiode_diagnosis.forward import Forward
@@ -27,9 +29,7 @@ from calibration.photodiode_diagnosis.run import (
     _continued,
     _effect_sd,
     _fit_effect,
-    _fit_session,
     _start_effect,
-    light_track,
 )
 
 SEEDS = (31, 32, 33, 34)
@@ -40,10 +40,7 @@ def _fitted(separation: float, seed: int):
     """``(separation, SD, mean elevation offset of the units)`` fitted on a whole session."""
     inst = instrument_from_photodiodes(
         ring_session("neutral_points", {"separation_deg": separation}, seed))
-    sun = light_track(inst)
-    s, _ = _fit_session(inst, sun, 25)
-    e = get_ring_effect("neutral_points")
-    fe = Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign)
+    s, fe, e, _ = base_fit_and_effect(inst, "neutral_points")
     L = fe.layout
     fr, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
     fr, aop = _continued(fe, (fr, aop), s.sigma, None)
@@ -80,10 +77,7 @@ def test_no_neutral_points_on_a_clock_error_and_the_clock_read_under_that_sky():
     from skysim.sky import RayleighSky
     inst = instrument_from_photodiodes(
         ring_session("clock_offset", {"clock_offset_s": 900.0}, 31))
-    sun = light_track(inst)
-    s, _ = _fit_session(inst, sun, 25)
-    e = get_ring_effect("neutral_points")
-    fe = Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign)
+    s, fe, e, sun = base_fit_and_effect(inst, "neutral_points")
     fr, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
     fr, aop = _continued(fe, (fr, aop), s.sigma, None)
     sep = float(fr.theta[fe.layout.effect][0])
