@@ -538,6 +538,12 @@ def horizon_quadrature(hwhm_deg: float, up, order: float = ACCEPTANCE_ORDER, *,
         with np.errstate(divide="ignore", invalid="ignore"):
             c_lim = -tan_e / np.tan(np.radians(t_b))
         half = np.arccos(np.clip(c_lim, -1.0, 1.0))                    # (n_polar,) [rad]
+        if np.all(half >= np.pi):
+            # the arc is the whole circle at every node (an axis at the zenith, whose
+            # acceptance ends at the horizon): nothing is cut, and the uncut rule's
+            # midpoints in azimuth keep the acceptance's symmetry about the axis exactly
+            out_t.append(th0), out_b.append(az0), out_w.append(w0)
+            continue
         beta = np.degrees(half[:, None] * xb[None, :])
         w_b = (dt * acceptance(t_b, h, n) * np.sin(np.radians(t_b)) * half)[:, None] \
             * gb[None, :]
