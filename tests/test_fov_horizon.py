@@ -67,14 +67,17 @@ def test_up_vectors_give_the_units_elevation(ring):
     np.testing.assert_allclose(up[:, 1], 0.0, atol=1e-12)
 
 
-@pytest.mark.parametrize("h", [40.0, 50.0, 60.0])
+@pytest.mark.parametrize("h", [24.0, 25.0, 28.0, 30.0, 40.0, 50.0, 60.0])
 def test_the_rule_weighs_the_visible_part_of_the_acceptance(h):
     """Its weights sum to the part of the acceptance above the horizon, against scipy's
     adaptive integral of ``a(theta) sin(theta) 2 beta(theta)`` (``beta`` the half-width of
     the visible arc) over the whole acceptance's ``a sin(theta) 2 pi``: with 12 nodes in
     each stretch to 1e-7 (measured 3e-8; the rule stops where the acceptance is 1e-6 of its
-    peak), with the candidate's 6 to 5e-5 (measured 3.6e-5 at 40-60 deg: a common factor on
-    each unit's radiance, which its gains take up)."""
+    peak), with the candidate's 6 to 1e-4 (measured 1e-8 to 7e-8 at 24-30 deg, up to 6.8e-5
+    at 50 deg: a common factor on each unit's radiance, which its profiled radiance takes
+    up). From 24 deg, just past where the horizon starts to cut a unit at 45 deg (23.8 deg),
+    the sum must stay continuous with the uncut rule's 1: normalised by a separate fine
+    integral it jumped to 0.997 there."""
     e = 45.0
     up = np.array([np.cos(np.radians(e)), 0.0, np.sin(np.radians(e))])
 
@@ -86,11 +89,11 @@ def test_the_rule_weighs_the_visible_part_of_the_acceptance(h):
                 np.pi / 2, **opts)[0]
     whole = quad(lambda x: acceptance(np.degrees(x), h) * np.sin(x) * 2 * np.pi, 0,
                  np.pi / 2, **opts)[0]
-    assert seen / whole < 0.99      # the horizon cuts 1.4-12 % of the acceptance away
+    assert seen / whole < 1.0       # the horizon cuts 1e-9 to 12 % of the acceptance away
     fine = horizon_quadrature(h, up, n_polar=12, n_azimuth=6, n_arc=8)[2][0].sum()
     assert fine == pytest.approx(seen / whole, abs=1e-7)
     t, b, w = horizon_quadrature(h, up, n_polar=6, n_azimuth=6, n_arc=8)
-    assert w[0].sum() == pytest.approx(seen / whole, abs=5e-5)
+    assert w[0].sum() == pytest.approx(seen / whole, abs=1e-4)
     # every direction of the rule looks above the horizon: sin el = up . direction
     tr, br = np.radians(t[0]), np.radians(b[0])
     d = np.stack([np.sin(tr) * np.sin(br), -np.sin(tr) * np.cos(br), np.cos(tr)], -1)
@@ -105,8 +108,9 @@ def test_an_acceptance_the_horizon_does_not_reach_keeps_the_plain_rule():
         np.testing.assert_array_equal(got[0], ref)
 
 
-@pytest.mark.parametrize("h", [40.0, 45.0, 50.0, 60.0])
-def test_candidate_matches_a_brute_force_integral_of_the_cut_acceptance(ring, h):
+@pytest.mark.parametrize("h, tol", [(24.0, 3e-4), (25.0, 3e-4), (28.0, 3e-4), (30.0, 6e-5),
+                                    (40.0, 6e-5), (45.0, 6e-5), (50.0, 6e-5), (60.0, 6e-5)])
+def test_candidate_matches_a_brute_force_integral_of_the_cut_acceptance(ring, h, tol):
     """The candidate's forward model against a 200 x 200 equal-area grid that drops every
     direction below the horizon at each sample (the ground dark, the normalisation the whole
     acceptance). Measured: ``Q/I`` and ``U/I`` within 1.7e-5 to 4.1e-5 of the grid at 40-60
@@ -114,14 +118,19 @@ def test_candidate_matches_a_brute_force_integral_of_the_cut_acceptance(ring, h)
     up to 1.5e-5 in ``Q/I`` and 1.3e-4 in the radiance. The tolerances, 6e-5 and 3e-4, are
     the measured errors plus twice the grid's own, ten times below those of the rule that
     drops whole directions (4e-4 to 8e-3), and below the 3e-4 noise of one reading of the
-    simulated ring (a HWHM 1 deg off moves ``Q/I`` by about 2e-3)."""
+    simulated ring (a HWHM 1 deg off moves ``Q/I`` by about 2e-3). Just past where the
+    horizon starts to cut (24-28 deg for units at 45 deg) most of the acceptance is on the
+    visible cap, whose 6 Gauss-Legendre nodes span its steep edge as the uncut rule's do:
+    ``Q/I`` within 1.7e-4 to 2.7e-4 there (the uncut rule: 1.2e-4 at the measured 22.7 deg),
+    tolerance 3e-4 in both; the radiance is continuous across the onset (the weights'
+    normalisation, :func:`test_the_rule_weighs_the_visible_part_of_the_acceptance`)."""
     sensor, sky, att, sun = ring
     ref = _brute(sensor, sky, att, sun, h)
     o = FieldOfView().observe(sensor, sky, att, sun, np.array([h]))
     x = np.radians(2.0 * o.aop_unit_deg)
     got = (o.radiance, o.dop * np.cos(x), o.dop * np.sin(x))
     assert np.max(np.abs(got[0] / ref[0] - 1.0)) < 3e-4
-    assert max(np.max(np.abs(got[1] - ref[1])), np.max(np.abs(got[2] - ref[2]))) < 6e-5
+    assert max(np.max(np.abs(got[1] - ref[1])), np.max(np.abs(got[2] - ref[2]))) < tol
 
 
 @pytest.mark.parametrize("h", [40.0, 45.0])
