@@ -334,7 +334,14 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
     """The chosen start's ``(fit, aop_fit)``, continued from where it stopped when it did
     not converge (kept as it was when the continuation leaves the model's valid range); the
     angle of polarization read under ``aop_sky``, or under single scattering for a clock
-    far from the recorded times (:func:`.clock.far_clock`), as :func:`_fit_effect` read it."""
+    far from the recorded times (:func:`.clock.far_clock`), as :func:`_fit_effect` read it.
+
+    The continuation holds the pointing where the fit's own stage put it (the acceptance's
+    turns, a geometric effect's joint AoP fit), except for a sky with its own angle of
+    polarization, whose AoP stage reads the pointing again (:func:`.fit.fit_pinned`): its
+    pointing is then freed in the full model again (:func:`_pointing_in_full_fit`), or the
+    continuation would report the separation with the pointing the AoP stage left, the
+    estimate whose spread its SD does not describe."""
     fit_, aop = pair
     if fit_.converged:
         return pair
@@ -348,6 +355,8 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
         return pair
     finally:
         fe.aop_sky = offered
+    if getattr(fe.effect, "pointing_in_full_fit", False):
+        more = _pointing_in_full_fit(fe, more, sigma)
     return more if (more[1] if geometric else more[0]).cost <= \
         (aop if geometric else fit_).cost * (1 + 1e-9) or more[0].converged else pair
 
