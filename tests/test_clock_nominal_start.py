@@ -45,8 +45,10 @@ def test_whole_hour_start_keeps_a_two_hour_clock_error():
     _, aop = _fit_start(fc, hour[0], s.sigma)
     value, se = float(aop.theta[L.effect][0]), _sandwich_sd(fc, aop, s.sigma)[0]
     assert abs(value - 7200.0) <= 3.0 * se, (value, se, aop.cost)
-    # measured 7,199.999 +- 4.4 s at an AoP cost of 102 on the whole session (the fold fits
-    # at the truth: 66-68 on two thirds of it); from the base fit's instrument 7,765 s at
-    # 21,521
-    assert aop.cost < 3 * 68.0, aop.cost
+    # measured 7,199.999 +- 4.4 s at an AoP cost of 102 on the whole session; from the base
+    # fit's instrument 7,765 s at 21,521. The cost at the truth on the whole session is 3/2
+    # of the fold fits' 66-68 on two thirds of it (about 100); the bound, twice that, leaves
+    # the noise draw room (a fit within its SE adds about 1) and is a hundredth of a walked
+    # start's
+    assert aop.cost < 2 * 1.5 * 68.0, aop.cost
     assert np.isfinite(se) and se > 0.0

@@ -49,6 +49,7 @@ def _fitted(separation: float, seed: int):
             float(np.mean(fr.theta[L.pointing][:inst.n_units])))
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("separation", [20.0, 40.0])
 def test_separation_within_its_sd_over_noise_draws(separation):
     """20 deg: measured z -1.37, -0.40, 1.49, 0.41 (SD 0.022 deg); 40 deg: -0.51, -0.65,
@@ -57,12 +58,17 @@ def test_separation_within_its_sd_over_noise_draws(separation):
     fits = [_fitted(separation, seed) for seed in SEEDS]
     z = np.array([(v - separation) / sd for v, sd, _ in fits])
     assert np.all(np.abs(z) <= 3.0), (z, fits)
-    assert np.sqrt(np.mean(z ** 2)) <= 1.5, (z, fits)
+    # an SD too wide shows as z-scores too small: the RMS of four standard normal z-scores
+    # falls below 0.2 with probability 0.3 % (chi-square with 4 degrees of freedom below
+    # 4 x 0.04)
+    assert 0.2 <= np.sqrt(np.mean(z ** 2)) <= 1.5, (z, fits)
     # the mechanism: the common elevation the full model reads is off by at most 0.0104 deg
-    # on these draws, under a third of the AoP stage's largest error (0.047 deg)
+    # on these draws; the bound, 0.015 deg, is below the AoP stage's smallest error on them
+    # (0.02 deg), so a fit that kept the AoP stage's pointing fails it
     assert max(abs(el) for _, _, el in fits) < 0.015, fits
 
 
+@pytest.mark.slow
 def test_no_neutral_points_on_a_clock_error_and_the_clock_read_under_that_sky():
     """A Rayleigh sky recorded with a 900 s clock error (the identifiability matrix's
     moderate clock, seed 31). With the pointing held where the AoP stage read it, the
