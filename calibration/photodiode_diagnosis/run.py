@@ -433,8 +433,7 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
             # best of a few scales (each a new sky)
             # the base fit's instrument may have absorbed much of a strong effect, so
             # the nominal instrument is tried as well
-            for tb in (t, _nominal(t, L)):
-                scored.extend(_with_dop_scales(fwd, tb))
+            scored.extend(_with_dop_scales(fwd, t, also=_nominal(t, L)))
             continue
         o = effect.modify(obs0, p, sun) if obs0 is not None else fwd.observe(t)
         for tt in ((t, _carry_dop_scale(fwd, t, o, base_dop)) if own_sky else (t,)):
@@ -471,18 +470,23 @@ def _nominal(t, L) -> np.ndarray:
     return _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))
 
 
-def _with_dop_scales(fwd: Forward, t, obs=None):
-    """``(cost, theta)`` of ``t`` at each DoP scale of :data:`DOP_SCALE_STARTS`: the sky
-    sample ``obs`` held, or (``None``) seen anew at each scale, for an effect whose sky takes
+def _with_dop_scales(fwd: Forward, t, obs=None, also=None):
+    """``(cost, theta)`` of ``t`` (and of ``also``, a start with the same geometry and
+    effect: the nominal instrument) at each DoP scale of :data:`DOP_SCALE_STARTS`: the sky
+    sample ``obs`` held, or (``None``) seen once at each scale, for an effect whose sky takes
     the scale (:attr:`~.effects.RingEffect.dop_scale_in_sky`). The grid, not
     :func:`_best_dop_scale`'s search, for effects with many starts (an occlusion's dozens:
     five residuals a start instead of some twenty)."""
     L = fwd.layout
     out = []
     for sc in DOP_SCALE_STARTS:
-        tt = t.copy()
-        tt[L.scale] = sc
-        out.append((float(np.sum(fwd.residual(tt, obs) ** 2)), tt))
+        at = []
+        for start in (t,) if also is None else (t, also):
+            tt = start.copy()
+            tt[L.scale] = sc
+            at.append(tt)
+        seen = fwd.observe(at[0]) if obs is None else obs
+        out.extend((float(np.sum(fwd.residual(tt, seen) ** 2)), tt) for tt in at)
     return out
 
 
