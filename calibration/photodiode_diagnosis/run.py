@@ -464,9 +464,13 @@ def _start_effect(fwd: Forward, theta_base, fwd_base, effect, sigma):
 
 
 def _nominal(t, L) -> np.ndarray:
-    """``t`` with the instrument's gains, dark offsets, polarizer angles and 0/90 imbalance
+    """``t`` with the instrument's gains, dark offsets, photodiode and unit polarizer angles
     at their nominal 0 (:func:`.effect_fit._nominal_instrument`): a start that does not carry
-    what the base fit, made without the effect, took up of it."""
+    what the base fit, made without the effect, took up of it. The units' pointing stays
+    the base fit's: read from the angle of polarization, it is near the truth under a sky
+    effect, which changes the DoP far more than the AoP (the clock's starts, hours off,
+    reset it too: there the sun the AoP was read against has moved,
+    :func:`.clock._clock_starts`)."""
     return _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.delta))
 
 
