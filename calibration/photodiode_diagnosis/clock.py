@@ -158,8 +158,9 @@ def _clock_starts(fwd: Forward, theta_base, fwd_base, effect) -> list:
         # nominal pointing, a typical DoP scale): a clock hours off corrupts every parameter
         # the base fitted under it (on a simulated ring 2.5 h off, pointing at its -20 deg
         # bound and a DoP scale of 0.99), and the scores with them; the units' polarizer
-        # offsets stay the base's, which the per-sweep headings absorb with them (the sky
-        # effects' nominal start, run._nominal, resets those and keeps the pointing)
+        # offsets stay the base's, with which the starts found the hour of a ring recorded
+        # 2 h early (tests/test_clock_nominal_start.py; the sky effects' nominal start,
+        # run._nominal, resets those and keeps the pointing)
         nominal = _nominal_instrument(t, L, (L.lam, L.off, L.angle, L.pointing))
         nominal[L.scale] = NOMINAL_DOP_SCALE
         scored.append((float(np.sum(fwd.residual(nominal) ** 2)), nominal))
