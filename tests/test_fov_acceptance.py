@@ -20,7 +20,6 @@ from calibration.photodiode_diagnosis.acceptance import (
 from calibration.photodiode_diagnosis.effects import (
     FOV_NODES,
     FieldOfView,
-    fov_offsets_deg,
     integrate_stokes,
 )
 from sensor.compound_eye import PhotodiodeModel, body_attitude, ring_configuration
@@ -131,7 +130,8 @@ def test_candidate_reduces_to_the_base_and_agrees_with_the_photodiode_average(ri
     wide = fov.observe(sensor, sky, att, sun, np.array([ACCEPTANCE_HWHM_DEG]))
     # the Stokes average is the photodiodes' Malus readings averaged (what the simulated
     # sessions compute), to rounding
-    th, az, w = fov_offsets_deg(ACCEPTANCE_HWHM_DEG)
+    th, az, w = acceptance_quadrature(ACCEPTANCE_HWHM_DEG, n_polar=FOV_NODES[0],
+                                      n_azimuth=FOV_NODES[1])
     obs, unit, w, _ = observe_directions(sensor, sky, att, sun, th, az, w)
     for u in range(sensor.n_units):
         for a in (0.0, 45.0, 90.0, 135.0):
@@ -151,7 +151,7 @@ def test_candidate_reduces_to_the_base_and_agrees_with_the_photodiode_average(ri
 def test_directions_below_the_horizon_are_dark(ring):
     _, sky, att, sun = ring
     low = ring_configuration(8, 10.0, photodiode=PhotodiodeModel())
-    th, az, w = fov_offsets_deg(30.0)
+    th, az, w = acceptance_quadrature(30.0, n_polar=FOV_NODES[0], n_azimuth=FOV_NODES[1])
     obs, unit, kept, theta = observe_directions(low, sky, att, sun, th, az, w)
     assert np.all(obs.view_elevation_deg >= 0.0)
     # at 10 deg elevation, directions more than 10 deg below the axis are dropped

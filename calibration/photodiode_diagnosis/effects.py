@@ -21,8 +21,9 @@ the same physics library (:mod:`skysim`, :mod:`sensor`), to inject in the blind 
   included, by the units' measured angular acceptance (:mod:`.acceptance`: a torch scan of
   the Gkanias et al. 2023 units, HWHM 22.7 deg, an edge steeper than a Gaussian), its width
   free from 0 to 60 deg (a bare photodiode's cosine response, the widest a casing allows);
-  Gauss-Legendre in the off-axis angle times equal azimuth steps (:data:`FOV_NODES`), the
-  ground dark. Base at ``hwhm = 0``.
+  Gauss-Legendre in the off-axis angle times equal azimuth steps (:data:`FOV_NODES`), on
+  the visible arcs where the horizon cuts the acceptance, the ground dark. Base at
+  ``hwhm = 0``.
 - ``occlusion`` (``center_deg``, ``width_deg``, ``depolarization``, ``edge_deg``): a sector of
   sky azimuth (world frame) blocked by canopy or buildings. What reaches a unit looking into
   it is foliage-scattered, nearly unpolarized light: its DoP is multiplied by
@@ -97,11 +98,10 @@ from skysim.geometry import direction_vector, elevation_azimuth, wrap_deg
 
 from ..diagnosis.errors import EffectUnavailableError
 from ..effects import UnknownEffectError
-from .acceptance import (ACCEPTANCE_HWHM_DEG, ACCEPTANCE_ORDER, HWHM_MAX_DEG,
-                         acceptance_quadrature, observe_cut_acceptance)
+from .acceptance import ACCEPTANCE_HWHM_DEG, HWHM_MAX_DEG, observe_cut_acceptance
 
 __all__ = ["RING_EFFECT_NAMES", "RingEffect", "EffectUnavailableError", "get_ring_effect",
-           "occlusion_weight", "fov_offsets_deg", "integrate_stokes", "FIT_STREAMS",
+           "occlusion_weight", "integrate_stokes", "FIT_STREAMS",
            "fit_engine_settings", "sun_side", "lagged_yaw", "FOV_NODES"]
 
 RING_EFFECT_NAMES = ("neutral_points", "fov", "occlusion", "yaw_scale", "clock_offset",
@@ -307,34 +307,13 @@ class Tilt(RingEffect):
 
 
 FOV_NODES = (6, 6)
-"""Gauss-Legendre nodes in the off-axis angle x azimuth nodes of the ``fov`` candidate's
-quadrature (:func:`fov_offsets_deg`). Against a 32 x 64 rule on the single-scattering sky
-seen by units at 45 deg elevation, its normalised Stokes parameters ``Q/I``, ``U/I`` differ
-by at most 4e-5 at a HWHM of 10 deg and 1.5e-4 at 22.7 and 30 deg, the radiance by 4e-5,
-1.5e-4 and 5e-4 (tested; a ring's readings carry about 4e-3 of noise); by 4e-3 to 1e-2 at
-40-60 deg, where the horizon cuts the acceptance (a step the rule does not resolve; 4 x 6
-nodes: 3e-3 at 22.7 deg)."""
-
-
-def fov_offsets_deg(hwhm_deg: float, order: float = ACCEPTANCE_ORDER, *,
-                    nodes: tuple = FOV_NODES):
-    """Directions about a unit's axis and their weights for the ``fov`` candidate.
-
-    Parameters
-    ----------
-    hwhm_deg : float
-        Half-width at half-maximum of the acceptance [deg] (:func:`.acceptance.acceptance`).
-    order : float
-        Steepness of its edge.
-    nodes : (int, int)
-        Nodes in the off-axis angle and in the azimuth.
-
-    Returns
-    -------
-    theta_deg, azimuth_deg, weights : ndarray (k,)
-        :func:`.acceptance.acceptance_quadrature`.
-    """
-    return acceptance_quadrature(hwhm_deg, order, n_polar=nodes[0], n_azimuth=nodes[1])
+"""Gauss-Legendre nodes in the off-axis angle x midpoint nodes in the azimuth of the ``fov``
+candidate's quadrature where the horizon does not cut the acceptance
+(:func:`.acceptance.acceptance_quadrature`; where it cuts, :attr:`FieldOfView.nodes`).
+Against a 32 x 64 rule on the single-scattering sky seen by units at 45 deg elevation, its
+normalised Stokes parameters ``Q/I``, ``U/I`` differ by at most 4e-5 at a HWHM of 10 deg and
+1.5e-4 at 22.7 and 30 deg, the radiance by 4e-5, 1.5e-4 and 5e-4 (tested; a ring's readings
+carry about 4e-3 of noise; 4 x 6 nodes: 3e-3 at 22.7 deg)."""
 
 
 def integrate_stokes(radiance, dop, aop_deg, axis, weights=None):
@@ -402,9 +381,11 @@ class FieldOfView(RingEffect):
     azimuth on the cap's full circles, Gauss-Legendre on the band's visible arcs. Against a
     200 x 200 equal-area grid that drops every direction below the horizon at each sample,
     on the single-scattering sky seen by units at 45 deg elevation, its ``Q/I`` and ``U/I``
-    differ by at most 4e-5 at a HWHM of 40-60 deg and its radiance by 1.6e-4 (6 nodes on
-    the arcs: 4e-4 in ``Q/I``; the rule that drops whole directions: 4e-3 to 8e-3); below
-    a HWHM of about 23 deg the horizon does not cut the acceptance and the rule is
+    differ by at most 4e-5 at a HWHM of 30-60 deg and its radiance by 1.6e-4 (6 nodes on
+    the arcs: 4e-4 in ``Q/I``; a rule that drops the directions below the horizon whole:
+    4e-3 to 8e-3); just past where the horizon starts to cut (24-28 deg) the cap's nodes
+    span the acceptance's steep edge as the uncut rule's do, 1.7e-4 to 2.7e-4 in ``Q/I``;
+    below a HWHM of about 23.8 deg the horizon does not cut the acceptance and the rule is
     :data:`FOV_NODES` (tested in ``tests/test_fov_horizon.py``)."""
 
     def observe(self, sensor, sky, att, sun, p) -> SkySample:
