@@ -419,7 +419,7 @@ class Occlusion(RingEffect):
     fd_step = (0.2, 0.2, 1e-3, 0.05)
     two_step_sd: ClassVar[bool] = True
     """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the model
-    covariance, scaled by the white-noise RMS of all readings, was several times the
+    covariance, scaled by the white-noise RMS of all readings, is several times the
     spread of its errors on simulated rings."""
     n_fits: ClassVar[int] = 3
     """Short fits from this many of the best-scoring distinct starts (a sector near the sun
@@ -844,7 +844,7 @@ class Aureole(RingEffect):
     there is taken up twice; from there the fit ran to the amplitude's bound."""
     two_step_sd: ClassVar[bool] = True
     """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the model
-    covariance, scaled by the white-noise RMS of all readings, was 3-11 times the spread of
+    covariance, scaled by the white-noise RMS of all readings, is 3-11 times the spread of
     its errors on simulated rings (z RMS 0.09 at amplitude 2, 0.38 at 0.5; with the sandwich
     0.67 and 0.79 over eight noise draws). The aureole lowers the DoP alone, so the angle of
     polarization the pointing is read from is the base model's."""
@@ -878,7 +878,7 @@ class StrayLight(RingEffect):
     output_only = True
     two_step_sd: ClassVar[bool] = True
     """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the model
-    covariance, scaled by the white-noise RMS of all readings, was about three times the
+    covariance, scaled by the white-noise RMS of all readings, is about three times the
     spread of the strengths' errors on simulated rings (z RMS 0.28; with the sandwich 0.71
     over eight noise draws)."""
 
