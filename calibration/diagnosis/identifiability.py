@@ -659,13 +659,16 @@ def _cone_readings(sensor, sky, att, sun, hwhm_deg: float) -> np.ndarray:
     1e-8; on each ring, equal steps in azimuth over the part of it above the horizon, found
     from the unit's elevation), each weighted by the acceptance and the visible part of its
     ring, and normalised by the whole acceptance (a photodiode sees the dark ground as no
-    light): a rule of its own, not the candidate's Gauss-Legendre one, and about fourteen
-    times finer."""
-    from calibration.photodiode_diagnosis.acceptance import (ACCEPTANCE_ORDER, acceptance,
+    light): a rule of its own, not the candidate's Gauss-Legendre one, with 27-32 times as
+    many directions (the geometry of the visible arc is shared,
+    :func:`~calibration.photodiode_diagnosis.acceptance.visible_half_arc`)."""
+    from calibration.photodiode_diagnosis.acceptance import (acceptance, arc_azimuth_deg,
                                                              observe_directions,
-                                                             unit_up_vectors)
+                                                             theta_max_deg,
+                                                             unit_up_vectors,
+                                                             visible_half_arc)
     K, M = RING_CAP
-    t_max = min(90.0, hwhm_deg * (np.log(1e8) / np.log(2.0)) ** (1.0 / ACCEPTANCE_ORDER))
+    t_max = theta_max_deg(hwhm_deg, cut=1e-8)
     mid_k, mid_m = (np.arange(K) + 0.5) / K, (np.arange(M) + 0.5) / M
 
     def rings(t0):
@@ -685,19 +688,11 @@ def _cone_readings(sensor, sky, att, sun, hwhm_deg: float) -> np.ndarray:
 
     sets = ([], [], [])
     for up in unit_up_vectors(sensor, att):
-        # a direction theta off the axis at azimuth beta from the axis's upward tilt looks
-        # at elevation arcsin(sin e cos theta + cos e sin theta cos beta)
-        sin_e, cos_e = up[2], np.hypot(up[0], up[1])
-        theta, dw = rings(90.0 - np.degrees(np.arcsin(sin_e)))
+        theta, dw = rings(90.0 - np.degrees(np.arcsin(up[2])))
         a = acceptance(theta, hwhm_deg) * dw
-        s_t = np.sin(np.radians(theta))
-        with np.errstate(divide="ignore", invalid="ignore"):
-            lim = np.where(cos_e * s_t > 0.0,
-                           -sin_e * np.cos(np.radians(theta)) / (cos_e * s_t), -np.inf)
-        half = np.arccos(np.clip(lim, -1.0, 1.0))                     # (rings,) [rad]
+        half = visible_half_arc(theta, up)                            # (rings,) [rad]
         beta = np.degrees(half[:, None] * (2.0 * mid_m[None, :] - 1.0))
-        # the rotation about (cos b, sin b, 0) tilts the axis along (sin b, -cos b)
-        b = (beta + np.degrees(np.arctan2(up[1], up[0])) + 90.0) % 360.0
+        b = arc_azimuth_deg(beta, up)
         sets[0].append(np.repeat(theta, M))
         sets[1].append(b.ravel())
         # normalised by the whole acceptance (the ground dark)

@@ -49,7 +49,8 @@ from skysim.exceptions import InvalidParameterError
 __all__ = ["TORCH_SCAN", "PLATEAU_COUNTS", "ACCEPTANCE_HWHM_DEG", "ACCEPTANCE_ORDER",
            "HWHM_MAX_DEG", "fit_torch_scan", "acceptance", "acceptance_quadrature",
            "quadrature_rotations_deg", "observe_directions", "observe_axes",
-           "observe_acceptance", "unit_up_vectors", "horizon_quadrature",
+           "observe_acceptance", "unit_up_vectors", "theta_max_deg", "visible_half_arc",
+           "arc_azimuth_deg", "horizon_quadrature",
            "observe_cut_acceptance"]
 
 TORCH_SCAN = {
@@ -188,7 +189,7 @@ def acceptance_quadrature(hwhm_deg: float, order: float = ACCEPTANCE_ORDER, *,
     for name, v in (("n_polar", n_polar), ("n_azimuth", n_azimuth)):
         if int(v) != v or v < 1:
             raise InvalidParameterError(f"{name} {v!r} must be a positive integer")
-    t_max = min(90.0, h * (np.log(1.0 / _CUT) / np.log(2.0)) ** (1.0 / n))
+    t_max = theta_max_deg(h, n)
     x, gw = np.polynomial.legendre.leggauss(int(n_polar))
     t = 0.5 * t_max * (x + 1.0)
     w_t = gw * acceptance(t, h, n) * np.sin(np.radians(t))
@@ -206,6 +207,37 @@ def quadrature_rotations_deg(theta_deg, azimuth_deg) -> np.ndarray:
     parallel transport of its reference direction)."""
     t, b = np.asarray(theta_deg, float), np.radians(np.asarray(azimuth_deg, float))
     return np.stack([t * np.cos(b), t * np.sin(b), np.zeros_like(t)], axis=-1)
+
+
+def theta_max_deg(hwhm_deg: float, order: float = ACCEPTANCE_ORDER, cut: float = _CUT) -> float:
+    """Off-axis angle [deg] where the acceptance (:func:`acceptance`) falls to ``cut`` of its
+    on-axis value, at most 90 deg: ``h (ln(1/cut) / ln 2)^(1/n)``."""
+    return float(min(90.0, hwhm_deg * (np.log(1.0 / cut) / np.log(2.0)) ** (1.0 / order)))
+
+
+def visible_half_arc(theta_deg, up) -> np.ndarray:
+    """Half-width [rad] of the arc of directions ``theta_deg`` off a unit's axis that look
+    above the horizon, about the axis's upward tilt: a direction at azimuth ``beta`` from
+    that tilt looks at elevation ``arcsin(sin e cos theta + cos e sin theta cos beta)``
+    (``e`` the axis's elevation, ``up`` the local vertical in the unit's frame,
+    :func:`unit_up_vectors`), above the horizon for ``|beta| <= arccos(-tan e cot theta)``:
+    pi (the whole circle) out to ``theta = 90 - e``, 0 for none."""
+    sin_e, cos_e = up[2], np.hypot(up[0], up[1])
+    t = np.radians(np.asarray(theta_deg, float))
+    with np.errstate(divide="ignore", invalid="ignore"):
+        lim = np.where(cos_e * np.sin(t) > 0.0, -sin_e * np.cos(t) / (cos_e * np.sin(t)),
+                       -np.inf)
+    return np.arccos(np.clip(lim, -1.0, 1.0))
+
+
+def arc_azimuth_deg(beta_deg, up) -> np.ndarray:
+    """The azimuth about a unit's axis [deg] (the convention of
+    :func:`quadrature_rotations_deg`) of a direction ``beta_deg`` from the axis's upward
+    tilt: the direction tilts along ``beta + phi_up`` and a rotation about
+    ``(cos b, sin b, 0)`` tilts the axis along ``(sin b, -cos b)``, so ``b = beta + phi_up +
+    90 deg``."""
+    phi = np.degrees(np.arctan2(up[1], up[0])) if np.hypot(up[0], up[1]) > 0 else 0.0
+    return (np.asarray(beta_deg, float) + phi + 90.0) % 360.0
 
 
 def _columns(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights, *,
@@ -500,7 +532,7 @@ def horizon_quadrature(hwhm_deg: float, up, order: float = ACCEPTANCE_ORDER, *,
     """
     h, n = _check_width(hwhm_deg, order)
     th0, az0, w0 = acceptance_quadrature(h, n, n_polar=n_polar, n_azimuth=n_azimuth)
-    t_max = min(90.0, h * (np.log(1.0 / _CUT) / np.log(2.0)) ** (1.0 / n))
+    t_max = theta_max_deg(h, n)
     x, gw = np.polynomial.legendre.leggauss(int(n_polar))
     n_arc = int(n_azimuth if n_arc is None else n_arc)
     if n_arc < 1:
@@ -529,10 +561,7 @@ def horizon_quadrature(hwhm_deg: float, up, order: float = ACCEPTANCE_ORDER, *,
         s_ = 0.5 * (x + 1.0)
         t_b = t0 + (t_max - t0) * s_ ** 2
         dt = gw * 0.5 * 2.0 * np.radians(t_max - t0) * s_            # dtheta = 2 (..) s ds
-        tan_e = sin_e / np.sqrt(max(1.0 - sin_e ** 2, 0.0)) if sin_e < 1.0 else np.inf
-        with np.errstate(divide="ignore", invalid="ignore"):
-            c_lim = -tan_e / np.tan(np.radians(t_b))
-        half = np.arccos(np.clip(c_lim, -1.0, 1.0))                    # (n_polar,) [rad]
+        half = visible_half_arc(t_b, u)                                # (n_polar,) [rad]
         if np.all(half >= np.pi):
             # the arc is the whole circle at every node (an axis at the zenith, whose
             # acceptance ends at the horizon): nothing is cut, and the uncut rule's
@@ -542,11 +571,7 @@ def horizon_quadrature(hwhm_deg: float, up, order: float = ACCEPTANCE_ORDER, *,
         beta = np.degrees(half[:, None] * xb[None, :])
         a_b = dt * acceptance(t_b, h, n) * np.sin(np.radians(t_b))
         w_b = (a_b * half)[:, None] * gb[None, :]
-        # beta from the upward tilt: the direction's tilt psi = beta + phi_up, and
-        # b = psi + 90 deg (the tilt of a rotation about (cos b, sin b, 0) is along
-        # (sin b, -cos b))
-        phi = np.degrees(np.arctan2(u[1], u[0])) if np.hypot(u[0], u[1]) > 0 else 0.0
-        b_b = (beta + phi + 90.0) % 360.0
+        b_b = arc_azimuth_deg(beta, u)
         # the normalisation, the whole acceptance, on the same nodes with full circles: the
         # rule's error in the polar angle then cancels between the visible part and the whole
         # (a separate fine integral left the weights summing to 0.997-1.003 and the radiance
