@@ -267,7 +267,7 @@ def test_the_sun_projections_give_what_the_angles_give(ring, pitch, roll):
     the horizon at some samples), they agree to rounding. The tolerances are a few hundred
     ulp of the values: the routes differ by a dozen rounded operations (a degree-to-radian
     round trip of the AoP, tangents of half angles) on quantities of order 1; the measured
-    differences on the real ring session were 3e-15 in the DoP and 1e-12 deg in the AoP."""
+    differences on the real ring session were 3e-15 in the DoP and 3e-12 deg in the AoP."""
     from calibration.photodiode_diagnosis.acceptance import (observe_cut_acceptance,
                                                              horizon_quadrature)
     sensor, sky, _, sun = ring
@@ -280,6 +280,13 @@ def test_the_sun_projections_give_what_the_angles_give(ring, pitch, roll):
     pairs = [(got[0], ref[0])]
     pairs.append((observe_axes(sensor, sky, att, sun), observe_axes(sensor, angles, att, sun)))
     pairs.append(tuple(observe_cut_acceptance(sensor, s, att, sun, 55.0) for s in (sky, angles)))
+    # the units' own sums (columns that see the sky at every sample) and, tilted, the
+    # columns the horizon cuts at some samples only, one by one
+    from calibration.photodiode_diagnosis.acceptance import _columns, unit_up_vectors
+    cut = horizon_quadrature(55.0, unit_up_vectors(sensor, att))
+    vis = _columns(sensor, sky, att, sun, *cut, dark_below=True, per_column=False)["visible"]
+    cut_somewhere = ~vis.all(axis=0) & vis.any(axis=0)
+    assert cut_somewhere.any() == (pitch != 0.0) and vis.all(axis=0).any()
     for a, b in pairs:
         np.testing.assert_allclose(a.radiance, b.radiance, rtol=1e-13)
         np.testing.assert_allclose(a.dop, b.dop, rtol=1e-12, atol=1e-14)
