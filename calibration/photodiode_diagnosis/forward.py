@@ -306,7 +306,7 @@ class Forward:
         ``cos 2(chi - a) = cos 2chi cos 2a + sin 2chi sin 2a``: the trigonometry of the units'
         angles (n, U) once per sky sample and of the polarizer angles (P,) once per call, not
         a cosine per reading (n, P) at each of a Jacobian's polarizer-angle columns (equal to
-        rounding, 2e-16)."""
+        Malus's law written out to rounding, tested)."""
         key = (np.array(angle, float), s)
         last = self._modulations
         if (last is not None and last[0] is obs and last[1][1] == s
