@@ -46,7 +46,7 @@ def _brute(sensor, sky, att, sun, h, K=200, M=200):
     az = np.tile(360.0 * (np.arange(M) + 0.5) / M, K)
     w = acceptance(theta, h)
     o = _stokes_average(_columns(sensor, sky, att, sun, theta, az, w / w.sum(),
-                                 dark_below=True), sensor.n_units)
+                                 dark_below=True, per_column=False), sensor.n_units)
     x = np.radians(2.0 * o.aop_unit_deg)
     return o.radiance, o.dop * np.cos(x), o.dop * np.sin(x)
 

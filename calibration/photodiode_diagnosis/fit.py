@@ -134,31 +134,48 @@ def _groups(fwd: Forward, free: np.ndarray):
     return out
 
 
-def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
-    n, P = fwd.y.shape
-    fidx = np.flatnonzero(free)
-    col_of = {int(i): c for c, i in enumerate(fidx)}
-    # row and column of every usable residual: a column's support is selected among them
-    # directly (its positions in the usable residual vector are the Jacobian's rows)
+def _jacobian_plan(fwd: Forward, free, usable_idx):
+    """The column groups of :func:`_groups` with, for every parameter, its position among
+    the free ones and the positions of its support among the usable residuals: fixed for a
+    forward model and a set of free parameters, so remembered on ``fwd`` (a fit's dozens of
+    Jacobians share one)."""
+    key = (np.asarray(free, bool).tobytes(), usable_idx.tobytes())
+    cache = fwd.__dict__.setdefault("_jacobian_plans", {})
+    if key in cache:
+        return cache[key]
+    P = fwd.y.shape[1]
+    col_of = {int(i): c for c, i in enumerate(np.flatnonzero(free))}
     u_row, u_col = np.divmod(usable_idx, P)
-    rows, cols, vals = [], [], []
+    plan = []
     for idx, stage, supports in _groups(fwd, free):
-        t = theta.copy()
-        h = step[idx]
-        t[idx] += h
-        r = fwd.residual(t, obs0 if stage == "output" else None)
-        d = (r - r0).ravel()
-        for i, hi, (kind, mask) in zip(idx, h, supports):
+        cols = []
+        for i, (kind, mask) in zip(idx, supports):
             if kind == "cols":
                 at = np.flatnonzero(mask[u_col])
             elif kind == "rows":
                 at = np.flatnonzero(mask[u_row])
             else:
                 at = np.arange(usable_idx.size)
-            v = d[usable_idx[at]] / hi
+            cols.append((i, col_of[int(i)], at, usable_idx[at]))
+        plan.append((np.array(idx), stage, cols))
+    cache[key] = plan
+    return plan
+
+
+def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
+    fidx = np.flatnonzero(free)
+    rows, cols, vals = [], [], []
+    for idx, stage, group in _jacobian_plan(fwd, free, usable_idx):
+        t = theta.copy()
+        h = step[idx]
+        t[idx] += h
+        r = fwd.residual(t, obs0 if stage == "output" else None)
+        d = (r - r0).ravel()
+        for (i, c, at, flat), hi in zip(group, h):
+            v = d[flat] / hi
             nz = v != 0.0
             rows.append(at[nz])
-            cols.append(np.full(nz.sum(), col_of[int(i)]))
+            cols.append(np.full(nz.sum(), c))
             vals.append(v[nz])
     rows = np.concatenate(rows) if rows else np.zeros(0, int)
     return sp.csc_matrix((np.concatenate(vals) if vals else np.zeros(0),

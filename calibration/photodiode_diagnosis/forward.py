@@ -61,7 +61,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from sensor.compound_eye import SkySample, body_attitude
-from sensor.photodiode import malus_signal
+from skysim.geometry import cos_sin_deg
 from skysim.sky import RayleighSky
 from skysim.sun import SunTrack
 
@@ -164,6 +164,8 @@ class Forward:
         self._attitudes = []
         """The last attitudes computed, ``((heading, pitch, roll), Rotation)``, newest last."""
         self._modulations = None
+        self._double_angle = None
+        """``(obs, (cos 2 chi, sin 2 chi))`` of the last sky sample's units (n, U)."""
         self._additive_last = None
         """The last additive light of the effect, ``(obs, parameters, values)``."""
         """The last modulation terms, ``(obs, key, values)`` (:meth:`_modulation`)."""
@@ -188,6 +190,7 @@ class Forward:
         self.unit_mean = mean
         need = np.minimum(self.member.sum(axis=1), MIN_PHOTODIODES_USED)    # (U,)
         self.usable = good & ((mean > RELATIVE_FLOOR) & (cnt >= need))[:, units]
+        self._usable_f = self.usable.astype(float)
         self.pd_angle_deg = (inst.pd_angle_deg if inst.pd_angle_row_deg is None
                              else np.asarray(inst.pd_angle_row_deg, float))
         """Nominal polarizer angles, (P,) with fixed analysers or (n, P) per sample [deg]."""
@@ -298,18 +301,27 @@ class Forward:
         """Malus's modulation ``1 + d cos 2(chi - angle)`` (n, P), ``d`` the DoP of ``obs``
         times ``s`` (clipped to [0, 0.999]), or ``cos 2(chi - angle)`` alone without ``s``, at
         each photodiode's unit: remembered for the last sky sample, polarizer angles and DoP
-        scale (a fit's steps in the gains and offsets leave them unchanged)."""
+        scale (a fit's steps in the gains and offsets leave them unchanged).
+
+        ``cos 2(chi - a) = cos 2chi cos 2a + sin 2chi sin 2a``: the trigonometry of the units'
+        angles (n, U) once per sky sample and of the polarizer angles (P,) once per call, not
+        a cosine per reading (n, P) at each of a Jacobian's polarizer-angle columns (equal to
+        Malus's law written out to rounding, tested)."""
         key = (np.array(angle, float), s)
         last = self._modulations
         if (last is not None and last[0] is obs and last[1][1] == s
                 and np.array_equal(last[1][0], key[0])):
             return last[2]
         u = self.inst.pd_unit
-        if s is None:
-            out = np.cos(np.radians(2.0 * (obs.aop_unit_deg[:, u] - angle)))
-        else:
-            d = np.clip(s * obs.dop[:, u], 0.0, 0.999)
-            out = malus_signal(1.0, obs.aop_unit_deg[:, u], d, angle)
+        if self._double_angle is None or self._double_angle[0] is not obs:
+            self._double_angle = (obs, cos_sin_deg(2.0 * obs.aop_unit_deg))
+        c2, s2 = (x[:, u] for x in self._double_angle[1])
+        ca, sa = cos_sin_deg(2.0 * key[0])
+        out = c2 * ca
+        out += s2 * sa
+        if s is not None:
+            out *= np.clip(s * obs.dop[:, u], 0.0, 0.999)
+            out += 1.0
         self._modulations = (obs, key, out)
         return out
 
@@ -337,11 +349,13 @@ class Forward:
         angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
         return np.exp(theta[L.lam]) * self._modulation(obs, angle, float(s))
 
-    def _unit_sums(self, x) -> np.ndarray:
+    def _unit_sums(self, x, weight=None) -> np.ndarray:
         """Sums of ``x`` (n, P) over the photodiodes of each profile (n, K: each unit's, or
-        each photodiode alone, :attr:`_profile_member`), and over the samples of each group
-        of :attr:`profile_rows` when it is set (G, K)."""
-        s = x @ self._profile_member.T
+        each photodiode alone, :attr:`_profile_member`), each photodiode's term times
+        ``weight`` (P,) when given, and over the samples of each group of
+        :attr:`profile_rows` when it is set (G, K)."""
+        m = self._profile_member if weight is None else self._profile_member * weight
+        s = x @ m.T
         if self.profile_rows is None:
             return s
         out = np.zeros((int(self.profile_rows.max()) + 1, s.shape[1]))
@@ -402,18 +416,20 @@ class Forward:
         u = inst.pd_unit
         g = np.exp(theta[L.lam])
         angle = self.polarizer_sign * self.pd_angle_deg + theta[L.angle] + theta[L.delta][u]
-        b0 = np.broadcast_to(g, self.y.shape)
-        b1 = g * self._modulation(obs, angle)
+        mod = self._modulation(obs, angle)
         off = self._offsets(theta, obs)
         w = self.usable
         yo = np.where(w, self.y - off, 0.0)
-        b0w, b1w = np.where(w, b0, 0.0), np.where(w, b1, 0.0)
+        mw = np.where(w, mod, 0.0)
         S = self._unit_sums
         # a trial step of a fit to gains of e^700 overflows here; its cost is then not finite
         # and the step is rejected (:func:`.fit.fit`), so the overflow is not reported
         with np.errstate(over="ignore", invalid="ignore"):
-            a00, a01, a11 = S(b0w * b0w), S(b0w * b1w), S(b1w * b1w)
-            c0, c1 = S(yo * b0w), S(yo * b1w)
+            # the basis (g, g cos 2(chi - a)) of each reading, its gain carried by the sums'
+            # weights: five sums over (n, P) products instead of eight
+            g2 = g * g
+            a00, a01, a11 = S(self._usable_f, g2), S(mw, g2), S(mw * mw, g2)
+            c0, c1 = S(yo, g), S(yo * mw, g)
             det = np.maximum(a00 * a11 - a01 * a01, 1e-300)
             radiance = (a11 * c0 - a01 * c1) / det
             polarized = (a00 * c1 - a01 * c0) / det
@@ -426,7 +442,11 @@ class Forward:
                 radiance = np.where(neg, c0 / np.maximum(a00, 1e-300), radiance)
             radiance, polarized = self._per_sample(radiance), self._per_sample(polarized)
             k = self._profile_col
-            return radiance[:, k] * b0 + polarized[:, k] * b1 + off, radiance
+            pred = polarized[:, k] * mod
+            pred += radiance[:, k]
+            pred *= g
+            pred += off
+            return pred, radiance
 
     def residual(self, theta, obs: SkySample | None = None) -> np.ndarray:
         """Relative residuals (n, P): ``(r - r_hat) / unit mean``, 0 where not usable."""
