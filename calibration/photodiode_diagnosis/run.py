@@ -287,11 +287,17 @@ def _pointing_under_effect(fe: Forward, pair, sigma):
             return np.inf
         return fits[w][0].cost
 
+    def newton(w):
+        try:
+            return _profile_newton_step(fe, fits[w][0].theta, sigma)
+        except InvalidParameterError:
+            return None
+
     e = fe.effect
     try:
         found = profile_minimum(cost, float(pair[0].theta[j]), PROFILE_STEP, e.lower[0],
-                                e.upper[0], PROFILE_XTOL, PROFILE_EVALUATIONS)
-    except InsufficientDataError:
+                                e.upper[0], PROFILE_XTOL, PROFILE_EVALUATIONS, newton)
+    except InvalidParameterError:
         return pair
     full, aop = fits[found.x]
     return replace(full, converged=bool(found.converged and full.converged)), aop
@@ -336,13 +342,43 @@ def _under_effect(fe: Forward, base_pointing, near, value: float, sigma):
     return replace(full, converged=full.converged and aop.converged), aop
 
 
+def _profile_newton_step(fe: Forward, theta, sigma) -> float | None:
+    """Gauss-Newton step of a one-parameter effect along :func:`_pointing_under_effect`'s
+    profile at a point of it (``theta``: the full model's fit there, the pointing the AoP
+    stage's): ``-g / S``, ``g`` the derivative of the data's cost along the path
+    (the effect's Jacobian column plus the pointing's times ``dp/de``,
+    :func:`_along_pointing`) and ``S`` its Gauss-Newton curvature with the full model's other
+    parameters profiled (the Schur complement). None where the curvature is not positive (an
+    effect at its null, whose readings change with its square).
+
+    Costs one Jacobian of each stage (about ten evaluations of the model), where a point of
+    the profile costs 45-130."""
+    L = fe.layout
+    aop_free = np.ones(L.size, bool)
+    aop_free[L.scale] = False
+    A1, G1, f1 = _sample_scores(fe, theta, aop_free, sigma, dop_free=True)
+    full = ~geometry_mask(fe)
+    full[L.pointing] = True
+    A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
+    idx1, idx2 = np.flatnonzero(f1), np.flatnonzero(f2)
+    ptg = np.arange(L.size)[L.pointing]
+    _, _, _, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, L.effect)
+    own = np.flatnonzero(~np.isin(idx2, ptg))
+    k = int(np.flatnonzero(idx2[own] == L.effect.start)[0])
+    inv_kk = np.linalg.pinv(A2[np.ix_(own, own)])[k, k]
+    if not inv_kk > 0.0:
+        return None
+    return float(-inv_kk * G2[:, own[k]].sum())
+
+
 PROFILE_STEP = 1.0
 """First step [deg] of :func:`_pointing_under_effect`'s search: about the distance from the
 width read under the base model's pointing to the profile's minimum at 30-40 deg (3.2 deg at
 40: the bracketing's steps grow by 1.6)."""
-PROFILE_XTOL = 0.005
-"""Accuracy [deg] of the profile's minimum: a tenth of the width's smallest SE measured on a
-simulated ring of twelve sweeps (0.05 deg at 45 deg)."""
+PROFILE_XTOL = 0.01
+"""Accuracy [deg] of the profile's minimum: a fifth of the width's smallest SE measured on a
+simulated ring of twelve sweeps (0.05 deg at 45 deg); an error spread evenly over +-0.01 deg
+adds 1.3 % to that SE's square."""
 PROFILE_EVALUATIONS = 16
 """Most values of the effect :func:`_pointing_under_effect` fits at (7-9 sufficed from
 30-45 deg on simulated rings)."""
@@ -1378,10 +1414,25 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
     full = ~geometry_mask(fe)
     full[L.pointing] = True
     A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
-    idx1, idx2 = np.flatnonzero(f1), np.flatnonzero(f2)
-    ptg = np.arange(L.size)[L.pointing]
-    if follows:
-        A1, G1, idx1, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, L.effect)
+    var, own = _two_step_variance(A1, G1, np.flatnonzero(f1), A2, G2, np.flatnonzero(f2),
+                                  np.arange(L.size)[L.pointing], L.effect if follows else None)
+    out = []
+    for i in range(L.effect.start, L.effect.stop):
+        k = np.flatnonzero(own == i)
+        out.append(float(np.sqrt(var[k[0]])) if k.size else None)
+    return out
+
+
+def _two_step_variance(A1, G1, idx1, A2, G2, idx2, ptg, follows: slice | None = None):
+    """Variance of the full model's own free parameters under the two-step estimator of
+    :func:`_two_step_sd`, from each stage's information ``A`` and per-sample scores ``G``
+    (:func:`_sample_scores`) over the parameters ``idx1`` (the AoP stage) and ``idx2`` (the
+    full model, the pointing ``ptg`` among them); with ``follows`` (the effect's slice, in
+    both sets) the effect's pointing is the AoP reading under it (:func:`_along_pointing`).
+    Returns ``(variance, parameter indices)`` of the full model's parameters other than the
+    pointing."""
+    if follows is not None:
+        A1, G1, idx1, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, follows)
     p1 = np.flatnonzero(np.isin(idx1, ptg))          # pointing among the AoP fit's
     p2 = np.flatnonzero(np.isin(idx2, ptg))          # and among the full model's
     e2 = np.flatnonzero(~np.isin(idx2, ptg))         # the full model's own free set
@@ -1396,12 +1447,7 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
         infl = infl + ptg_infl[:, b] @ move[:, a].T
     infl = infl - infl.mean(axis=0)       # the scores' mean off the optimum of either stage
     n = infl.shape[0]
-    var = np.sum(infl ** 2, axis=0) * n / max(n - 1, 1)
-    out = []
-    for i in range(L.effect.start, L.effect.stop):
-        k = np.flatnonzero(idx2[e2] == i)
-        out.append(float(np.sqrt(var[k[0]])) if k.size else None)
-    return out
+    return np.sum(infl ** 2, axis=0) * n / max(n - 1, 1), idx2[e2]
 
 
 def _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, effect: slice):
