@@ -102,3 +102,36 @@ def test_bad_settings_are_named(kw, word):
 def test_a_cost_infinite_everywhere_is_named():
     with pytest.raises(InvalidParameterError, match="infinite at every point"):
         profile_minimum(lambda x: np.inf, 1.0, 1.0, 0.0, 60.0, XTOL)
+
+
+def test_newton_steps_reach_a_parabola_in_few_evaluations():
+    """Exact Newton steps on a parabola, from 10 deg away: one step lands on the vertex, the
+    next is null, and the bracketing around it (two tolerances out, then the neighbours'
+    rule) confirms it: at most 7 evaluations, where the bracketing alone takes more."""
+    f = lambda x: 500.0 * (x - 45.07) ** 2
+    cost, calls = _counted(f)
+    r = profile_minimum(cost, 35.0, 1.0, 0.0, 60.0, XTOL, newton=lambda x: 45.07 - x)
+    assert r.converged and abs(r.x - 45.07) <= XTOL
+    assert len(calls) <= 7
+    plain, plain_calls = _counted(f)
+    profile_minimum(plain, 35.0, 1.0, 0.0, 60.0, XTOL)
+    assert len(plain_calls) > len(calls)
+
+
+@pytest.mark.parametrize("bias", [0.03, -0.03, 3.0])
+def test_a_biased_newton_step_still_ends_at_the_cost_minimum(bias):
+    """Newton steps aimed ``bias`` off the minimum (a slope from a model that is not quite
+    the cost's: 0.03 deg at 45 deg for the acceptance's width, three tolerances; or an
+    overshoot of 3 deg): the minimum returned is the cost's, within ``xtol``."""
+    m = 45.07
+    cost, _ = _counted(lambda x: 500.0 * (x - m) ** 2)
+    r = profile_minimum(cost, 35.0, 1.0, 0.0, 60.0, XTOL, newton=lambda x: m + bias - x)
+    assert r.converged and abs(r.x - m) <= XTOL
+
+
+def test_no_newton_step_falls_back_to_the_bracketing():
+    """``newton`` returning None (no positive curvature, an effect at its null): the
+    bracketing alone finds the minimum at the bound."""
+    cost, _ = _counted(lambda x: x ** 4)
+    r = profile_minimum(cost, 8.0, 1.0, 0.0, 60.0, XTOL, newton=lambda x: None)
+    assert r.converged and r.x == 0.0

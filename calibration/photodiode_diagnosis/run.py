@@ -288,6 +288,8 @@ def _pointing_under_effect(fe: Forward, pair, sigma):
         return fits[w][0].cost
 
     def newton(w):
+        if w not in fits:
+            return None
         try:
             return _profile_newton_step(fe, fits[w][0].theta, sigma)
         except InvalidParameterError:
@@ -354,14 +356,7 @@ def _profile_newton_step(fe: Forward, theta, sigma) -> float | None:
     Costs one Jacobian of each stage (about ten evaluations of the model), where a point of
     the profile costs 45-130."""
     L = fe.layout
-    aop_free = np.ones(L.size, bool)
-    aop_free[L.scale] = False
-    A1, G1, f1 = _sample_scores(fe, theta, aop_free, sigma, dop_free=True)
-    full = ~geometry_mask(fe)
-    full[L.pointing] = True
-    A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
-    idx1, idx2 = np.flatnonzero(f1), np.flatnonzero(f2)
-    ptg = np.arange(L.size)[L.pointing]
+    A1, G1, idx1, A2, G2, idx2, ptg = _stage_scores(fe, theta, sigma, True)
     _, _, _, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, L.effect)
     own = np.flatnonzero(~np.isin(idx2, ptg))
     k = int(np.flatnonzero(idx2[own] == L.effect.start)[0])
@@ -422,8 +417,13 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
     offered = fe.aop_sky
     fe.aop_sky = None if far_clock(fe.effect, fit_.theta[fe.layout.effect]) else aop_sky
     try:
-        more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
-                          geometry=geometric, covariance=geometric)
+        if getattr(fe.effect, "pointing_under_effect", False):
+            # its profile searched again from where it stopped: a fit of the full model
+            # with the pointing held would move the width off the profile's minimum
+            more = _pointing_under_effect(fe, pair, sigma)
+        else:
+            more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
+                              geometry=geometric, covariance=geometric)
     except InvalidParameterError:
         return pair
     finally:
@@ -1406,21 +1406,32 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
        models", J. Business & Economic Statistics 3(4), 370-379 (1985).
     """
     L = fe.layout
-    aop_free = np.ones(L.size, bool)
-    aop_free[L.scale] = False
     follows = getattr(fe.effect, "pointing_under_effect", False)
-    aop_free[L.effect] = follows
-    A1, G1, f1 = _sample_scores(fe, theta, aop_free, sigma, dop_free=True)
-    full = ~geometry_mask(fe)
-    full[L.pointing] = True
-    A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
-    var, own = _two_step_variance(A1, G1, np.flatnonzero(f1), A2, G2, np.flatnonzero(f2),
-                                  np.arange(L.size)[L.pointing], L.effect if follows else None)
+    var, own = _two_step_variance(*_stage_scores(fe, theta, sigma, follows),
+                                  L.effect if follows else None)
     out = []
     for i in range(L.effect.start, L.effect.stop):
         k = np.flatnonzero(own == i)
         out.append(float(np.sqrt(var[k[0]])) if k.size else None)
     return out
+
+
+def _stage_scores(fe: Forward, theta, sigma: float, effect_in_aop: bool):
+    """Information and per-sample scores (:func:`_sample_scores`) of the two stages at
+    ``theta``: the AoP stage (the DoP profiled out; the DoP scale held, the effect held
+    unless ``effect_in_aop``) and the full model with the pointing among its parameters.
+    Returns ``(A1, G1, idx1, A2, G2, idx2, ptg)``, ``idx`` the parameters of each and
+    ``ptg`` the pointing's."""
+    L = fe.layout
+    aop_free = np.ones(L.size, bool)
+    aop_free[L.scale] = False
+    aop_free[L.effect] = effect_in_aop
+    A1, G1, f1 = _sample_scores(fe, theta, aop_free, sigma, dop_free=True)
+    full = ~geometry_mask(fe)
+    full[L.pointing] = True
+    A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
+    return (A1, G1, np.flatnonzero(f1), A2, G2, np.flatnonzero(f2),
+            np.arange(L.size)[L.pointing])
 
 
 def _two_step_variance(A1, G1, idx1, A2, G2, idx2, ptg, follows: slice | None = None):
