@@ -364,13 +364,15 @@ class FieldOfView(RingEffect):
     fd_step = (0.05,)
     observes = True
     pointing_under_effect: ClassVar[bool] = True
-    """The units' pointing is read again from the angle of polarization under the fitted
-    acceptance, in turns with the width (:func:`.run._pointing_under_effect`): the base
-    model's pointing, read under a pencil beam, takes up part of a wide acceptance."""
+    """The units' pointing is read again from the angle of polarization under each width,
+    and the width is the minimum of the full model's cost along that path
+    (:func:`.run._pointing_under_effect`): the base model's pointing, read under a pencil
+    beam, takes up part of an acceptance the horizon cuts (every elevation 1.5 deg high at
+    a HWHM of 45 deg)."""
     two_step_sd: ClassVar[bool] = True
-    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`): the width
-    trades with the DoP scale and the gains, and with the pointing read from the angle of
-    polarization."""
+    """Its SE is the two-step sandwich over samples (:func:`.run._two_step_sd`) along the
+    pointing the angle of polarization reads under the width: the width trades with the
+    DoP scale and the gains, and with that pointing."""
 
     def starts(self, ctx) -> list:
         return [np.array([ACCEPTANCE_HWHM_DEG]), np.array([8.0])]

@@ -241,78 +241,153 @@ def _joint_geometry(fe: Forward, pair, sigma):
 
 
 def _pointing_under_effect(fe: Forward, pair, sigma):
-    """A non-geometric fit that held the base model's pointing, continued by turns of the
-    pointing read from the angle of polarization under the effect's fitted value (the DoP
-    profiled out, the effect held, as in :func:`.fit.fit_pinned`'s first stage, the
-    pointing tied to the base model's reading by :data:`POINTING_TURN_SD_DEG`) and the full
-    model with that pointing held, until a turn changes the full model's cost by less than
-    :data:`ALTERNATION_GAIN` of it; returns the last turn's ``(fit, aop_fit)`` (the fit as
-    it was when a turn leaves the model's valid range).
+    """A one-parameter effect whose units' pointing is read from the angle of polarization
+    under it, fitted by its profile cost (:func:`calibration.diagnosis.profile.profile_minimum`
+    from ``pair``'s fitted value, :data:`PROFILE_STEP` and :data:`PROFILE_XTOL`): at each
+    value, the pointing, polarizer angles, gains, offsets and headings read from the angle
+    of polarization (the DoP profiled out, the effect held), then the full model with that
+    pointing and the effect held (:func:`_under_effect`); the value of least full-model cost
+    wins. Returns ``(fit, aop_fit)`` at that value (``fit`` not converged when the search
+    ran out of evaluations or the fits there did not converge; ``pair`` when no value could
+    be evaluated).
 
-    The base model reads the pointing under a pencil beam; for an effect that changes what
-    each unit sees (a wide acceptance, :class:`.effects.FieldOfView`) that pointing is off
-    by what the effect moves the angle of polarization, and at a ring's noise a few
-    hundredths of a degree of every unit's elevation take up a large part of the effect:
-    on a simulated ring of twelve sweeps with an acceptance of HWHM 30 deg, the base's
-    pointing (0.01 deg from the truth) held, the width fitted 28.6 deg; read in turns under
-    the fitted width, the pointing moved by 0.02 deg and the width fitted 29.98 deg. The
-    pointing stays the angle of polarization's, as in the base model, so a DoP profile the
-    sky model lacks is not taken up by it."""
+    The base model reads the pointing under a pencil beam; an acceptance the horizon cuts
+    (:class:`.effects.FieldOfView`) moves the angle of polarization the way a higher
+    elevation does, so that reading is off by what the width implies: every unit's
+    elevation +0.02, +0.59 and +1.52 deg on simulated rings of twelve sweeps with an
+    acceptance of HWHM 30, 40 and 45 deg. Read under the width, the AoP puts it within
+    0.01 deg of the truth, and a hundredth of a degree of elevation moves the width by
+    0.07 deg at 40 deg: the width and the pointing are read together. Fitted in turns
+    (the pointing under the width, then the width under that pointing) they approach the
+    solution by 6 % of the distance a turn at 40 deg (the width one turn reaches rises 0.94
+    deg for every degree it starts higher), and the turns' own fixed point is not the
+    solution either: it neglects what the pointing the width implies does to the full
+    model's cost (it came out at 39.74 for 40 over six draws, at 44.0 for 45). The profile
+    cost is lowest within 0.1 deg of the truth on the same draws.
+
+    The pointing keeps the base model's prior except the azimuths, tied to the base
+    model's reading by :data:`POINTING_TURN_SD_DEG`: an acceptance symmetric about a unit's
+    axis leaves the azimuth the AoP reads (mirror symmetry about the vertical plane through
+    the view; moved by under 0.001 deg at 45 deg), while the elevations move by what the
+    width implies, 1.5 deg at 45 deg: tied to the base's reading within 0.1 deg they were
+    held back the more the wider the width, and the profile's minimum fell at 44.6 for 45.
+    """
+    from ..diagnosis.profile import profile_minimum
+    L = fe.layout
+    j = L.effect.start
+    fits = {}
+
+    def cost(w):
+        near = min(fits, key=lambda v: abs(v - w)) if fits else None
+        try:
+            fits[w] = _under_effect(fe, pair[0].theta[L.pointing],
+                                    fits[near] if near is not None else (pair[0], None),
+                                    w, sigma)
+        except InvalidParameterError:
+            return np.inf
+        return fits[w][0].cost
+
+    def newton(w):
+        if w not in fits:
+            return None
+        try:
+            return _profile_newton_step(fe, fits[w][0].theta, sigma)
+        except InvalidParameterError:
+            return None
+
+    e = fe.effect
+    try:
+        found = profile_minimum(cost, float(pair[0].theta[j]), PROFILE_STEP, e.lower[0],
+                                e.upper[0], PROFILE_XTOL, PROFILE_EVALUATIONS, newton)
+    except InvalidParameterError:
+        return pair
+    full, aop = fits[found.x]
+    return replace(full, converged=bool(found.converged and full.converged)), aop
+
+
+def _under_effect(fe: Forward, base_pointing, near, value: float, sigma):
+    """``(fit, aop_fit)`` with the effect held at ``value``: the AoP stage (pointing,
+    polarizer angles, gains, offsets, headings; the DoP profiled out; the azimuths tied to
+    ``base_pointing``'s by :data:`POINTING_TURN_SD_DEG`) from ``near``'s AoP fit (its full
+    fit when it has none), then the full model with the pointing held, from ``near``'s full
+    fit with the AoP stage's pointing, both to :data:`PROFILE_FIT_TOL`.
+
+    Raises
+    ------
+    InvalidParameterError
+        When either stage leaves the model's valid range.
+    """
     from .fit import Priors
     L = fe.layout
+    full0, aop0 = near
+    t = (full0 if aop0 is None else aop0).theta.copy()
+    t[L.effect] = value
     aop_free = np.ones(L.size, bool)
     aop_free[L.scale] = False
     aop_free[L.effect] = False
-    best, last = pair, pair[0].cost
-    for _ in range(POINTING_TURNS):
-        pri = Priors.for_model(fe, best[0].theta)
-        pri.mu[L.pointing] = pair[0].theta[L.pointing]
-        pri.sd[L.pointing] = POINTING_TURN_SD_DEG
-        fe.dop_free = True
-        try:
-            aop = fit(fe, best[0].theta, aop_free, priors=pri, sigma=sigma,
-                      max_iter=EFFECT_JOINT_ITER)
-        except InvalidParameterError:
-            break
-        finally:
-            fe.dop_free = False
-        try:
-            full = fit(fe, aop.theta, ~geometry_mask(fe), sigma=sigma, max_iter=EFFECT_JOINT_ITER)
-        except InvalidParameterError:
-            break
-        best = (full, aop)
-        if abs(last - full.cost) <= ALTERNATION_GAIN * full.cost:
-            break
-        last = full.cost
-    # the last full-model fit run to a tight tolerance: the width trades with the DoP scale
-    # and the gains along a valley where a relative cost change of 1e-6 (0.02 of the
-    # chi-square of a twelve-sweep ring) still leaves it 0.15 deg short of the optimum
-    # (14.87 against 15.03 deg for a truth of 15, its sandwich SE 0.07 deg); the fit has
-    # met the usual tolerance already, so a refinement that stops at its iteration limit
-    # does not make it unconverged
+    pri = Priors.for_model(fe, t)
+    az = np.arange(L.size)[L.pointing][L.n_units:]
+    pri.mu[az] = np.asarray(base_pointing)[L.n_units:]
+    pri.sd[az] = POINTING_TURN_SD_DEG
+    fe.dop_free = True
     try:
-        tight = fit(fe, best[0].theta, ~geometry_mask(fe), sigma=sigma,
-                    max_iter=EFFECT_CONTINUE_ITER, tol=POINTING_TURN_TOL)
-    except InvalidParameterError:
-        return best
-    if tight.cost > best[0].cost:
-        return best
-    return replace(tight, converged=tight.converged or best[0].converged), best[1]
+        aop = fit(fe, t, aop_free, priors=pri, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
+                  tol=PROFILE_FIT_TOL)
+    finally:
+        fe.dop_free = False
+    t = full0.theta.copy()
+    t[L.pointing] = aop.theta[L.pointing]
+    t[L.effect] = value
+    held = ~geometry_mask(fe)
+    held[L.effect] = False
+    full = fit(fe, t, held, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER, tol=PROFILE_FIT_TOL)
+    return replace(full, converged=full.converged and aop.converged), aop
 
 
-POINTING_TURNS = 6
-"""Most turns of :func:`_pointing_under_effect` (three sufficed on simulated rings)."""
-POINTING_TURN_TOL = 1e-11
-"""Relative cost change that ends :func:`_pointing_under_effect`'s last fit."""
+def _profile_newton_step(fe: Forward, theta, sigma) -> float | None:
+    """Gauss-Newton step of a one-parameter effect along :func:`_pointing_under_effect`'s
+    profile at a point of it (``theta``: the full model's fit there, the pointing the AoP
+    stage's): ``-g / S``, ``g`` the derivative of the data's cost along the path
+    (the effect's Jacobian column plus the pointing's times ``dp/de``,
+    :func:`_along_pointing`) and ``S`` its Gauss-Newton curvature with the full model's other
+    parameters profiled (the Schur complement). None where the curvature is not positive (an
+    effect at its null, whose readings change with its square).
+
+    Costs one Jacobian of each stage (about ten evaluations of the model), where a point of
+    the profile costs 45-130."""
+    L = fe.layout
+    A1, G1, idx1, A2, G2, idx2, ptg = _stage_scores(fe, theta, sigma, True)
+    _, _, _, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, L.effect)
+    own = np.flatnonzero(~np.isin(idx2, ptg))
+    k = int(np.flatnonzero(idx2[own] == L.effect.start)[0])
+    inv_kk = np.linalg.pinv(A2[np.ix_(own, own)])[k, k]
+    if not inv_kk > 0.0:
+        return None
+    return float(-inv_kk * G2[:, own[k]].sum())
+
+
+PROFILE_STEP = 1.0
+"""First step [deg] of :func:`_pointing_under_effect`'s search: about the distance from the
+width read under the base model's pointing to the profile's minimum at 30-40 deg (3.2 deg at
+40: the bracketing's steps grow by 1.6)."""
+PROFILE_XTOL = 0.01
+"""Accuracy [deg] of the profile's minimum: a fifth of the width's smallest SE measured on a
+simulated ring of twelve sweeps (0.05 deg at 45 deg); an error spread evenly over +-0.01 deg
+adds 1.3 % to that SE's square."""
+PROFILE_EVALUATIONS = 16
+"""Most values of the effect :func:`_pointing_under_effect` fits at (7-9 sufficed from
+30-45 deg on simulated rings)."""
+PROFILE_FIT_TOL = 1e-10
+"""Relative cost change that ends each fit of the profile: neighbouring values 0.005 deg
+apart differ in cost by about 1e-6 of it at 40 deg (curvature 460 on a cost of 8,400)."""
 POINTING_TURN_SD_DEG = 0.1
-"""Prior SD [deg] of the units' pointing about the base model's reading in
-:func:`_pointing_under_effect`'s turns. Under single scattering an acceptance symmetric about
-a unit's axis keeps the axis's angle of polarization (mirror symmetry about the plane through
-the sun and the view; tested in ``tests/test_fov_acceptance.py``), so the pointing the AoP
-reads moves only where the horizon cuts the acceptance: by 0.02 deg at HWHM 30 deg on a
-simulated ring. Shifts of degrees are the real sky's angle of polarization that the model
-lacks (on a real session's folds, free, the elevations moved by 2-5 deg and the width ran
-to its 60-deg bound)."""
+"""Prior SD [deg] of a quantity the units' pointing is tied to the base model's reading by
+when a sky effect is read: the azimuths under an acceptance (:func:`_pointing_under_effect`;
+an acceptance symmetric about a unit's axis keeps the axis's angle of polarization azimuth
+by mirror symmetry, tested in ``tests/test_fov_acceptance.py``), the whole pointing under a
+neutral-point sky (:func:`_pointing_in_full_fit`). Shifts of degrees are the real sky's
+angle of polarization that the model lacks (on a real session's folds, free in the full
+model, the elevations moved by 2-5 deg and the width ran to its 60-deg bound)."""
 
 
 ALTERNATION_PASSES = 4
@@ -349,8 +424,13 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
     offered = fe.aop_sky
     fe.aop_sky = None if far_clock(fe.effect, fit_.theta[fe.layout.effect]) else aop_sky
     try:
-        more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
-                          geometry=geometric, covariance=geometric)
+        if getattr(fe.effect, "pointing_under_effect", False):
+            # its profile searched again from where it stopped: a fit of the full model
+            # with the pointing held would move the width off the profile's minimum
+            more = _pointing_under_effect(fe, pair, sigma)
+        else:
+            more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
+                              geometry=geometric, covariance=geometric)
     except InvalidParameterError:
         return pair
     finally:
@@ -1330,7 +1410,10 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
     over 40 noise draws of a short ring the aureole's and the stray light's errors spread
     0.7-1.05 times this SD). And the pointing's own error enters: at a ring's noise a
     hundredth of a degree of every unit's elevation moves an acceptance of HWHM 30 deg by
-    0.7 deg.
+    0.7 deg. For an effect whose pointing is the AoP reading under it
+    (:func:`_pointing_under_effect`, the acceptance's width) the full model's effect
+    column moves the pointing with it (:func:`_along_pointing`): the estimator is the
+    profile cost's minimum, whose score is the derivative along that path.
 
     References
     ----------
@@ -1340,15 +1423,44 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
        models", J. Business & Economic Statistics 3(4), 370-379 (1985).
     """
     L = fe.layout
+    follows = getattr(fe.effect, "pointing_under_effect", False)
+    var, own = _two_step_variance(*_stage_scores(fe, theta, sigma, follows),
+                                  L.effect if follows else None)
+    out = []
+    for i in range(L.effect.start, L.effect.stop):
+        k = np.flatnonzero(own == i)
+        out.append(float(np.sqrt(var[k[0]])) if k.size else None)
+    return out
+
+
+def _stage_scores(fe: Forward, theta, sigma: float, effect_in_aop: bool):
+    """Information and per-sample scores (:func:`_sample_scores`) of the two stages at
+    ``theta``: the AoP stage (the DoP profiled out; the DoP scale held, the effect held
+    unless ``effect_in_aop``) and the full model with the pointing among its parameters.
+    Returns ``(A1, G1, idx1, A2, G2, idx2, ptg)``, ``idx`` the parameters of each and
+    ``ptg`` the pointing's."""
+    L = fe.layout
     aop_free = np.ones(L.size, bool)
     aop_free[L.scale] = False
-    aop_free[L.effect] = False
+    aop_free[L.effect] = effect_in_aop
     A1, G1, f1 = _sample_scores(fe, theta, aop_free, sigma, dop_free=True)
     full = ~geometry_mask(fe)
     full[L.pointing] = True
     A2, G2, f2 = _sample_scores(fe, theta, full, sigma, dop_free=False)
-    idx1, idx2 = np.flatnonzero(f1), np.flatnonzero(f2)
-    ptg = np.arange(L.size)[L.pointing]
+    return (A1, G1, np.flatnonzero(f1), A2, G2, np.flatnonzero(f2),
+            np.arange(L.size)[L.pointing])
+
+
+def _two_step_variance(A1, G1, idx1, A2, G2, idx2, ptg, follows: slice | None = None):
+    """Variance of the full model's own free parameters under the two-step estimator of
+    :func:`_two_step_sd`, from each stage's information ``A`` and per-sample scores ``G``
+    (:func:`_sample_scores`) over the parameters ``idx1`` (the AoP stage) and ``idx2`` (the
+    full model, the pointing ``ptg`` among them); with ``follows`` (the effect's slice, in
+    both sets) the effect's pointing is the AoP reading under it (:func:`_along_pointing`).
+    Returns ``(variance, parameter indices)`` of the full model's parameters other than the
+    pointing."""
+    if follows is not None:
+        A1, G1, idx1, A2, G2 = _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, follows)
     p1 = np.flatnonzero(np.isin(idx1, ptg))          # pointing among the AoP fit's
     p2 = np.flatnonzero(np.isin(idx2, ptg))          # and among the full model's
     e2 = np.flatnonzero(~np.isin(idx2, ptg))         # the full model's own free set
@@ -1363,12 +1475,24 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
         infl = infl + ptg_infl[:, b] @ move[:, a].T
     infl = infl - infl.mean(axis=0)       # the scores' mean off the optimum of either stage
     n = infl.shape[0]
-    var = np.sum(infl ** 2, axis=0) * n / max(n - 1, 1)
-    out = []
-    for i in range(L.effect.start, L.effect.stop):
-        k = np.flatnonzero(idx2[e2] == i)
-        out.append(float(np.sqrt(var[k[0]])) if k.size else None)
-    return out
+    return np.sum(infl ** 2, axis=0) * n / max(n - 1, 1), idx2[e2]
+
+
+def _along_pointing(A1, G1, idx1, A2, G2, idx2, ptg, effect: slice):
+    """The two stages' information and per-sample scores for an effect whose pointing is
+    the AoP reading under it (:func:`_pointing_under_effect`): the AoP stage's without the
+    effect (the pointing's influence at a held effect), and the full model's with each
+    effect column moved along the pointing the AoP reads under it,
+    ``J_e + J_p dp/de``, ``dp/de = -A_pp^-1 A_pe`` from the AoP stage's information (the
+    implicit function of its optimum). Returns ``(A1, G1, idx1, A2, G2)``."""
+    eff = np.arange(effect.start, effect.stop)
+    own = ~np.isin(idx1, eff)
+    de = -np.linalg.pinv(A1[np.ix_(own, own)]) @ A1[np.ix_(own, ~own)]   # (own, effect)
+    shared = np.flatnonzero(np.isin(idx1[own], ptg) & np.isin(idx1[own], idx2))
+    T = np.eye(idx2.size)        # idx1, idx2 ascending (np.flatnonzero)
+    T[np.ix_(np.searchsorted(idx2, idx1[own][shared]),
+             np.searchsorted(idx2, idx1[~own]))] = de[shared]
+    return (A1[np.ix_(own, own)], G1[:, own], idx1[own], T.T @ A2 @ T, G2 @ T)
 
 
 def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma: float) -> None:
