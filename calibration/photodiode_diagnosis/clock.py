@@ -228,7 +228,7 @@ def _aop_clock_fit(fe: Forward, theta_base, layout, start_s, sigma) -> float:
     t[:layout.size] = theta_base[:layout.size]
     t[fe.layout.effect] = start_s
     _, aop = fit_pinned(fe, t, sigma=sigma, max_iter=EFFECT_MAX_ITER, full=False)
-    if getattr(fe.effect, "joint_pointing", False):
+    if fe.effect.pointing == "joint":
         aop = _joint_aop(fe, aop, sigma)
     return float(aop.theta[fe.layout.effect][0])
 

@@ -157,6 +157,15 @@ class RingEffect:
     alone (the DoP profiled out), so that a DoP profile the sky model lacks cannot be traded
     for a false clock, tilt or pointing; then held."""
 
+    pointing: ClassVar[str] = "held"
+    """How the units' pointing is read when the effect is fitted (:func:`.run._fit_start`):
+    ``"held"`` where the base model read it (:func:`.fit.fit_pinned`); ``"joint"`` with a
+    geometric effect on the angle of polarization (:func:`.run._joint_geometry`);
+    ``"under_effect"`` from the angle of polarization under each value of a one-parameter
+    effect, the value the profile cost's minimum (:func:`.run._pointing_under_effect`);
+    ``"full_fit"`` freed in the full model after the AoP stage, tied to its reading
+    (:func:`.run._pointing_in_full_fit`)."""
+
     dop_scale_in_sky: ClassVar[bool] = False
     """True when the effect's sky takes the DoP scale ``s`` on the base sky it wraps (its
     argument ``base_sky`` is then the base sky of maximum DoP ``s``), instead of ``s``
@@ -230,7 +239,7 @@ class ClockOffset(RingEffect):
     prior_sd = (6 * 3600.0,)
     fd_step = (5.0,)
     time_margin_s = 15 * 3600.0
-    joint_pointing: ClassVar[bool] = True
+    pointing: ClassVar[str] = "joint"
     """Fitted jointly with the units' pointing on the angle of polarization
     (:func:`.run._joint_geometry`): over a session of real length (12 sweeps over 12 min)
     the sun's track tells a clock from a common shift of the units' elevations (on a
@@ -253,7 +262,7 @@ class YawScale(RingEffect):
     upper = (1.25,)
     prior_sd = (0.1,)
     fd_step = (1e-4,)
-    joint_pointing: ClassVar[bool] = True
+    pointing: ClassVar[str] = "joint"
     """Fitted jointly with the units' pointing on the angle of polarization: constant
     pointing offsets cannot stand in for a heading error that grows along each turn
     (:func:`.run._joint_geometry`)."""
@@ -363,7 +372,7 @@ class FieldOfView(RingEffect):
     prior_sd = (30.0,)
     fd_step = (0.05,)
     observes = True
-    pointing_under_effect: ClassVar[bool] = True
+    pointing: ClassVar[str] = "under_effect"
     """The units' pointing is read again from the angle of polarization under each width,
     and the width is the minimum of the full model's cost along that path
     (:func:`.run._pointing_under_effect`): the base model's pointing, read under a pencil
@@ -641,7 +650,7 @@ class NeutralPoints(RingEffect):
     """The units' pointing is read from the angle of polarization under this sky
     (:func:`.fit.fit_pinned`): held where single scattering's AoP puts it (8.4 deg low on a
     simulated ring under neutral points 40 deg apart), the fit stops at 6 deg."""
-    pointing_in_full_fit: ClassVar[bool] = True
+    pointing: ClassVar[str] = "full_fit"
     """The pointing the AoP stage read is then freed beside the separation in the full
     model, tied to that reading (:func:`.run._pointing_in_full_fit`): held, the AoP's
     error of the units' common elevation moved the separation by 4.5 times that error
@@ -1015,7 +1024,7 @@ class ReadLag(RingEffect):
     upper = (2.0,)
     prior_sd = (1.0,)
     fd_step = (2e-3,)
-    joint_pointing: ClassVar[bool] = True
+    pointing: ClassVar[str] = "joint"
     """Fitted jointly with the units' pointing on the angle of polarization: a lag moves the
     heading by the turn rate times the lag, in turns only, where constant pointing offsets
     cannot stand in for it (:func:`.run._joint_geometry`)."""

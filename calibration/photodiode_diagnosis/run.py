@@ -148,12 +148,9 @@ def _fit_start(fe: Forward, start, sigma):
     try:
         pair = fit_pinned(fe, start, sigma=sigma, max_iter=EFFECT_MAX_ITER,
                           geometry=geometric, covariance=geometric)
-        if getattr(fe.effect, "joint_pointing", False):
-            pair = _joint_geometry(fe, pair, sigma)
-        elif getattr(fe.effect, "pointing_under_effect", False):
-            pair = _pointing_under_effect(fe, pair, sigma)
-        elif getattr(fe.effect, "pointing_in_full_fit", False):
-            pair = _pointing_in_full_fit(fe, pair, sigma)
+        stage = _POINTING_STAGES.get(fe.effect.pointing)
+        if stage is not None:
+            pair = stage(fe, pair, sigma)
     finally:
         fe.aop_sky = offered
     return pair
@@ -390,6 +387,12 @@ angle of polarization that the model lacks (on a real session's folds, free in t
 model, the elevations moved by 2-5 deg and the width ran to its 60-deg bound)."""
 
 
+_POINTING_STAGES = {"joint": _joint_geometry, "under_effect": _pointing_under_effect,
+                    "full_fit": _pointing_in_full_fit}
+"""The stage that reads the units' pointing with an effect, by its
+:attr:`~.effects.RingEffect.pointing` (``"held"``: none)."""
+
+
 ALTERNATION_PASSES = 4
 """Most turns of pointing and effect after :func:`_joint_geometry`'s joint fit."""
 ALTERNATION_GAIN = 1e-3
@@ -411,12 +414,14 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
     angle of polarization read under ``aop_sky``, or under single scattering for a clock
     far from the recorded times (:func:`.clock.far_clock`), as :func:`_fit_effect` read it.
 
-    The continuation holds the pointing where the fit's own stage put it (the acceptance's
-    turns, a geometric effect's joint AoP fit), except for a sky with its own angle of
-    polarization, whose AoP stage reads the pointing again (:func:`.fit.fit_pinned`): its
-    pointing is then freed in the full model again (:func:`_pointing_in_full_fit`), or the
-    continuation would report the separation with the pointing the AoP stage left, the
-    estimate whose spread its SD does not describe."""
+    The continuation holds the pointing where the fit's own stage put it (a geometric
+    effect's joint AoP fit), or runs that stage again: the acceptance's profile search
+    from where it stopped (a full-model fit with the pointing held would move the width
+    off the profile's minimum), and for a sky with its own angle of polarization, whose
+    AoP stage reads the pointing again (:func:`.fit.fit_pinned`), the pointing freed in the
+    full model again (:func:`_pointing_in_full_fit`), or the continuation would report the
+    separation with the pointing the AoP stage left, the estimate whose spread its SD does
+    not describe."""
     fit_, aop = pair
     if fit_.converged:
         return pair
@@ -424,9 +429,7 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
     offered = fe.aop_sky
     fe.aop_sky = None if far_clock(fe.effect, fit_.theta[fe.layout.effect]) else aop_sky
     try:
-        if getattr(fe.effect, "pointing_under_effect", False):
-            # its profile searched again from where it stopped: a fit of the full model
-            # with the pointing held would move the width off the profile's minimum
+        if fe.effect.pointing == "under_effect":
             more = _pointing_under_effect(fe, pair, sigma)
         else:
             more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
@@ -435,7 +438,7 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
         return pair
     finally:
         fe.aop_sky = offered
-    if getattr(fe.effect, "pointing_in_full_fit", False):
+    if fe.effect.pointing == "full_fit":
         more = _pointing_in_full_fit(fe, more, sigma)
     return more if (more[1] if geometric else more[0]).cost <= \
         (aop if geometric else fit_).cost * (1 + 1e-9) or more[0].converged else pair
@@ -1300,7 +1303,7 @@ def _effect_sd(fe: Forward, fr, fr_aop, sigma: float) -> list:
         held = geometry_mask(fe)
         fr_aop = fit(fe, fr.theta, ~held, sigma=sigma, max_iter=0, covariance=True,
                      profiled=held)
-    elif getattr(fe.effect, "joint_pointing", False):
+    elif fe.effect.pointing == "joint":
         return _sandwich_sd(fe, fr_aop, sigma)
     return [fr_aop.sd(i) for i in range(L.effect.start, L.effect.stop)]
 
@@ -1423,7 +1426,7 @@ def _two_step_sd(fe: Forward, theta, sigma: float) -> list:
        models", J. Business & Economic Statistics 3(4), 370-379 (1985).
     """
     L = fe.layout
-    follows = getattr(fe.effect, "pointing_under_effect", False)
+    follows = fe.effect.pointing == "under_effect"
     var, own = _two_step_variance(*_stage_scores(fe, theta, sigma, follows),
                                   L.effect if follows else None)
     out = []
