@@ -491,8 +491,10 @@ def _e_vector_sensor(cols, which) -> np.ndarray:
     """Unit e-vectors (n, len(which), 3) in the sensor frame of the columns ``which``."""
     ax = cols["axes"][which]
     e_x, e_y = _e_components(cols, which)
-    e = ax[:, :, 0] * e_x[:, :, None] + ax[:, :, 1] * e_y[:, :, None]
-    return e / np.linalg.norm(e, axis=-1, keepdims=True)
+    e = ax[:, :, 0] * e_x[:, :, None]
+    e += ax[:, :, 1] * e_y[:, :, None]
+    e /= np.sqrt(np.einsum("ncj,ncj->nc", e, e))[:, :, None]
+    return e
 
 
 def observe_directions(sensor, sky, att, sun_enu, theta_deg, azimuth_deg, weights):
