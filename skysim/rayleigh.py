@@ -35,7 +35,6 @@ __all__ = [
     "relative_radiance",
     "meridian_components",
     "polarization_field",
-    "vector_field",
     "stokes",
     "stokes_from_sun_projections",
     "slab_transmission",
@@ -216,54 +215,6 @@ def polarization_field(view_elevation_deg, view_azimuth_deg, sun_elevation_deg,
     if off.any():
         aop[off] = np.where(np.isnan(aop[off]), 0.0, -90.0)
     return {"I": intensity, "Q": q, "U": u, "dop": dop, "aop_deg": aop}
-
-
-def vector_field(view, sun, dmax: float = 1.0):
-    """Single-scattering radiance, DoP and E-vector of ENU view vectors: no angles at all.
-
-    The E-vector is ``e = v x s`` [1]_ (unnormalised, ``|e|^2 = sin^2 gamma``); with
-    ``s2 = |e|^2``: ``I = (3/4)(2 - s2)`` and ``DoP = d_max s2 / (2 - s2)`` (eq. 1 of [2]_),
-    as :func:`polarization_field`. Its component on the local meridian ``e_el`` is
-    ``e_z / cos h`` (``e`` is perpendicular to ``v``), so the sign of ``e_z`` is the sign that
-    puts the AoP in [-90, 90). For views given as vectors (a sensor's columns rotated into
-    ENU) this skips the elevation and azimuth of each view and the trigonometry of the
-    angle route, which cost five transcendental passes per value.
-
-    Parameters
-    ----------
-    view : sequence of three ndarray
-        ``(x, y, z)`` ENU components of unit view vectors (East, North, Up), same shape.
-    sun : sequence of three array_like
-        ``(x, y, z)`` ENU components of the unit sun vector, broadcasting against ``view``'s.
-    dmax : float
-        Maximum degree of polarization, in (0, 1].
-
-    Returns
-    -------
-    radiance, dop : ndarray
-        ``I`` (relative, mean 1 over the sphere) and the degree of polarization.
-    e : tuple of three ndarray
-        ``(e_x, e_y, e_z)`` of ``v x s`` in ENU (zero along the sun and the anti-sun).
-    s2 : ndarray
-        ``sin^2 gamma = |e|^2``.
-    """
-    dmax = float(check_in_range("dmax", dmax, 0.0, 1.0, low_open=True))
-    vx, vy, vz = view
-    sx, sy, sz = sun
-    ex = vy * sz
-    ex -= vz * sy
-    ey = vz * sx
-    ey -= vx * sz
-    ez = vx * sy
-    ez -= vy * sx
-    s2 = ex * ex
-    s2 += ey * ey
-    s2 += ez * ez
-    radiance = np.subtract(2.0, s2)              # 1 + cos^2 gamma for now
-    dop = np.multiply(s2, dmax)
-    dop /= radiance
-    radiance *= 0.75
-    return radiance, dop, (ex, ey, ez), s2
 
 
 def stokes_from_sun_projections(p1, p2, dmax: float = 1.0):
