@@ -235,8 +235,9 @@ def test_a_unit_below_the_horizon_is_named(ring):
 def test_the_width_of_a_simulated_ring_is_recovered_within_its_uncertainty(hwhm, seed):
     """On a simulated ring of twelve sweeps whose units weigh the sky by the measured
     acceptance (sampled by the generator's own rule), the diagnosis's width is within 3 of
-    its reported uncertainty of the truth. The uncertainty is calibrated: over seeds 31-34
-    at HWHM 15 and 30 deg the z-scores (fitted - true) / uncertainty have an RMS near 1
+    its reported uncertainty of the truth. The uncertainty is calibrated: over seeds 31-36
+    at HWHM 30, 40 and 45 deg the z-scores (fitted - true) / uncertainty have an RMS of
+    0.84-1.45
     (docs/diagnosis.md), so a calibrated uncertainty exceeds 3 in 0.3 % of cases; the
     candidate's quadrature differs from the generator's rule by 0.02 deg at 15 deg (0.3 of
     the uncertainty), and fitted with the base model's pencil-beam pointing held the width
@@ -248,7 +249,8 @@ def test_the_width_of_a_simulated_ring_is_recovered_within_its_uncertainty(hwhm,
     (cand,) = [c for c in rep.candidates if c.effect == "fov"]
     p = cand.params["hwhm_deg"]
     assert cand.converged and not cand.at_bound
-    # the width is read to better than 1 % of itself (0.07 deg at 15, 0.03 at 30)
+    # the width is read to better than 1 % of itself (measured on whole-session fits: an SE
+    # of 0.07 deg at 15, 0.04-0.06 at 30)
     assert 0.0 < p["uncertainty"] < 0.01 * hwhm
     assert abs(p["value"] - hwhm) < 3.0 * p["uncertainty"]
 
