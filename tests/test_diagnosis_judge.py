@@ -211,6 +211,49 @@ def test_ring_failing_candidates_are_not_applicable(monkeypatch):
     assert rep.verdict.effect in ("none", "unexplained")      # a clean session
 
 
+def test_ring_candidate_whose_uncertainty_fails_is_not_applicable(monkeypatch):
+    """A failure in a candidate's SD (after its fit: an acceptance at its 60-deg bound once
+    stepped past it there) is that candidate's, not the run's."""
+    from calibration.photodiode_diagnosis import run
+    from ring_sessions import ring_session
+    fails = {"fov": FAILURES["svd"]}
+    monkeypatch.setattr(run, "_effect_sd", _raiser(
+        run._effect_sd, fails, lambda fe, fr, fr_aop, sigma: fe.effect.name))
+    rep = diagnose(ring_session(), ("yaw_scale", "fov"), folds=3)
+    _check(rep, fails, ("yaw_scale",))
+
+
+def test_ring_jacobian_at_an_upper_bound_steps_inside():
+    """A parameter at its upper bound (an acceptance at its widest, 60 deg) is differenced
+    backwards, where the model is defined: the column equals the backward difference, and
+    the forward one raises (the model's width check)."""
+    from calibration.photodiode_diagnosis.effects import get_ring_effect
+    from calibration.photodiode_diagnosis.fit import Priors, _jacobian
+    from calibration.photodiode_diagnosis.forward import Forward
+    from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
+    from ring_sessions import ring_session
+    from skysim.exceptions import InvalidParameterError
+    inst = instrument_from_photodiodes(ring_session(n_sweeps=2, per_sweep=30))
+    fe = Forward(inst, get_ring_effect("fov"))
+    L = fe.layout
+    theta = np.zeros(L.size)
+    theta[L.scale] = 0.6
+    theta[L.effect] = 60.0
+    pri = Priors.for_model(fe, theta)
+    free = np.zeros(L.size, bool)
+    free[L.effect] = True
+    r0 = fe.residual(theta)
+    usable = np.flatnonzero(fe.usable.ravel())
+    with pytest.raises(InvalidParameterError, match="60.05"):
+        _jacobian(fe, theta, r0, None, free, pri.step, usable)
+    J = _jacobian(fe, theta, r0, None, free, pri.step, usable, pri.upper).toarray()[:, 0]
+    back = theta.copy()
+    back[L.effect] -= pri.step[L.effect]
+    ref = (fe.residual(back) - r0).ravel()[usable] / -pri.step[L.effect][0]
+    np.testing.assert_allclose(J, ref, rtol=1e-12, atol=1e-15)
+    assert np.any(J != 0.0)
+
+
 def test_camera_failing_candidates_are_not_applicable(monkeypatch):
     from calibration.diagnosis import camera
     from test_camera_diagnosis import _frame

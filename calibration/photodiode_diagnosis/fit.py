@@ -162,12 +162,17 @@ def _jacobian_plan(fwd: Forward, free, usable_idx):
     return plan
 
 
-def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx):
+def _jacobian(fwd: Forward, theta, r0, obs0, free, step, usable_idx, upper=None):
+    """Forward-difference Jacobian (sparse, usable residuals x free parameters) by column
+    groups (:func:`_jacobian_plan`); a step that would cross ``upper`` (a parameter at its
+    bound: an acceptance at its widest) is taken backwards, where the model is defined."""
     fidx = np.flatnonzero(free)
     rows, cols, vals = [], [], []
     for idx, stage, group in _jacobian_plan(fwd, free, usable_idx):
         t = theta.copy()
         h = step[idx]
+        if upper is not None:
+            h = np.where(t[idx] + h > upper[idx], -h, h)
         t[idx] += h
         r = fwd.residual(t, obs0 if stage == "output" else None)
         d = (r - r0).ravel()
@@ -243,7 +248,7 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
         return r.ravel()[usable_idx], (r, obs)
 
     def jacobian(t, _, state, columns):
-        return _jacobian(fwd, t, state[0], state[1], columns, pri.step, usable_idx)
+        return _jacobian(fwd, t, state[0], state[1], columns, pri.step, usable_idx, pri.upper)
 
     if profiled is not None:
         profiled = (np.asarray(profiled, bool) & _not_calibrated(fwd)

@@ -904,6 +904,9 @@ def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOu
                 fr, fr_aop, effect_held, theta_held, r_effect = out
                 why = core.non_finite_reason(np.where(base_held.usable, r_effect, np.nan),
                                              np.where(base_held.usable, r, np.nan))
+            if why is None:
+                # its SD is the candidate's too: a failure there is its own, not the run's
+                sd, why = core.run_candidate(_effect_sd, fe, fr, fr_aop, sigma)
             if why is not None:
                 fits[e.name] = why
                 continue
@@ -913,8 +916,7 @@ def _cross_validate(s: _Session, cand, folds, unavailable: dict) -> judge.HeldOu
                             {"effect": e.name, **dict(zip(e.parameter_names, map(float, p)))})
             stopped = not fr.converged and not _has_sky(e)   # a sky's was continued above
             fits[e.name] = judge.FoldFit(
-                r_effect, p, bool(fr.converged),
-                _effect_sd(fe, fr, fr_aop, sigma),
+                r_effect, p, bool(fr.converged), sd,
                 _FoldState(e, theta_held, effect_held.headings(theta_held), aop_sky,
                            (fe, (fr, fr_aop), effect_held) if stopped else None))
         return base_held.usable, fits
@@ -1346,7 +1348,7 @@ def _sandwich_sd(fe: Forward, aop, sigma: float) -> list:
         r = fe.residual(aop.theta, obs)
         usable_idx = np.flatnonzero(fe.usable.ravel())
         pri = Priors.for_model(fe, aop.theta)
-        J = _jacobian(fe, aop.theta, r, obs, free, pri.step, usable_idx)
+        J = _jacobian(fe, aop.theta, r, obs, free, pri.step, usable_idx, pri.upper)
     finally:
         fe.dop_free = False
     fidx = np.flatnonzero(free)
@@ -1383,7 +1385,7 @@ def _sample_scores(fe: Forward, theta, free, sigma: float, dop_free: bool):
         r = fe.residual(theta, obs)
         usable_idx = np.flatnonzero(fe.usable.ravel())
         pri = Priors.for_model(fe, theta)
-        J = _jacobian(fe, theta, r, obs, free, pri.step, usable_idx)
+        J = _jacobian(fe, theta, r, obs, free, pri.step, usable_idx, pri.upper)
     finally:
         fe.dop_free = False
     fidx = np.flatnonzero(free)
@@ -1544,10 +1546,11 @@ def _continue_stopped(held: judge.HeldOut, cand, floor: float, n_cal: int, sigma
                 why = core.non_finite_reason(
                     np.where(held.usable[ho], r_effect, np.nan),
                     np.where(held.usable[ho], held.residual["base"][ho], np.nan))
+            if why is None:
+                sd, why = core.run_candidate(_effect_sd, fe, fr, fr_aop, sigma)
             if why is not None:
                 held.unavailable[e.name] = why
                 break
-            sd = _effect_sd(fe, fr, fr_aop, sigma)
             state = _FoldState(e, theta_held, effect_held.headings(theta_held), f.state.aop_sky)
             held.put(e.name, ho, judge.FoldFit(r_effect, fr.theta[fe.layout.effect],
                                                bool(fr.converged), sd, state), index=i)
