@@ -46,3 +46,22 @@ def base_fit_and_effect(inst, effect: str):
     s, _ = _fit_session(inst, sun, 25)
     e = get_ring_effect(effect)
     return s, Forward(s.base.inst, e, sun=sun, polarizer_sign=s.sign), e, sun
+
+
+def fitted_on_whole_session(effect: str, truth: dict, seed: int):
+    """``(value, SE, mean elevation offset of the units)`` of a one-parameter candidate
+    ``effect`` fitted on a whole simulated ring of twelve sweeps made with ``truth``
+    (:func:`calibration.diagnosis.identifiability.ring_session`), as each fold fits it: its
+    start, its fit, its continuation, its SE."""
+    from calibration.diagnosis.identifiability import ring_session as matrix_session
+    from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
+    from calibration.photodiode_diagnosis.run import (_continued, _effect_sd, _fit_effect,
+                                                      _start_effect)
+    inst = instrument_from_photodiodes(matrix_session(effect, truth, seed))
+    s, fe, e, _ = base_fit_and_effect(inst, effect)
+    L = fe.layout
+    fr, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
+    fr, aop = _continued(fe, (fr, aop), s.sigma, None)
+    assert fr.converged
+    return (float(fr.theta[L.effect][0]), _effect_sd(fe, fr, aop, s.sigma)[0],
+            float(np.mean(fr.theta[L.pointing][:inst.n_units])))

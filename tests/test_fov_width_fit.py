@@ -14,17 +14,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ring_sessions import base_fit_and_effect
+from ring_sessions import fitted_on_whole_session
 
-from calibration.diagnosis.identifiability import ring_session
-from calibration.photodiode_diagnosis.instrument import instrument_from_photodiodes
-from calibration.photodiode_diagnosis.run import (
-    _continued,
-    _effect_sd,
-    _fit_effect,
-    _start_effect,
-    _two_step_variance,
-)
+from calibration.photodiode_diagnosis.run import _two_step_variance
 
 LINEAR_DRAWS = 4000
 """Noise draws of the linear model (the Monte-Carlo SD's relative error: 1.1 %)."""
@@ -92,16 +84,8 @@ def test_the_sandwich_along_the_pointing_matches_the_spread_of_a_linear_profile_
 
 
 def _fitted(hwhm: float, seed: int):
-    """``(width, SE, mean elevation offset of the units)`` fitted on a whole simulated
-    ring of twelve sweeps, as each fold fits it."""
-    inst = instrument_from_photodiodes(ring_session("fov", {"hwhm_deg": hwhm}, seed))
-    s, fe, e, _ = base_fit_and_effect(inst, "fov")
-    L = fe.layout
-    fr, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
-    fr, aop = _continued(fe, (fr, aop), s.sigma, None)
-    assert fr.converged
-    return (float(fr.theta[L.effect][0]), _effect_sd(fe, fr, aop, s.sigma)[0],
-            float(np.mean(fr.theta[L.pointing][:inst.n_units])))
+    """``(value, SE, mean elevation offset of the units)`` on a whole simulated ring."""
+    return fitted_on_whole_session("fov", {"hwhm_deg": hwhm}, seed)
 
 
 @pytest.mark.slow

@@ -19,7 +19,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from ring_sessions import base_fit_and_effect
+from ring_sessions import base_fit_and_effect, fitted_on_whole_session
 
 from calibration.diagnosis.identifiability import ring_session
 from calibration.photodiode_diagnosis.effects import get_ring_effect
@@ -37,16 +37,8 @@ SEEDS = (31, 32, 33, 34)
 
 
 def _fitted(separation: float, seed: int):
-    """``(separation, SD, mean elevation offset of the units)`` fitted on a whole session."""
-    inst = instrument_from_photodiodes(
-        ring_session("neutral_points", {"separation_deg": separation}, seed))
-    s, fe, e, _ = base_fit_and_effect(inst, "neutral_points")
-    L = fe.layout
-    fr, aop = _fit_effect(fe, _start_effect(fe, s.theta, s.base, e, s.sigma), s.sigma)
-    fr, aop = _continued(fe, (fr, aop), s.sigma, None)
-    assert fr.converged
-    return (float(fr.theta[L.effect][0]), _effect_sd(fe, fr, aop, s.sigma)[0],
-            float(np.mean(fr.theta[L.pointing][:inst.n_units])))
+    """``(value, SE, mean elevation offset of the units)`` on a whole simulated ring."""
+    return fitted_on_whole_session("neutral_points", {"separation_deg": separation}, seed)
 
 
 @pytest.mark.slow
