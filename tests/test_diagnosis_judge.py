@@ -221,6 +221,9 @@ def test_ring_candidate_whose_uncertainty_fails_is_not_applicable(monkeypatch):
         run._effect_sd, fails, lambda fe, fr, fr_aop, sigma: fe.effect.name))
     rep = diagnose(ring_session(), ("yaw_scale", "fov"), folds=3)
     _check(rep, fails, ("yaw_scale",))
+    fov = rep.candidate("fov")
+    assert not fov.available and "SVD did not converge" in fov.not_applicable
+    assert rep.candidate("yaw_scale").params     # the other candidate fitted and reported
 
 
 def test_ring_jacobian_at_an_upper_bound_steps_inside():
