@@ -270,3 +270,36 @@ def test_camera_overcast_standard_errors_are_calibrated():
     rms, (lo, hi) = _rms_with_interval(rows, np.random.default_rng(0))
     assert Z_RMS_RANGE[0] <= rms <= Z_RMS_RANGE[1], (rms, lo, hi)
     assert 0.6 <= lo and hi <= 1.6, (rms, lo, hi)
+
+
+def test_ring_generator_side_glare():
+    """The generator's side glare: as much light from either side is its stray light (the
+    same readings, same noise draw); its sun's side (the cross product with the vertical)
+    is the candidate's (explicit components) to 1e-12 on random views and suns; light from
+    the left only never takes light away (beyond the rounding of counts, 1) and adds some
+    (at least 2.5 % of the session's median reading somewhere: a strength of 0.2 within
+    20 deg of the sun on the left adds up to 0.2 exp(-psi / 20) of it)."""
+    from calibration.diagnosis.identifiability import _sun_side, ring_session
+    from calibration.photodiode_diagnosis.effects import sun_side
+    from sensor.compound_eye import SkySample
+    from skysim.geometry import direction_vector
+    kw = dict(n_sweeps=2, per_sweep=24)
+    stray = ring_session("stray_light", {"S": 0.1, "scale_deg": 20.0}, seed=3, **kw)
+    even = ring_session("side_glare", {"L": 0.1, "R": 0.1, "scale_deg": 20.0}, seed=3, **kw)
+    np.testing.assert_array_equal(even.table[even.columns].to_numpy(float),
+                                  stray.table[stray.columns].to_numpy(float))
+    rng = np.random.default_rng(4)
+    el, az = rng.uniform(5.0, 85.0, (50, 8)), rng.uniform(0.0, 360.0, (50, 8))
+    sun = direction_vector(rng.uniform(-10.0, 80.0, 50), rng.uniform(0.0, 360.0, 50))
+    views = direction_vector(el, az)
+    cos_psi = np.clip(np.einsum("nuk,nk->nu", views, sun), -1.0, 1.0)
+    obs = SkySample(np.ones_like(el), np.zeros_like(el), np.zeros_like(el),
+                    np.zeros(el.shape + (3,)), el, az)
+    np.testing.assert_allclose(_sun_side(views, cos_psi, sun), sun_side(obs, sun),
+                               atol=1e-12)
+    left = ring_session("side_glare", {"L": 0.2, "R": 0.0, "scale_deg": 20.0}, seed=3, **kw)
+    added = (left.table[left.columns].to_numpy(float)
+             - ring_session(seed=3, **kw).table[left.columns].to_numpy(float))
+    assert np.all(added >= -1.0)          # no light taken away (rounding of counts: 1)
+    median = float(np.median(left.table[left.columns].to_numpy(float)))
+    assert np.max(added) > 0.025 * median, (np.max(added), median)

@@ -527,7 +527,9 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING
     truth : dict
         The effect's parameters, by the candidate's parameter names (``stray_light``:
         ``S`` (one strength for every photodiode, in units of the session's median reading
-        with the stray light in it, as the candidate's) and ``scale_deg``).
+        with the stray light in it, as the candidate's) and ``scale_deg``; ``side_glare``:
+        ``L`` and ``R``, the strengths for the sun square to each unit's left and right, and
+        ``scale_deg``).
     seed : int
         Noise seed.
     n_sweeps, per_sweep : int
@@ -585,7 +587,7 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING
                          yaw_offset_deg=35.0, include_truth=False, sweep=sweep)
     t = data.table.drop(columns=["pitch_deg", "roll_deg"])
     cols = list(data.columns)
-    if effect in ("fov", "stray_light"):
+    if effect in ("fov", "stray_light", "side_glare"):
         att = body_attitude(yaw, np.full(yaw.size, pitch), np.full(yaw.size, roll))
         sun, _ = sun_vector(times, site)
         pm = sensor.photodiode
@@ -597,11 +599,16 @@ def ring_session(effect=None, truth=None, seed: int = 1, *, n_sweeps: int = RING
         else:   # sunlight inside the instrument, on readings that carry their noise already
             pd_unit = np.repeat(np.arange(sensor.n_units),
                                 [len(u.photodiodes_deg) for u in sensor.units])
-            psi = np.degrees(np.arccos(np.clip(np.einsum(
-                "nuk,nk->nu", _unit_views(sensor.observe(sky, att, sun)), sun),
-                -1.0, 1.0)))[:, pd_unit]
-            added = truth["S"] * np.exp(-psi / truth["scale_deg"])
-            R = R + _stray_level(R, added, truth["S"]) * added
+            views = _unit_views(sensor.observe(sky, att, sun))
+            cos_psi = np.clip(np.einsum("nuk,nk->nu", views, sun), -1.0, 1.0)
+            psi = np.degrees(np.arccos(cos_psi))[:, pd_unit]
+            if effect == "stray_light":
+                strength = truth["S"]
+            else:   # light of its own strength for the sun on either side of each unit
+                side = _sun_side(views, cos_psi, sun)[:, pd_unit]
+                strength = (truth["L"] * (1.0 + side) + truth["R"] * (1.0 - side)) / 2.0
+            added = strength * np.exp(-psi / truth["scale_deg"])
+            R = R + _stray_level(R, added, np.max(strength)) * added
         t[cols] = np.clip(np.round(R), 0.0, pm.saturation_value)
     t["yaw_deg"] = -(((t["yaw_deg"] + 180.0) % 360.0) - 180.0)      # ccw, wrapped
     if effect == "yaw_scale":   # the recorded change within each sweep, times the factor
@@ -642,6 +649,17 @@ def _stray_level(R, shape, S, tol: float = 1e-9, max_iter: int = 100) -> float:
     raise IdentifiabilityInputError(
         f"stray light S = {S!r}: the session's median reading with the stray light in it "
         "does not settle; give S below 1")
+
+
+def _sun_side(views, cos_psi, sun) -> np.ndarray:
+    """Sine of the sun's bearing about each view (n, U): the sun's component along the
+    horizontal direction to the view's left (``z x view``, normalised), over the sine of its
+    distance from the view; 0 with the sun on the axis."""
+    left = np.cross(np.array([0.0, 0.0, 1.0]), views)
+    left /= np.linalg.norm(left, axis=-1, keepdims=True)
+    sin_psi = np.sqrt(1.0 - cos_psi ** 2)
+    along = np.einsum("nuk,nk->nu", left, sun)
+    return np.where(sin_psi > 1e-9, along / np.maximum(sin_psi, 1e-9), 0.0)
 
 
 def _unit_views(obs) -> np.ndarray:

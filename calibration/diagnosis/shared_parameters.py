@@ -21,6 +21,7 @@ References
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 
 import numpy as np
@@ -31,6 +32,10 @@ from .errors import InsufficientDataError
 
 __all__ = ["SharedEstimate", "combine_sessions", "shared_parameters", "PARAMETER_SCOPE",
            "AGREEMENT_P"]
+
+_PER_PHOTODIODE = re.compile(r"_u\d+_p\d")
+"""A per-photodiode parameter's name (a strength of the light on one photodiode, ``S_u0_p045``):
+each session fits its own, which a day does not combine."""
 
 AGREEMENT_P = 0.01
 """Sessions agree on a parameter when Cochran's Q has a p-value at or above this."""
@@ -149,7 +154,7 @@ def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
             if kind not in ("instrument", "sky") or not c.available or c.not_applicable:
                 continue
             for pname, p in c.params.items():
-                if pname.startswith(("S_", "b_")):
+                if _PER_PHOTODIODE.search(pname):
                     continue
                 se = _se(p)
                 if se is None or p.get("value") is None or not np.isfinite(p["value"]):

@@ -254,10 +254,12 @@ def fit(fwd: Forward, theta0, free=None, *, priors: Priors | None = None, sigma:
         profiled = (np.asarray(profiled, bool) & _not_calibrated(fwd)
                     & ~fwd.held_by_readings() & ~fwd.absorbed_by_profile())
     # the schedule and the bound handling with which the ring's diagnoses and identifiability
-    # matrix are measured: a trust-region schedule, trials clipped into the bounds
+    # matrix are measured: a trust-region schedule, trials clipped into the bounds (held at
+    # them where the effect asks, RingEffect.hold_at_bounds)
+    hold = bool(getattr(fwd.effect, "hold_at_bounds", False))
     return levenberg_marquardt(residual, jacobian, theta0, pri.mu, pri.sd, lower=pri.lower,
                                upper=pri.upper, free=free, sigma=sigma, max_iter=max_iter,
-                               tol=tol, damping=TRUST_REGION, hold_at_bounds=False,
+                               tol=tol, damping=TRUST_REGION, hold_at_bounds=hold,
                                covariance=covariance, profiled=profiled)
 
 

@@ -54,8 +54,12 @@ RING_THRESHOLDS = Thresholds(
     # aureole and the stray light both brighten the sky near the sun (with the stray light
     # withheld the aureole was named alone); a wide acceptance flattens the DoP as the
     # neutral-point sky does (an acceptance of HWHM 45 deg is their group, and with the
-    # width withheld the neutral-point sky was named alone)
-    confusable={"aureole": ("stray_light",), "stray_light": ("aureole",),
+    # width withheld the neutral-point sky was named alone); the side glare holds the stray
+    # light (as much light from either side), so it stands in for whatever the stray light
+    # stands in for
+    confusable={"aureole": ("stray_light", "side_glare"),
+                "stray_light": ("aureole", "side_glare"),
+                "side_glare": ("stray_light", "aureole"),
                 "fov": ("neutral_points",), "neutral_points": ("fov",)})
 """The ring's thresholds of the one verdict rule (:func:`calibration.diagnosis.core.decide`):
 a candidate is named when it beats every other and the base by more than 2 paired SE on the
