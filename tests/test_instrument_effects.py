@@ -170,10 +170,10 @@ def test_side_glare_named_over_stray_light_and_recovered():
     over 12 deg from the sun, on a ring whose units' pointing is calibrated (as with
     ``--pointing-from``: read from the angle of polarization with the glare unmodelled, the
     pointing takes up part of it and holds the candidate short of its optimum). Named over
-    side-blind stray light and the aureole by the paired rule; the fall-off recovered within 10 % and, on
-    every lit photodiode the fault screen keeps, its side fraction (L - R) / (L + R) within
-    0.3 (the strengths' SE on this short ring is 0.01-0.02 for strengths of 0.04-0.10: 0.3
-    is the fraction's spread at about 2 SE on the weakest)."""
+    side-blind stray light and the aureole by the paired rule; the fall-off recovered
+    within 10 % and, on every lit photodiode the fault screen keeps, its side fraction
+    (L - R) / (L + R) within 0.3 of the planted +-0.8 (a fraction from the wrong side would
+    be 1.6 off)."""
     base = _stand_and_turn(seed=5)
     P = 32
     rng = np.random.default_rng(8)
