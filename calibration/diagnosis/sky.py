@@ -28,7 +28,10 @@ candidates and fits.
    withheld ones: ``d_max`` (the base itself), ``multiple_scattering`` (a Rayleigh slab of
    free optical thickness ``tau`` over a black ground, no parameter added to the base's one)
    and ``ground_albedo`` (``tau`` and the Lambertian albedo ``A`` free, one added), both
-   solved by sasktran2 through :class:`skysim.multiple.MultipleScatteringSky`; scored by
+   solved by sasktran2 through :class:`skysim.multiple.MultipleScatteringSky`. The ground
+   albedo nests the multiple-scattering sky (``A = 0``), which is fitted as its null even
+   when it is not a candidate: the ground is named only when it beats that null on the
+   withheld cases (:data:`NULL_MODELS`). Scored by
    :func:`judge.score` (:func:`calibration.diagnosis.core.held_out_score` [3]_) and judged by
    :func:`judge.verdict`: the effect's name, ``none`` (single scattering with a fitted
    ``d_max`` is within the noise floor), ``group``, ``partly_explained`` or ``unexplained``.
@@ -110,15 +113,20 @@ _ALBEDO_NODES = (0.0, 0.5, 1.0)
 PARAMETER_BOUNDS = {"d_max": (0.0, 1.0), "tau": TAU_BOUNDS, "albedo": (0.0, 1.0)}
 """Range searched for each sky parameter (a fit at a bound: the candidate's form is wrong
 for these data or the range too narrow)."""
-DEFAULT_THRESHOLDS = Thresholds(
-    block_name="cases",
-    # what the sky's identifiability matrix measured (docs/diagnosis.md, "sky"): a
-    # multiple-scattering sky diagnosed without its candidate was named ground_albedo
-    confusable={"ground_albedo": ("multiple_scattering",)})
+DEFAULT_THRESHOLDS = Thresholds(block_name="cases")
+NULL_MODELS = {"ground_albedo": "multiple_scattering"}
+"""The model each candidate reduces to with its own parameters at their null values (a black
+ground), fitted whether or not it is among the candidates: a candidate is named only when it
+beats its null on the held-out cases (:func:`.core.decide`), so that a multiple-scattering
+sky diagnosed without its candidate is not named ``ground_albedo`` for an albedo the
+calibration noise drew."""
 NULL_SE = 2.0
 """Standard errors by which a fitted albedo must exceed 0 (a black ground, where the
 ``ground_albedo`` sky is the ``multiple_scattering`` one) for the ground to be a finding; a
-smaller one leaves the candidate indistinguishable from its null and it is not named."""
+smaller one leaves the candidate indistinguishable from its null and it is not named. This
+reads the calibration cases that fitted the albedo; the held-out comparison with the null
+(:data:`NULL_MODELS`) reads the withheld ones, whose noise is independent of it: under a
+black ground each passes by chance ~2 % of the time, both together far less."""
 
 
 class SkyGapInputError(DiagnosisError, ValueError):
@@ -573,8 +581,10 @@ def diagnose_sky(cases: SkyCases, calibration_cases=None, *, candidates=SKY_CAND
     noise_floor = float(noise_floor)
     fold, held_folds, cal_given = _sky_folds(cases, calibration_cases, folds)
     names = ["d_max"] + [e for e in SKY_CANDIDATES[1:] if e in candidates]
-    unavailable = {n: why for n in names if (why := SKY_EFFECTS[n].available())}
-    stokes = {n: np.full((cases.q.size, 2), np.nan) for n in ("base", *names)}
+    # the candidates and the nested nulls of those that have one (fitted, not reported)
+    models = names + sorted({NULL_MODELS[n] for n in names if n in NULL_MODELS} - set(names))
+    unavailable = {n: why for n in models if (why := SKY_EFFECTS[n].available())}
+    stokes = {n: np.full((cases.q.size, 2), np.nan) for n in ("base", *models)}
 
     def by_rows(rows):
         return cases.subset(np.unique(cases.case[rows]))
@@ -593,7 +603,7 @@ def diagnose_sky(cases: SkyCases, calibration_cases=None, *, candidates=SKY_CAND
                                     "fit_seconds": 0.0})
         fits = {"base": fit0, "d_max": fit0}
         stokes["d_max"][held] = stokes["base"][held]
-        for name in names[1:]:
+        for name in models[1:]:
             if name in skip:
                 continue
             out, why = core.run_candidate(_fit_and_predict, c_cal, c_held, name, settings,
@@ -613,7 +623,7 @@ def diagnose_sky(cases: SkyCases, calibration_cases=None, *, candidates=SKY_CAND
         return np.ones(held.size, bool), fits
 
     # |(dq, du)| per point: its mean square is the gap's, paired per withheld case
-    held = judge.cross_validate(fold, names, cases.q.shape, fit_fold, unavailable,
+    held = judge.cross_validate(fold, models, cases.q.shape, fit_fold, unavailable,
                                 held_folds=held_folds)
     used = np.flatnonzero(held.usable)
     block = cases.case[used]
@@ -635,12 +645,14 @@ def diagnose_sky(cases: SkyCases, calibration_cases=None, *, candidates=SKY_CAND
             a = row["params"]["albedo"]
             row["null_excluded"] = bool(a["se"] is not None
                                         and a["value"] > NULL_SE * a["se"])
+        if name in NULL_MODELS:
+            row["null_model"] = NULL_MODELS[name]
         # the calibration gap of the folds' fits on average, their cost in total
         row["calibration_gap"] = float(np.mean([f.state["calibration_gap"] for f in fits]))
         row["engine_evaluations"] = int(sum(f.state["engine_evaluations"] for f in fits))
         row["fit_seconds"] = float(sum(f.state["fit_seconds"] for f in fits))
         rows.append(Candidate.from_dict(row))
-    avail = ["base"] + held.available(names)
+    avail = ["base"] + held.available(models)
     ranked, verdict = judge.verdict(rows, {k: held.residual[k][used] for k in avail}, block,
                                     noise_floor, thresholds, np.random.default_rng(seed))
     if verdict.effect == "none":          # the base model's d_max is the answer
