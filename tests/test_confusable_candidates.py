@@ -182,9 +182,12 @@ def test_thresholds_confusable_is_frozen_and_checked():
 
 
 def test_ring_thresholds_pair_the_aureole_and_the_stray_light():
-    """The ring's table is the pair its identifiability matrix confused, both ways."""
+    """The ring's table is the pairs its identifiability matrix confused, both ways, and
+    the side glare: the stray light, which it holds, is named alone only over it, and it
+    only over what the stray light can be mistaken for."""
     assert RING_THRESHOLDS.confusers("aureole") == ("stray_light",)
-    assert RING_THRESHOLDS.confusers("stray_light") == ("aureole",)
+    assert RING_THRESHOLDS.confusers("stray_light") == ("aureole", "side_glare")
+    assert RING_THRESHOLDS.confusers("side_glare") == ("stray_light", "aureole")
     assert RING_THRESHOLDS.confusers("fov") == ("neutral_points",)
     assert RING_THRESHOLDS.confusers("neutral_points") == ("fov",)
     assert RING_THRESHOLDS.block_consistency == 0.75
@@ -212,7 +215,8 @@ def test_judge_names_the_aureole_only_with_the_stray_light_tried():
     per-reading difference has variance ~13; on this draw 2.03 +- 0.16), so it is beaten
     by ~10 SE, where the margin is 2.43 (2 SE as Student's t with 7 degrees of freedom) and
     the test asks for 5: the aureole is named. With the stray light
-    withheld, the same aureole is the group of the two; its ``explained`` column still says
+    withheld, the same aureole is the group of the two and the side glare, which holds the
+    stray light; its ``explained`` column still says
     that its own fit meets the rule."""
     held, block = _held(np.random.default_rng(5))
     t = RING_THRESHOLDS.for_blocks(8)
@@ -223,7 +227,8 @@ def test_judge_names_the_aureole_only_with_the_stray_light_tried():
     assert v.effect == "aureole", v.reason
     held_w = {k: held[k] for k in ("base", "aureole")}
     rows_w, w = core.judge([_scored("aureole", held_w)], held_w, block, FLOOR, t)
-    assert (w.effect, w.group) == ("group", ["aureole", "stray_light"])
+    # the stray light untried, and the side glare that holds it with it
+    assert (w.effect, w.group) == ("group", ["aureole", "stray_light", "side_glare"])
     assert "not among the candidates" in w.reason
     assert w.share == pytest.approx(v.share)
     assert rows_w[0].explained

@@ -55,9 +55,9 @@ RING_THRESHOLDS = Thresholds(
     # withheld the aureole was named alone); a wide acceptance flattens the DoP as the
     # neutral-point sky does (an acceptance of HWHM 45 deg is their group, and with the
     # width withheld the neutral-point sky was named alone); the side glare holds the stray
-    # light (as much light from either side), so it stands in for whatever the stray light
-    # stands in for
-    confusable={"aureole": ("stray_light", "side_glare"),
+    # light (as much light from either side): the stray light is named alone only over it,
+    # and it only over what the stray light can be mistaken for
+    confusable={"aureole": ("stray_light",),
                 "stray_light": ("aureole", "side_glare"),
                 "side_glare": ("stray_light", "aureole"),
                 "fov": ("neutral_points",), "neutral_points": ("fov",)})
