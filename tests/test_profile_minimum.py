@@ -135,34 +135,3 @@ def test_no_newton_step_falls_back_to_the_bracketing():
     cost, _ = _counted(lambda x: x ** 4)
     r = profile_minimum(cost, 8.0, 1.0, 0.0, 60.0, XTOL, newton=lambda x: None)
     assert r.converged and r.x == 0.0
-
-
-@pytest.mark.parametrize("phase", [0.0, 1.0, 2.0, 3.0])
-def test_a_tolerance_from_the_best_point_ends_a_scattered_profile_sooner(phase):
-    """A profile whose values scatter by 0.15 about a parabola of curvature 9.4 per deg^2
-    (the acceptance's width on a real session's fold: each value a fit warm-started from
-    a different neighbour): to ``xtol`` 0.01 deg the search chases the scatter; with
-    ``xtol_at`` 0.1 deg (a twentieth of an SE of 2 deg) it ends in fewer evaluations, and
-    both land where the scatter leaves the minimum, within 0.18 deg of the parabola's
-    vertex (where the parabola rises by the scatter's full 0.3)."""
-    m = 39.31
-
-    def fn(x):
-        return 9.4 * (x - m) ** 2 + 10602.7 + 0.15 * np.sin(157.0 * x + phase)
-    fine, fine_calls = _counted(fn)
-    r_fine = profile_minimum(fine, 33.0, 1.0, 0.0, 60.0, 0.01)
-    coarse, coarse_calls = _counted(fn)
-    r = profile_minimum(coarse, 33.0, 1.0, 0.0, 60.0, 0.01, xtol_at=lambda x: 0.1)
-    assert r.converged and abs(r.x - m) <= 0.18 and abs(r_fine.x - m) <= 0.18
-    assert len(coarse_calls) < len(fine_calls)
-
-
-def test_a_tolerance_from_the_best_point_below_xtol_changes_nothing():
-    """``xtol_at`` smaller than ``xtol`` (a simulated ring's SE of 0.05 deg times 0.05):
-    the search is the one without it, point for point."""
-    fn = lambda x: 230.0 * (x - 39.95) ** 2 + 8423.0   # noqa: E731
-    plain, plain_calls = _counted(fn)
-    profile_minimum(plain, 36.8, 1.0, 0.0, 60.0, XTOL)
-    same, same_calls = _counted(fn)
-    profile_minimum(same, 36.8, 1.0, 0.0, 60.0, XTOL, xtol_at=lambda x: 0.5 * XTOL)
-    assert same_calls == plain_calls

@@ -59,8 +59,7 @@ class ProfileMinimum:
 
 def profile_minimum(cost: Callable[[float], float], x0: float, step: float, lower: float,
                     upper: float, xtol: float, max_eval: int = 16,
-                    newton: Callable[[float], float | None] | None = None,
-                    xtol_at: Callable[[float], float] | None = None) -> ProfileMinimum:
+                    newton: Callable[[float], float | None] | None = None) -> ProfileMinimum:
     """Minimum of ``cost`` on ``[lower, upper]`` from ``x0`` (module docstring).
 
     Parameters
@@ -89,11 +88,6 @@ def profile_minimum(cost: Callable[[float], float], x0: float, step: float, lowe
         Gauss-Newton step of the acceptance's width stopped 0.03 deg from the minimum of
         its profile at 45 deg). From 10 deg away the steps reach the minimum's
         neighbourhood in three or four evaluations where the bracketing takes five or six.
-    xtol_at : callable, optional
-        ``xtol_at(x) -> tolerance`` at the best evaluated point: the search around it
-        stops at the larger of this and ``xtol`` (a fraction of the minimum's standard
-        error there: a profile whose values are fits carries their own scatter, and a
-        tolerance far below the SE buys nothing but evaluations).
 
     Returns
     -------
@@ -136,16 +130,12 @@ def profile_minimum(cost: Callable[[float], float], x0: float, step: float, lowe
         if c == b or seen[c] > seen[b]:
             break
         a, b = b, c
-
-    def tol():
-        return xtol if xtol_at is None else max(xtol, float(xtol_at(min(seen, key=seen.get))))
-
     while len(seen) < max_eval:
-        u = _next_point(seen, lower, upper, tol())
+        u = _next_point(seen, lower, upper, xtol)
         if u is None:
             return _result(seen, True)
         f(u)
-    return _result(seen, _next_point(seen, lower, upper, tol()) is None)
+    return _result(seen, _next_point(seen, lower, upper, xtol) is None)
 
 
 def _newton_descent(f, seen: dict, newton, x: float, xtol: float, max_eval: int):

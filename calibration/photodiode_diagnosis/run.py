@@ -249,8 +249,7 @@ def _joint_geometry(fe: Forward, pair, sigma):
 def _pointing_under_effect(fe: Forward, pair, sigma):
     """A one-parameter effect whose units' pointing is read from the angle of polarization
     under it, fitted by its profile cost (:func:`calibration.diagnosis.profile.profile_minimum`
-    from ``pair``'s fitted value, :data:`PROFILE_STEP` and :data:`PROFILE_XTOL`, or
-    :data:`PROFILE_XTOL_SE` of the SE at the best point where that is larger): at each
+    from ``pair``'s fitted value, :data:`PROFILE_STEP` and :data:`PROFILE_XTOL`): at each
     value, the pointing, polarizer angles, gains, offsets and headings read from the angle
     of polarization (the DoP profiled out, the effect held), then the full model with that
     pointing and the effect held (:func:`_under_effect`); the value of least full-model cost
@@ -305,23 +304,10 @@ def _pointing_under_effect(fe: Forward, pair, sigma):
         except InvalidParameterError:
             return None
 
-    se = {}
-
-    def tolerance(w):
-        # the width's SE at the best point, as the fold reports it (:func:`_effect_sd`);
-        # none where no fit was kept there (every value so far infinite) or it fails
-        if w not in se:
-            try:
-                se[w] = _two_step_sd(fe, fits[w][0].theta, sigma)[0] if w in fits else None
-            except InvalidParameterError:
-                se[w] = None
-        return PROFILE_XTOL_SE * se[w] if se[w] is not None and np.isfinite(se[w]) else 0.0
-
     e = fe.effect
     try:
         found = profile_minimum(cost, float(pair[0].theta[j]), PROFILE_STEP, e.lower[0],
-                                e.upper[0], PROFILE_XTOL, PROFILE_EVALUATIONS, newton,
-                                tolerance)
+                                e.upper[0], PROFILE_XTOL, PROFILE_EVALUATIONS, newton)
     except InvalidParameterError:
         return pair
     full, aop = fits[found.x]
@@ -397,13 +383,6 @@ PROFILE_XTOL = 0.01
 """Accuracy [deg] of the profile's minimum: a fifth of the width's smallest SE measured on a
 simulated ring of twelve sweeps (0.05 deg at 45 deg); an error spread evenly over +-0.01 deg
 adds 1.3 % to that SE's square."""
-PROFILE_XTOL_SE = 0.05
-"""Accuracy of the profile's minimum as a fraction of the width's SE at the best point
-(:func:`_two_step_sd`), where that exceeds :data:`PROFILE_XTOL`: on the real 16:01
-session a fold's SE is 2.8-3.4 deg and the profile's values scatter by about 0.15 in cost
-(0.1 deg of width at its curvature there, 9 per deg^2) with the fit each is warm-started
-from, so a search to 0.01 deg ran out of its evaluations; on simulated rings (SE 0.04-0.06
-deg at 40-45 deg) :data:`PROFILE_XTOL` stays the tolerance."""
 PROFILE_EVALUATIONS = 16
 """Most values of the effect :func:`_pointing_under_effect` fits at (7-9 sufficed from
 30-45 deg on simulated rings)."""
