@@ -275,7 +275,7 @@ def geometry_mask(fwd: Forward) -> np.ndarray:
 
 
 def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: bool = True,
-               covariance: bool = False, full: bool = True
+               covariance: bool = False, full: bool = True, give_up_above: float = np.inf
                ) -> tuple[FitResult | None, FitResult | None]:
     """Fit in two stages so that a DoP profile the sky model lacks cannot move the geometry.
 
@@ -304,13 +304,18 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
     without that bias, because an aerosol or multiple-scattering sky changes the DoP profile
     far more than the AoP pattern.
 
+    ``give_up_above`` ends the fit after stage 1 when stage 1's cost exceeds it (a start
+    that has already lost the comparison the caller makes on that stage, see
+    :func:`.run._fit_effect`).
+
     Returns
     -------
     (FitResult or None, FitResult or None)
-        Stage 2 (None with ``full=False``), and stage 1 (with its covariance when asked) or
-        None. A geometric effect's covariance has the held pointing profiled out
-        (:func:`fit`, ``profiled``): its uncertainty is that of the effect with the units'
-        pointing unknown within its prior and what the AoP says of it.
+        Stage 2 (None with ``full=False`` or when stage 1 gave up), and stage 1 (with its
+        covariance when asked) or None. A geometric effect's covariance has the held
+        pointing profiled out (:func:`fit`, ``profiled``): its uncertainty is that of the
+        effect with the units' pointing unknown within its prior and what the AoP says of
+        it.
     """
     L = fwd.layout
     theta = np.asarray(theta0, float)
@@ -362,8 +367,8 @@ def fit_pinned(fwd: Forward, theta0, *, sigma: float, max_iter: int, geometry: b
         finally:
             fwd.dop_free = False
         theta = first.theta
-    if not full:            # the AoP stage is all the caller reads
-        return None, first
+    if not full or (first is not None and first.cost > give_up_above):
+        return None, first  # the AoP stage is all the caller reads, or all it needs
     second = fit(fwd, theta, ~geometry_mask(fwd), sigma=sigma, max_iter=max_iter)
     if own_sky_aop and not first.converged:
         # the sky's parameters were still moving the pointing: not converged, so that the
