@@ -167,6 +167,10 @@ class RingEffect:
     ``"full_fit"`` freed in the full model after the AoP stage, tied to its reading
     (:func:`.run._pointing_in_full_fit`)."""
 
+    continue_iter: ClassVar[int | None] = None
+    """Iterations of the continuation of a fit stopped on its way (:func:`.run._continued`);
+    None: the default budget (:data:`.run.EFFECT_CONTINUE_ITER`)."""
+
     hold_at_bounds: ClassVar[bool] = False
     """True when the fits with the effect hold a parameter at a bound while the cost falls
     outwards (:func:`calibration.diagnosis.lm.levenberg_marquardt`), for effects with many
@@ -913,6 +917,12 @@ class StrayLight(RingEffect):
     photodiodes the light does not reach sit at their null, and with trials merely clipped
     into the box the fit crawled (the 16:01 session's stray light not converged, 15 % of
     the excess; held, converged, 42 %)."""
+    continue_iter: ClassVar[int | None] = 500
+    """A strength per photodiode (65 parameters with the side glare's two) descends slowly
+    where many photodiodes hold light from few directions: the side glare's fits on the
+    reference ring's 14:09 session converged in 72, 89 and 242 iterations (150 left the
+    third short, and the session's side glare unnamed, 92 % of the excess), 40-75 on the
+    16:01 session."""
 
     def __init__(self):
         self.parameter_names, self.units = ("scale_deg",), ("deg",)

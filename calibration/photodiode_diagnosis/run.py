@@ -465,7 +465,8 @@ def _continued(fe: Forward, pair, sigma, aop_sky):
         if fe.effect.pointing == "under_effect":
             more = _pointing_under_effect(fe, pair, sigma)
         else:
-            more = fit_pinned(fe, fit_.theta, sigma=sigma, max_iter=EFFECT_CONTINUE_ITER,
+            more = fit_pinned(fe, fit_.theta, sigma=sigma,
+                              max_iter=fe.effect.continue_iter or EFFECT_CONTINUE_ITER,
                               geometry=geometric, covariance=geometric)
     except InvalidParameterError:
         return pair
