@@ -982,7 +982,7 @@ class SideGlare(StrayLight):
     This is ``S_p (1 + b_p s)`` with ``|b_p| <= 1`` written as two strengths
     (``L = S (1 + b)``, ``R = S (1 - b)``): light from one side only is then a strength at its
     null, not a side fraction at a bound of its range, and the model is linear in all but
-    the fall-off. On the reference ring's sessions the fitted fall-off is 50-115 deg, broad
+    the fall-off. On the reference ring's sessions the fitted fall-off is 51-356 deg, broad
     light through a unit's casing rather than glare at its aperture. Its fit holds strengths
     at 0 as the stray light's does: with trials merely clipped into the box, the
     65-parameter fit was not converged after 150 iterations on the 16:01 session; held, in
