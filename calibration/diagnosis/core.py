@@ -161,8 +161,9 @@ class Thresholds:
         ``(name, names)`` pairs); kept as sorted ``(name, tuple of names)`` pairs so that the
         thresholds stay frozen and hashable (:meth:`confusers` reads it). Default: none.
 
-    The ring (photodiode) instruments use ``block_consistency=0.75`` and two confusable
-    pairs, the aureole and the stray light, the field of view and the neutral-point sky
+    The ring (photodiode) instruments use ``block_consistency=0.75`` and a confusable table
+    of the aureole and the stray light, the side glare that holds the stray light, and the
+    field of view and the neutral-point sky
     (:data:`calibration.photodiode_diagnosis.run.RING_THRESHOLDS`, with the reason there);
     the three-pair sensor ``min_share=0.9``
     (:data:`calibration.diagnosis.three_pair.DEFAULT_THRESHOLDS`). The sky field needs no
