@@ -68,3 +68,25 @@ def test_two_real_sessions_combine_the_instrument_parameters(reference_dir, tmp_
     lo, hi = sorted(v["value"] for v in values)
     assert lo <= row["mean"] <= hi
     assert row["se"] < min(v["uncertainty"] for v in values)
+
+
+def test_day_parameters_over_every_session_and_where_the_candidate_explains():
+    """The day's table holds each parameter twice, over every session that fitted it and
+    over those where its candidate removes at least the ring's ``min_share`` of the excess;
+    the second combination is the weighted mean of those sessions alone."""
+    from calibration.diagnosis.report import Candidate, DiagnosisReport, Verdict
+    from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
+    from experiments.studies.real_compass import day_parameters
+    reports = {}
+    for i, (v, share) in enumerate([(1.00, 0.9), (1.02, 0.8), (1.30, 0.1)]):
+        c = Candidate(effect="yaw_scale", explained_share=share,
+                      params={"factor": {"value": v, "uncertainty": 0.01, "unit": "1"}})
+        reports[f"s{i}"] = DiagnosisReport(
+            instrument="photodiodes", metric="relative reading", unit="1",
+            verdict=Verdict(effect="yaw_scale", reason="test"), candidates=[c])
+    assert RING_THRESHOLDS.min_share == 0.5
+    t = day_parameters(reports).set_index("sessions_used")
+    assert t.loc["all", "sessions"] == 3 and t.loc["explaining", "sessions"] == 2
+    assert t.loc["explaining", "mean"] == pytest.approx(1.01, rel=1e-12)
+    assert not t.loc["all", "agree"] and t.loc["explaining", "agree"]
+    assert day_parameters({}).empty

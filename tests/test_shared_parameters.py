@@ -75,3 +75,51 @@ def test_table_from_reports_keeps_what_sessions_share():
     assert fov["sessions"] == 2 and not fov["agree"]          # 4 +- 0.5 against 9 +- 0.5
     assert fov["mean"] == pytest.approx(6.5) and fov["scope"] == "instrument"
     assert bool(t.iloc[1]["agree"])
+
+
+def test_sun_trend_is_spearmans_rank_correlation():
+    """Against the closed form for untied ranks, rho = 1 - 6 sum d^2 / (n (n^2 - 1))
+    (Spearman 1904), to float rounding; a perfectly monotone fall with the sun's elevation
+    is rho = -1; fewer than four sessions with a known elevation, or constant values, give
+    no trend (NaN)."""
+    from calibration.diagnosis.shared_parameters import TREND_MIN_SESSIONS, sun_trend
+    x = np.array([187.0, 114.0, 51.0, 53.0, 62.0, 94.0, 155.0, 356.0, 60.0])
+    h = np.array([33.2, 43.3, 63.9, 68.7, 65.7, 48.4, 36.8, 25.5, 54.2])
+    d = stats.rankdata(x) - stats.rankdata(h)
+    n = x.size
+    rho, p = sun_trend(x, h)
+    assert rho == pytest.approx(1 - 6 * np.sum(d ** 2) / (n * (n ** 2 - 1)), rel=1e-12)
+    assert 0 < p < 0.01
+    assert sun_trend([4.0, 3.0, 2.0, 1.0], [10.0, 20.0, 30.0, 40.0])[0] == pytest.approx(-1.0)
+    assert TREND_MIN_SESSIONS == 4
+    assert np.isnan(sun_trend([1.0, 2.0, 3.0], [10.0, 20.0, 30.0])[0])
+    assert np.isnan(sun_trend([1.0, 2.0, 3.0, 4.0], [10.0, np.nan, 30.0, 40.0])[0])
+    assert np.isnan(sun_trend([2.0] * 5, [10.0, 20.0, 30.0, 40.0, 50.0])[1])
+
+
+def test_table_keeps_the_sessions_a_candidate_explains_and_flags_a_drift():
+    """Five sessions whose glare fall-off shrinks as the sun rises, each with its SE: they
+    disagree (Cochran's Q) and the disagreement follows the sun (rho = -1, flagged). With
+    ``min_share=0.5`` the session where the candidate takes 20 % of the excess is left out
+    of the combination."""
+    elevations = [20.0, 30.0, 40.0, 50.0, 60.0]
+    falloff = [300.0, 180.0, 120.0, 80.0, 50.0]
+    shares = [0.9, 0.8, 0.2, 0.7, 0.95]
+    reports = {}
+    for i, (h, v, sh) in enumerate(zip(elevations, falloff, shares)):
+        c = Candidate(effect="side_glare", explained_share=sh,
+                      params={"scale_deg": {"value": v, "uncertainty": 5.0, "unit": "deg"},
+                              "L_u0_p000": {"value": 0.1, "uncertainty": 0.01, "unit": "1"}})
+        reports[f"s{i}"] = DiagnosisReport(
+            instrument="photodiodes", metric="relative reading", unit="1",
+            verdict=Verdict(effect="side_glare", reason="test"), candidates=[c],
+            data={"sun_elevation_deg": [h - 1.0, h + 1.0]})
+    every = shared_parameters(reports).set_index("parameter").loc["scale_deg"]
+    assert every["sessions"] == 5 and not every["agree"]
+    assert every["sun_trend_rho"] == pytest.approx(-1.0) and every["drifts_with_sun"]
+    kept = shared_parameters(reports, min_share=0.5).set_index("parameter").loc["scale_deg"]
+    assert kept["sessions"] == 4
+    w = 1 / 5.0 ** 2
+    assert kept["mean"] == pytest.approx(np.mean([300.0, 180.0, 80.0, 50.0]), rel=1e-12)
+    assert kept["q"] == pytest.approx(w * np.sum((np.array([300.0, 180.0, 80.0, 50.0])
+                                                  - 152.5) ** 2), rel=1e-12)

@@ -9,7 +9,12 @@ fitted in two or more sessions this module gives the inverse-variance weighted m
 chi-square of the sessions about it (Cochran's Q) and its p-value, and the between-session
 standard deviation beyond the sessions' own uncertainties (the DerSimonian-Laird moment
 estimate [1]_): an instrument parameter whose sessions disagree (p < 0.01) is not what its
-candidate says, or the sessions' uncertainties are too small.
+candidate says, or the sessions' uncertainties are too small. Where they disagree, the rank
+correlation of the session values with the sun's elevation (Spearman's rho [3]_) says
+whether the disagreement follows the sun: an instrument parameter that drifts with the sun
+stands for an angular form the candidate does not have. A day may be combined over all
+sessions or only over those where the candidate removes a given share of the excess (where
+its parameters are measured on the effect they describe).
 
 References
 ----------
@@ -17,6 +22,8 @@ References
    Trials 7(3):177-188 (1986), doi:10.1016/0197-2456(86)90046-2 (Q, tau^2 moment estimate).
 .. [2] W. G. Cochran, "The combination of estimates from different experiments",
    Biometrics 10(1):101-129 (1954), doi:10.2307/3001666.
+.. [3] C. Spearman, "The proof and measurement of association between two things",
+   American Journal of Psychology 15(1):72-101 (1904), doi:10.2307/1412159.
 """
 
 from __future__ import annotations
@@ -30,15 +37,21 @@ from scipy import stats
 
 from .errors import InsufficientDataError
 
-__all__ = ["SharedEstimate", "combine_sessions", "shared_parameters", "PARAMETER_SCOPE",
-           "AGREEMENT_P"]
+__all__ = ["SharedEstimate", "combine_sessions", "shared_parameters", "sun_trend",
+           "PARAMETER_SCOPE", "AGREEMENT_P", "TREND_MIN_SESSIONS"]
 
 _PER_PHOTODIODE = re.compile(r"_u\d+_p\d")
 """A per-photodiode parameter's name (a strength of the light on one photodiode, ``S_u0_p045``):
 each session fits its own, which a day does not combine."""
 
 AGREEMENT_P = 0.01
-"""Sessions agree on a parameter when Cochran's Q has a p-value at or above this."""
+"""Sessions agree on a parameter when Cochran's Q has a p-value at or above this; a parameter
+drifts with the sun when its rank correlation with the sun's elevation has a p-value below
+it."""
+
+TREND_MIN_SESSIONS = 4
+"""Fewest sessions with a known sun elevation for the rank correlation with it (with three,
+no correlation reaches p < 0.01)."""
 
 PARAMETER_SCOPE = {
     "fov": "instrument", "yaw_scale": "instrument", "tilt": "instrument",
@@ -127,9 +140,45 @@ def _se(p: dict):
     return None
 
 
-def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
+def sun_trend(values, sun_elevation_deg) -> tuple:
+    """Spearman's rank correlation of per-session values with the sessions' sun elevation
+    [3]_, and its two-sided p-value (``scipy.stats.spearmanr``).
+
+    Parameters
+    ----------
+    values, sun_elevation_deg : array (n,)
+        Session estimates and each session's mean sun elevation [deg]; sessions whose
+        elevation is not finite are left out.
+
+    Returns
+    -------
+    (rho, p) : tuple of float
+        NaN for both when fewer than :data:`TREND_MIN_SESSIONS` sessions are left or the
+        values or elevations are all equal.
+    """
+    x, h = np.asarray(values, float), np.asarray(sun_elevation_deg, float)
+    keep = np.isfinite(x) & np.isfinite(h)
+    x, h = x[keep], h[keep]
+    if x.size < TREND_MIN_SESSIONS or np.ptp(x) == 0 or np.ptp(h) == 0:
+        return float("nan"), float("nan")
+    rho, p = stats.spearmanr(x, h)
+    return float(rho), float(p)
+
+
+def _sun_elevation(report) -> float:
+    """The session's mean sun elevation [deg] from its report's data (NaN when unknown)."""
+    el = (report.data or {}).get("sun_elevation_deg")
+    if el is None:
+        return float("nan")
+    el = np.asarray(el, float)
+    return float(np.mean(el)) if el.size and np.all(np.isfinite(el)) else float("nan")
+
+
+def shared_parameters(reports: dict, scope: dict | None = None,
+                      min_share: float | None = None) -> pd.DataFrame:
     """Per parameter of every candidate fitted with an uncertainty in two or more sessions:
-    its combination over the sessions (:func:`combine_sessions`).
+    its combination over the sessions (:func:`combine_sessions`) and its rank correlation
+    with the sessions' sun elevation (:func:`sun_trend`).
 
     Parameters
     ----------
@@ -139,12 +188,18 @@ def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
         Candidate -> ``instrument``, ``sky`` or ``session`` (default
         :data:`PARAMETER_SCOPE`); ``session`` candidates and candidates it does not list are
         left out, and so are per-photodiode parameters (one photodiode's glare).
+    min_share : float, optional
+        Combine a candidate only over the sessions where it removes at least this share of
+        the excess over the noise floor (its ``explained_share``; sessions without one are
+        left out). Default: every session that fitted it.
 
     Returns
     -------
     pandas.DataFrame
         Columns ``candidate, parameter, scope, unit, sessions, mean, se, between_sd,
-        spread, q, p, agree`` (empty when nothing is fitted twice).
+        spread, q, p, agree, sun_trend_rho, sun_trend_p, drifts_with_sun`` (empty when
+        nothing is fitted twice); ``drifts_with_sun`` is True when the trend's p-value is
+        below :data:`AGREEMENT_P`.
     """
     scope = PARAMETER_SCOPE if scope is None else scope
     found: dict = {}
@@ -153,6 +208,9 @@ def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
             kind = scope.get(c.effect)
             if kind not in ("instrument", "sky") or not c.available or c.not_applicable:
                 continue
+            if min_share is not None and not (c.explained_share is not None
+                                              and c.explained_share >= min_share):
+                continue
             for pname, p in c.params.items():
                 if _PER_PHOTODIODE.search(pname):
                     continue
@@ -160,16 +218,19 @@ def shared_parameters(reports: dict, scope: dict | None = None) -> pd.DataFrame:
                 if se is None or p.get("value") is None or not np.isfinite(p["value"]):
                     continue
                 found.setdefault((c.effect, pname, kind, p.get("unit", "")), []).append(
-                    (name, float(p["value"]), se))
+                    (name, float(p["value"]), se, _sun_elevation(report)))
     rows = []
     for (effect, pname, kind, unit), got in sorted(found.items()):
         if len(got) < 2:
             continue
         est = combine_sessions([g[1] for g in got], [g[2] for g in got])
+        rho, p_trend = sun_trend([g[1] for g in got], [g[3] for g in got])
         rows.append({"candidate": effect, "parameter": pname, "scope": kind, "unit": unit,
                      "sessions": est.n, "mean": est.mean, "se": est.se,
                      "between_sd": est.between_sd, "spread": est.spread, "q": est.q,
-                     "p": est.p, "agree": est.agree})
+                     "p": est.p, "agree": est.agree, "sun_trend_rho": rho,
+                     "sun_trend_p": p_trend, "drifts_with_sun": bool(p_trend < AGREEMENT_P)})
     columns = ["candidate", "parameter", "scope", "unit", "sessions", "mean", "se",
-               "between_sd", "spread", "q", "p", "agree"]
+               "between_sd", "spread", "q", "p", "agree", "sun_trend_rho", "sun_trend_p",
+               "drifts_with_sun"]
     return pd.DataFrame(rows, columns=columns)

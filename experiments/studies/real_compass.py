@@ -19,7 +19,8 @@ from skysim.io import atomic_write, write_json_atomic
 
 from experiments.workflows.real_benchmark import session_files
 
-__all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions"]
+__all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
+           "day_parameters"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "gkanias2023"
 DEFAULT_SEED = 2023
@@ -195,6 +196,24 @@ SESSION_COLUMNS = ("session", "sun_elevation_deg", "faults", "gap_base", "verdic
                    "heading_rms_best_deg", "unit_elevation_offset_deg")
 
 
+def day_parameters(reports: dict) -> pd.DataFrame:
+    """The day's shared parameters (:func:`calibration.diagnosis.shared_parameters.shared_parameters`)
+    twice: over every session that fitted a candidate (``sessions_used = "all"``) and over
+    those where it removes at least the share of the excess a named effect must
+    (``"explaining"``, the ring's ``min_share``), where its parameters describe the effect
+    the data hold."""
+    from calibration.diagnosis.shared_parameters import shared_parameters
+    from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
+    parts = [shared_parameters(reports).assign(sessions_used="all"),
+             shared_parameters(reports, min_share=RING_THRESHOLDS.min_share
+                               ).assign(sessions_used="explaining")]
+    parts = [t for t in parts if len(t)]
+    if not parts:
+        return pd.DataFrame()
+    table = pd.concat(parts, ignore_index=True)
+    return table[["sessions_used"] + [c for c in table.columns if c != "sessions_used"]]
+
+
 def _table_md(table: pd.DataFrame, columns=SESSION_COLUMNS) -> str:
     cols = [c for c in columns if c in table.columns]
     lines = ["| " + " | ".join(cols) + " |", "|" + "---|" * len(cols)]
@@ -259,7 +278,7 @@ def plot_residual_over_azimuth(report, path: Path) -> None:
 
 # --------------------------------------------------------------------------- command line
 def _reproduce(args) -> int:
-    from calibration.diagnosis.shared_parameters import AGREEMENT_P, shared_parameters
+    from calibration.diagnosis.shared_parameters import AGREEMENT_P
     from calibration.photodiode_diagnosis import RING_EFFECT_NAMES
     from calibration.photodiode_diagnosis.effects import OPTIONAL_EFFECT_NAMES
     folder = Path(getattr(args, "data", None) or DEFAULT_DATA)
@@ -273,7 +292,7 @@ def _reproduce(args) -> int:
     t0 = time.perf_counter()
     table, reports = run_sessions(files, effects, out, seed=args.seed)
     elapsed = time.perf_counter() - t0
-    shared = shared_parameters({Path(f).name: r for f, r in reports.items()})
+    shared = day_parameters({Path(f).name: r for f, r in reports.items()})
     atomic_write(out / "shared_parameters.csv", lambda p: shared.to_csv(p, index=False))
     clocks = clock_check(files, reports, out, RING_EFFECT_NAMES, seed=args.seed)
     write_json_atomic(out / "summary.json", {
@@ -286,8 +305,11 @@ def _reproduce(args) -> int:
     print(f"wall time {elapsed:.0f} s for {len(table)} sessions")
     if len(shared):
         print("parameters fitted on two or more sessions, combined over the day (weighted "
-              "mean, its SE, the between-session SD beyond the sessions' own SEs, and "
-              f"whether the sessions agree: Cochran's Q, p >= {AGREEMENT_P}):")
+              "mean, its SE, the between-session SD beyond the sessions' own SEs, "
+              f"whether the sessions agree: Cochran's Q, p >= {AGREEMENT_P}, and whether "
+              "they drift with the sun's elevation: Spearman's rho, p < "
+              f"{AGREEMENT_P}), over every session that fitted the candidate and over "
+              "those where it removes half the excess or more:")
         print(_table_md(shared, tuple(shared.columns)))
     if len(clocks):
         print("clock errors injected into the first and last open-sky session, unit pointing "
