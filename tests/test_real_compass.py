@@ -90,3 +90,27 @@ def test_day_parameters_over_every_session_and_where_the_candidate_explains():
     assert t.loc["explaining", "mean"] == pytest.approx(1.01, rel=1e-12)
     assert not t.loc["all", "agree"] and t.loc["explaining", "agree"]
     assert day_parameters({}).empty
+
+
+def test_day_held_values_are_the_other_sessions_median():
+    """Each session where the side glare removes at least half of the excess is given the
+    median fall-off of the *other* such sessions; a session below half is neither given one
+    nor counted; fewer than three such sessions give none."""
+    from calibration.diagnosis.report import Candidate, DiagnosisReport, Verdict
+    from experiments.studies.real_compass import day_held_values
+
+    def report(value, share):
+        c = Candidate(effect="side_glare", explained_share=share,
+                      params={"scale_deg": {"value": value, "uncertainty": 5.0}})
+        return DiagnosisReport(instrument="photodiodes", metric="relative reading", unit="1",
+                               verdict=Verdict(effect="side_glare", reason="test"),
+                               candidates=[c])
+    reports = {"a": report(50.0, 0.9), "b": report(100.0, 0.8), "c": report(400.0, 0.2),
+               "d": report(200.0, 0.7), "e": report(60.0, 0.95)}
+    got = day_held_values(reports)
+    assert set(got) == {"a", "b", "d", "e"}
+    assert got["a"] == (50.0, 100.0)          # median of 100, 200, 60
+    assert got["b"] == (100.0, 60.0)          # median of 50, 200, 60
+    assert got["d"] == (200.0, 60.0)          # median of 50, 100, 60
+    assert got["e"] == (60.0, 100.0)          # median of 50, 100, 200
+    assert day_held_values({k: reports[k] for k in "abc"}) == {}

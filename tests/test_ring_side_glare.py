@@ -50,3 +50,51 @@ def test_side_glare_not_named_on_clean_data_nor_stood_in_for():
     assert held.verdict.effect in ("group", "partly_explained", "unexplained"), \
         held.verdict.reason
     assert held.verdict.effect != "group" or "side_glare" in held.verdict.group
+
+
+def _views():
+    from types import SimpleNamespace
+    rng = np.random.default_rng(5)
+    n, U = 40, 4
+    obs = SimpleNamespace(view_elevation_deg=np.full((n, U), 45.0),
+                          view_azimuth_deg=rng.uniform(0.0, 360.0, (n, U)))
+    el, az = np.radians(rng.uniform(5.0, 70.0, n)), np.radians(rng.uniform(0.0, 360.0, n))
+    sun = np.stack([np.sin(az) * np.cos(el), np.cos(az) * np.cos(el), np.sin(el)], axis=1)
+    inst = SimpleNamespace(columns=[f"u{u}_p{a:03d}" for u in range(U) for a in (0, 90)])
+    return obs, sun, inst, np.repeat(np.arange(U), 2)
+
+
+@pytest.mark.parametrize("name", ["side_glare", "stray_light"])
+def test_fall_off_held_at_a_day_value(name):
+    """``name(scale_deg=94)`` fits the strengths only: its parameters are the free one's
+    without the fall-off, its start has no fall-off, its reading term equals the free
+    one's at a fall-off of 94 deg (the same formula, to float rounding), and its rows in a
+    report say what was held."""
+    from calibration.photodiode_diagnosis.effects import get_ring_effect
+    obs, sun, inst, pd_unit = _views()
+    free, held = get_ring_effect(name), get_ring_effect(f"{name}(scale_deg=94)")
+    free.bind(inst)
+    held.bind(inst)
+    assert held.name == free.name and held.held_scale_deg == 94.0
+    assert held.parameter_names == free.parameter_names[:-1]
+    assert free.parameter_names[-1] == "scale_deg"
+    for f in ("units", "null", "lower", "upper", "prior_sd", "fd_step"):
+        assert len(getattr(held, f)) == held.k, f
+    assert all(len(s) == held.k for s in held.starts(None))
+    p = np.random.default_rng(1).uniform(0.0, 0.3, held.k)
+    np.testing.assert_allclose(held.additive(p, obs, sun, pd_unit),
+                               free.additive(np.r_[p, 94.0], obs, sun, pd_unit), rtol=1e-15)
+
+
+@pytest.mark.parametrize("name, match", [
+    ("side_glare(width_deg=3)", "cannot hold width_deg; it can hold: scale_deg"),
+    ("side_glare(scale_deg=wide)", "'scale_deg=wide' is not parameter=value"),
+    ("side_glare(scale_deg=1)", "scale_deg = 1.0 is outside its range"),
+    ("fov(hwhm_deg=20)", "fov cannot hold hwhm_deg; it can hold: nothing"),
+    ("glare(scale_deg=94)", "unknown effect 'glare"),
+])
+def test_held_value_errors_name_it(name, match):
+    from calibration.effects import UnknownEffectError
+    from calibration.photodiode_diagnosis.effects import get_ring_effect
+    with pytest.raises(UnknownEffectError, match=match.replace("(", r"\(")):
+        get_ring_effect(name)

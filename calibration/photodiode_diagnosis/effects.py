@@ -89,6 +89,7 @@ References
 from __future__ import annotations
 
 import importlib.util
+import re
 from dataclasses import replace
 from typing import ClassVar
 
@@ -237,6 +238,27 @@ class RingEffect:
         """None when the effect can be told apart on this instrument's session, else why not
         (a parameter the base model already fits in another guise)."""
         return None
+
+    holdable: ClassVar[tuple] = ()
+    """Parameters that may be held at a given value (:meth:`hold`): those an instrument
+    shares across sessions, held at a day's value."""
+
+    def hold(self, values: dict) -> None:
+        """Hold parameters at given values instead of fitting them (``values``: name ->
+        value, in the parameter's unit); a candidate asked for as
+        ``"side_glare(scale_deg=94)"`` (:func:`get_ring_effect`).
+
+        Raises
+        ------
+        UnknownEffectError
+            For a parameter this candidate cannot hold, or a value outside its range,
+            naming it.
+        """
+        bad = sorted(set(values) - set(self.holdable))
+        if bad:
+            raise UnknownEffectError(
+                f"{self.name} cannot hold {', '.join(bad)}; it can hold: "
+                f"{', '.join(self.holdable) or 'nothing'}")
 
 
 class ClockOffset(RingEffect):
@@ -924,30 +946,55 @@ class StrayLight(RingEffect):
     third short, and the session's side glare unnamed, 92 % of the excess), 40-75 on the
     16:01 session."""
 
+    holdable: ClassVar[tuple] = ("scale_deg",)
+    """The fall-off belongs to the instrument: a day's sessions may hold it at one value
+    (``shared_parameters``; ``skysim reproduce real-sky-compass`` holds the side glare's)."""
+
     def __init__(self):
         self.parameter_names, self.units = ("scale_deg",), ("deg",)
         self.null, self.lower, self.upper = (15.0,), (2.0,), (SCALE_MAX_DEG,)
         self.prior_sd, self.fd_step = (np.inf,), (0.05,)
+        self.held_scale_deg = None
+        """The fall-off held at this value [deg] (:meth:`hold`), or None: fitted."""
+
+    def hold(self, values: dict) -> None:
+        super().hold(values)
+        v = float(values["scale_deg"])
+        if not 2.0 <= v <= SCALE_MAX_DEG:
+            raise UnknownEffectError(f"{self.name}: scale_deg = {v!r} is outside its range "
+                                     f"2-{SCALE_MAX_DEG:g} deg")
+        self.held_scale_deg = v
+
+    def _strengths(self, names, P) -> None:
+        """Parameter lists of ``P`` strengths named ``names`` and the fall-off, unless held."""
+        keep = slice(None) if self.held_scale_deg is None else slice(0, P)
+        self.parameter_names = (tuple(names) + ("scale_deg",))[keep]
+        self.units = (("1",) * P + ("deg",))[keep]
+        self.null = ((0.0,) * P + (15.0,))[keep]
+        self.lower = ((0.0,) * P + (2.0,))[keep]
+        self.upper = ((20.0,) * P + (SCALE_MAX_DEG,))[keep]
+        self.prior_sd = ((5.0,) * P + (np.inf,))[keep]
+        self.fd_step = ((1e-4,) * P + (0.05,))[keep]
 
     def bind(self, inst) -> None:
-        P = len(inst.columns)
-        self.per_photodiode = P
-        self.parameter_names = tuple(f"S_{c}" for c in inst.columns) + ("scale_deg",)
-        self.units = ("1",) * P + ("deg",)
-        self.null = (0.0,) * P + (15.0,)
-        self.lower = (0.0,) * P + (2.0,)
-        self.upper = (20.0,) * P + (SCALE_MAX_DEG,)
-        self.prior_sd = (5.0,) * P + (np.inf,)
-        self.fd_step = (1e-4,) * P + (0.05,)
+        self.per_photodiode = len(inst.columns)
+        self._strengths([f"S_{c}" for c in inst.columns], self.per_photodiode)
 
     def starts(self, ctx) -> list:
         P = self.per_photodiode
+        if self.held_scale_deg is not None:
+            return [np.full(P, 0.05)]
         return [np.r_[np.full(P, 0.05), s] for s in (5.0, 15.0, 30.0)]
+
+    def _falloff(self, p, psi):
+        """``exp(-psi / psi_0)`` with the fitted or held fall-off."""
+        scale = self.held_scale_deg if self.held_scale_deg is not None else p[self.per_photodiode]
+        return np.exp(-psi / scale)
 
     def additive(self, p, obs, sun_enu, pd_unit):
         P = self.per_photodiode
         psi = sun_distance_deg(obs, sun_enu)[:, pd_unit]
-        return np.asarray(p[:P]) * np.exp(-psi / p[P])
+        return np.asarray(p[:P]) * self._falloff(p, psi)
 
 
 
@@ -991,29 +1038,19 @@ class SideGlare(StrayLight):
     name = "side_glare"
 
     def bind(self, inst) -> None:
-        super().bind(inst)
-        P = self.per_photodiode
-        self.per_photodiode = 2 * P
         cols = inst.columns
-        self.parameter_names = (tuple(f"L_{c}" for c in cols) + tuple(f"R_{c}" for c in cols)
-                                + ("scale_deg",))
-        self.units = ("1",) * (2 * P) + ("deg",)
-        self.null = (0.0,) * (2 * P) + (15.0,)
-        self.lower = (0.0,) * (2 * P) + (2.0,)
-        self.upper = (20.0,) * (2 * P) + (SCALE_MAX_DEG,)
-        self.prior_sd = (5.0,) * (2 * P) + (np.inf,)
-        self.fd_step = (1e-4,) * (2 * P) + (0.05,)
+        self.per_photodiode = 2 * len(cols)
+        self._strengths([f"L_{c}" for c in cols] + [f"R_{c}" for c in cols],
+                        self.per_photodiode)
 
-    def starts(self, ctx) -> list:
-        P = self.per_photodiode       # stray light's starts: as much light from either side
-        return [np.r_[np.full(P, 0.05), s] for s in (5.0, 15.0, 30.0)]
+    # starts: the stray light's, as much light from either side
 
     def additive(self, p, obs, sun_enu, pd_unit):
         P = self.per_photodiode // 2
         p = np.asarray(p, float)
         psi = sun_distance_deg(obs, sun_enu)[:, pd_unit]
         side = sun_side(obs, sun_enu)[:, pd_unit]
-        return (np.exp(-psi / p[2 * P])
+        return (self._falloff(p, psi)
                 * (p[:P] * (1.0 + side) + p[P:2 * P] * (1.0 - side)) / 2.0)
 
 
@@ -1078,15 +1115,40 @@ _EFFECTS = {c.name: c for c in (MultipleScattering, Aerosol, NeutralPoints, Over
                                 SideGlare, ReadLag)}
 
 
+_HELD = re.compile(r"^\s*(\w+)\s*\((.*)\)\s*$")
+"""A candidate with held parameters: ``name(parameter=value, ...)``."""
+
+
+def _held_values(name: str, text: str) -> dict:
+    values = {}
+    for item in filter(None, (t.strip() for t in text.split(","))):
+        key, sep, value = item.partition("=")
+        try:
+            values[key.strip()] = float(value)
+        except ValueError:
+            sep = ""
+        if not sep or not key.strip():
+            raise UnknownEffectError(f"{name!r}: {item!r} is not parameter=value "
+                                     "(a number in the parameter's unit)")
+    return values
+
+
 def get_ring_effect(name: str) -> RingEffect:
-    """The effect of that name.
+    """The effect of that name; ``"name(parameter=value, ...)"`` holds those parameters at
+    those values (:meth:`RingEffect.hold`), e.g. ``"side_glare(scale_deg=94)"``: a day's
+    shared fall-off. The effect keeps its own name in the report.
 
     Raises
     ------
     UnknownEffectError
-        Listing the valid names.
+        Listing the valid names; for a malformed or out-of-range held value, naming it.
     """
-    if name not in _EFFECTS:
+    held = _HELD.match(name)
+    base = held.group(1) if held else name
+    if base not in _EFFECTS:
         raise UnknownEffectError(f"unknown effect {name!r} for a photodiode instrument; valid: "
                                  f"{', '.join(RING_EFFECT_NAMES + OPTIONAL_EFFECT_NAMES)}")
-    return _EFFECTS[name]()
+    effect = _EFFECTS[base]()
+    if held:
+        effect.hold(_held_values(name, held.group(2)))
+    return effect

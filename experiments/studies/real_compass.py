@@ -20,7 +20,7 @@ from skysim.io import atomic_write, write_json_atomic
 from experiments.workflows.real_benchmark import session_files
 
 __all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
-           "day_parameters"]
+           "day_parameters", "day_held_values", "day_held_check"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "gkanias2023"
 DEFAULT_SEED = 2023
@@ -191,6 +191,84 @@ def clock_check(files, reports: dict, out: Path, effects, folds: int = 3,
     return table
 
 
+DAY_HELD = ("side_glare", "scale_deg")
+"""The instrument parameter a day's sessions are asked to share: the side glare's fall-off
+(:func:`day_held_check`)."""
+
+
+def day_held_values(reports: dict, effect: str = DAY_HELD[0], parameter: str = DAY_HELD[1],
+                    min_share: float | None = None) -> dict:
+    """For each session where ``effect`` removes at least ``min_share`` of the excess (the
+    ring's ``min_share`` by default), the median of ``parameter`` over the *other* such
+    sessions: the value the rest of the day predicts for it (none with fewer than three
+    such sessions).
+
+    Parameters
+    ----------
+    reports : dict
+        Session key -> :class:`calibration.DiagnosisReport`.
+
+    Returns
+    -------
+    dict
+        Session key -> ``(own value, predicted value)``.
+    """
+    from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
+    min_share = RING_THRESHOLDS.min_share if min_share is None else min_share
+    own = {}
+    for key, report in reports.items():
+        c = report.candidate(effect)
+        if (c is None or not c.available or c.not_applicable or c.explained_share is None
+                or c.explained_share < min_share or parameter not in c.params):
+            continue
+        own[key] = float(c.params[parameter]["value"])
+    if len(own) < 3:
+        return {}
+    return {k: (v, float(np.median([w for j, w in own.items() if j != k])))
+            for k, v in own.items()}
+
+
+def day_held_check(files, reports: dict, out: Path, folds: int = 3,
+                   seed: int = DEFAULT_SEED) -> pd.DataFrame:
+    """Whether the day's sessions can share the side glare's fall-off (an instrument
+    parameter): each session where the side glare removes at least half of the excess is
+    diagnosed again with the fall-off held at the median of the other such sessions
+    (:func:`day_held_values`), and its share of the excess with the held fall-off is put
+    beside its share with its own. Writes ``day_fall_off.csv`` and returns the table."""
+    from calibration import diagnose
+    from calibration.diagnosis import DiagnosisError
+    from sensor.photodiodes_io import read_photodiodes
+    effect, parameter = DAY_HELD
+    predicted = day_held_values(reports)
+    uncertain = times_uncertainty(files)
+    rows = []
+    for f in files:
+        if f not in predicted:
+            continue
+        mine, held = predicted[f]
+        free = reports[f].candidate(effect)
+        row = {"session": Path(f).name, f"own_{parameter}": mine,
+               f"own_{parameter}_se": free.params[parameter].get("uncertainty"),
+               f"held_{parameter}": held, "share_own": free.explained_share,
+               "share_own_se": free.explained_share_se}
+        t0 = time.perf_counter()
+        try:
+            report = diagnose(read_photodiodes(f), (f"{effect}({parameter}={held:.6g})",),
+                              folds=folds, seed=seed, time_uncertainty_s=uncertain[Path(f)],
+                              where=f"{Path(f).name} with {parameter} held at {held:.4g}")
+        except DiagnosisError as exc:
+            rows.append(dict(row, error=str(exc)))
+            continue
+        c = report.candidate(effect)
+        rows.append(dict(row, share_held=c.explained_share, share_held_se=c.explained_share_se,
+                         converged_held=c.converged, at_bound_held=",".join(c.at_bound or []),
+                         wall_s=time.perf_counter() - t0))
+    table = pd.DataFrame(rows)
+    if len(table):
+        atomic_write(out / "day_fall_off.csv", lambda p: table.to_csv(p, index=False))
+    return table
+
+
 SESSION_COLUMNS = ("session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best",
                    "gap_best", "shrink", "params", "heading_rms_base_deg",
                    "heading_rms_best_deg", "unit_elevation_offset_deg")
@@ -295,12 +373,15 @@ def _reproduce(args) -> int:
     shared = day_parameters({Path(f).name: r for f, r in reports.items()})
     atomic_write(out / "shared_parameters.csv", lambda p: shared.to_csv(p, index=False))
     clocks = clock_check(files, reports, out, RING_EFFECT_NAMES, seed=args.seed)
+    t1 = time.perf_counter()
+    day = day_held_check(files, reports, out, seed=args.seed) if not args.quick else pd.DataFrame()
     write_json_atomic(out / "summary.json", {
         "sessions": len(table), "effects": list(effects), "data": str(folder),
         "seed": args.seed, "elapsed_s": elapsed, "rows": table.to_dict(orient="records"),
         "clock_check": clocks.to_dict(orient="records"),
         "shared_parameters": shared.to_dict(orient="records"),
-        "clock_check_s": time.perf_counter() - t0 - elapsed})
+        "clock_check_s": t1 - t0 - elapsed, "day_fall_off": day.to_dict(orient="records"),
+        "day_fall_off_s": time.perf_counter() - t1})
     print(_table_md(table))
     print(f"wall time {elapsed:.0f} s for {len(table)} sessions")
     if len(shared):
@@ -315,10 +396,16 @@ def _reproduce(args) -> int:
         print("clock errors injected into the first and last open-sky session, unit pointing "
               "held at the other sessions' (median):")
         print(_table_md(clocks, tuple(clocks.columns)))
-        print(f"wall time of the clock check {time.perf_counter() - t0 - elapsed:.0f} s")
+        print(f"wall time of the clock check {t1 - t0 - elapsed:.0f} s")
+    if len(day):
+        print("the side glare's fall-off of each session where it removes half the excess or "
+              "more, held at the median of the other such sessions: its share of the excess "
+              "with its own fall-off and with the held one")
+        print(_table_md(day, tuple(day.columns)))
     print(f"wrote {out}/sessions.csv, sessions.md, summary.json, shared_parameters.csv, "
           f"gap_and_heading_over_day.png"
-          f"{', clock_check.csv' if len(clocks) else ''} and one diagnosis.json per session")
+          f"{', clock_check.csv' if len(clocks) else ''}"
+          f"{', day_fall_off.csv' if len(day) else ''} and one diagnosis.json per session")
     return 0
 
 
