@@ -68,8 +68,7 @@ def _views():
 def test_fall_off_held_at_a_day_value(name):
     """``name(scale_deg=94)`` fits the strengths only: its parameters are the free one's
     without the fall-off, its start has no fall-off, its reading term equals the free
-    one's at a fall-off of 94 deg (the same formula, to float rounding), and its rows in a
-    report say what was held."""
+    one's at a fall-off of 94 deg (the same formula, to float rounding)."""
     from calibration.photodiode_diagnosis.effects import get_ring_effect
     obs, sun, inst, pd_unit = _views()
     free, held = get_ring_effect(name), get_ring_effect(f"{name}(scale_deg=94)")
@@ -92,9 +91,25 @@ def test_fall_off_held_at_a_day_value(name):
     ("side_glare(scale_deg=1)", "scale_deg = 1.0 is outside its range"),
     ("fov(hwhm_deg=20)", "fov cannot hold hwhm_deg; it can hold: nothing"),
     ("glare(scale_deg=94)", "unknown effect 'glare"),
+    ("side_glare()", "'' is not parameter=value"),
+    ("stray_light( )", "'' is not parameter=value"),
+    ("side_glare(scale_deg=94, scale_deg=20)", "scale_deg is given twice"),
 ])
 def test_held_value_errors_name_it(name, match):
+    """A held candidate that cannot be read or held is refused, naming what is wrong."""
     from calibration.effects import UnknownEffectError
     from calibration.photodiode_diagnosis.effects import get_ring_effect
     with pytest.raises(UnknownEffectError, match=match.replace("(", r"\(")):
         get_ring_effect(name)
+
+
+def test_a_candidate_asked_for_twice_is_refused():
+    """The free and the held side glare are one candidate, named once in a report: asking
+    for both is refused, naming both."""
+    from calibration.diagnosis.rings import ring_candidates
+    from calibration.effects import UnknownEffectError
+    assert ring_candidates(["side_glare(scale_deg=94)", "fov"]) == (
+        "side_glare(scale_deg=94)", "fov")
+    with pytest.raises(UnknownEffectError,
+                       match=r"'side_glare' and 'side_glare\(scale_deg=94\)' are the same"):
+        ring_candidates(["side_glare", "side_glare(scale_deg=94)"])

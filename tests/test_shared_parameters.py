@@ -79,9 +79,12 @@ def test_table_from_reports_keeps_what_sessions_share():
 
 def test_sun_trend_is_spearmans_rank_correlation():
     """Against the closed form for untied ranks, rho = 1 - 6 sum d^2 / (n (n^2 - 1))
-    (Spearman 1904), to float rounding; a perfectly monotone fall with the sun's elevation
-    is rho = -1; fewer than four sessions with a known elevation, or constant values, give
-    no trend (NaN)."""
+    (Spearman 1904), to float rounding; the p-value exact: a perfect ordering of n sessions
+    has two-sided p = 2 / n! (6: 2/720); nine sessions against the t approximation's
+    p, which is close there (within a factor 3: exact 1.3e-3). Fewer than six sessions with
+    a known elevation, or constant values, give no trend (NaN)."""
+    from math import factorial
+
     from calibration.diagnosis.shared_parameters import TREND_MIN_SESSIONS, sun_trend
     x = np.array([187.0, 114.0, 51.0, 53.0, 62.0, 94.0, 155.0, 356.0, 60.0])
     h = np.array([33.2, 43.3, 63.9, 68.7, 65.7, 48.4, 36.8, 25.5, 54.2])
@@ -89,22 +92,25 @@ def test_sun_trend_is_spearmans_rank_correlation():
     n = x.size
     rho, p = sun_trend(x, h)
     assert rho == pytest.approx(1 - 6 * np.sum(d ** 2) / (n * (n ** 2 - 1)), rel=1e-12)
-    assert 0 < p < 0.01
-    assert sun_trend([4.0, 3.0, 2.0, 1.0], [10.0, 20.0, 30.0, 40.0])[0] == pytest.approx(-1.0)
-    assert TREND_MIN_SESSIONS == 4
-    assert np.isnan(sun_trend([1.0, 2.0, 3.0], [10.0, 20.0, 30.0])[0])
-    assert np.isnan(sun_trend([1.0, 2.0, 3.0, 4.0], [10.0, np.nan, 30.0, 40.0])[0])
-    assert np.isnan(sun_trend([2.0] * 5, [10.0, 20.0, 30.0, 40.0, 50.0])[1])
+    assert p == pytest.approx(stats.spearmanr(x, h).pvalue, rel=3.0) and 1e-3 < p < 2e-3
+    assert TREND_MIN_SESSIONS == 6
+    r6, p6 = sun_trend([6.0, 5.0, 4.0, 3.0, 2.0, 1.0], [10.0, 20.0, 30.0, 40.0, 50.0, 60.0])
+    assert r6 == pytest.approx(-1.0) and p6 == pytest.approx(2 / factorial(6), rel=1e-9)
+    assert np.isnan(sun_trend([5.0, 4.0, 3.0, 2.0, 1.0], [10.0, 20.0, 30.0, 40.0, 50.0])[1])
+    assert np.isnan(sun_trend([1.0, 2.0, 3.0, 4.0, 5.0, 6.0],
+                              [10.0, np.nan, 30.0, 40.0, 50.0, 60.0])[0])
+    assert np.isnan(sun_trend([2.0] * 6, [10.0, 20.0, 30.0, 40.0, 50.0, 60.0])[1])
 
 
 def test_table_keeps_the_sessions_a_candidate_explains_and_flags_a_drift():
-    """Five sessions whose glare fall-off shrinks as the sun rises, each with its SE: they
-    disagree (Cochran's Q) and the disagreement follows the sun (rho = -1, flagged). With
-    ``min_share=0.5`` the session where the candidate takes 20 % of the excess is left out
-    of the combination."""
-    elevations = [20.0, 30.0, 40.0, 50.0, 60.0]
-    falloff = [300.0, 180.0, 120.0, 80.0, 50.0]
-    shares = [0.9, 0.8, 0.2, 0.7, 0.95]
+    """Six sessions whose glare fall-off shrinks as the sun rises, each with its SE: they
+    disagree (Cochran's Q) and the disagreement follows the sun (rho = -1, p = 2/6!,
+    flagged). With ``min_share=0.5`` the session where the candidate takes 20 % of the
+    excess is left out of the combination, and five sessions are too few to test a trend;
+    a share outside 0-1 is refused, naming it."""
+    elevations = [20.0, 30.0, 40.0, 50.0, 60.0, 70.0]
+    falloff = [300.0, 180.0, 120.0, 80.0, 50.0, 40.0]
+    shares = [0.9, 0.8, 0.2, 0.7, 0.95, 0.1]
     reports = {}
     for i, (h, v, sh) in enumerate(zip(elevations, falloff, shares)):
         c = Candidate(effect="side_glare", explained_share=sh,
@@ -115,10 +121,13 @@ def test_table_keeps_the_sessions_a_candidate_explains_and_flags_a_drift():
             verdict=Verdict(effect="side_glare", reason="test"), candidates=[c],
             data={"sun_elevation_deg": [h - 1.0, h + 1.0]})
     every = shared_parameters(reports).set_index("parameter").loc["scale_deg"]
-    assert every["sessions"] == 5 and not every["agree"]
+    assert every["sessions"] == 6 and not every["agree"]
     assert every["sun_trend_rho"] == pytest.approx(-1.0) and every["drifts_with_sun"]
+    assert every["sun_trend_p"] == pytest.approx(2 / 720, rel=1e-9)
     kept = shared_parameters(reports, min_share=0.5).set_index("parameter").loc["scale_deg"]
-    assert kept["sessions"] == 4
+    assert kept["sessions"] == 4 and kept["drifts_with_sun"] is None
+    with pytest.raises(InsufficientDataError, match="min_share = 50"):
+        shared_parameters(reports, min_share=50)
     w = 1 / 5.0 ** 2
     assert kept["mean"] == pytest.approx(np.mean([300.0, 180.0, 80.0, 50.0]), rel=1e-12)
     assert kept["q"] == pytest.approx(w * np.sum((np.array([300.0, 180.0, 80.0, 50.0])

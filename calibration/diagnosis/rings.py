@@ -26,14 +26,22 @@ def ring_candidates(names=None) -> tuple:
     Raises
     ------
     UnknownEffectError
-        For a name the ring diagnosis does not know (the message lists the valid ones).
+        For a name the ring diagnosis does not know (the message lists the valid ones), or
+        two names of one candidate (``side_glare`` and ``side_glare(scale_deg=94)``: a
+        report names each candidate once).
     """
+    from ..effects import UnknownEffectError
     from ..photodiode_diagnosis import RING_EFFECT_NAMES, get_ring_effect
     if names is None:
         return RING_EFFECT_NAMES
     names = tuple(names)
+    seen: dict = {}
     for n in names:
-        get_ring_effect(n)
+        base = get_ring_effect(n).name
+        if base in seen:
+            raise UnknownEffectError(f"{seen[base]!r} and {n!r} are the same candidate, "
+                                     f"{base}: ask for it once")
+        seen[base] = n
     return names
 
 

@@ -38,7 +38,7 @@ from scipy import stats
 from .errors import InsufficientDataError
 
 __all__ = ["SharedEstimate", "combine_sessions", "shared_parameters", "sun_trend",
-           "PARAMETER_SCOPE", "AGREEMENT_P", "TREND_MIN_SESSIONS"]
+           "PARAMETER_SCOPE", "AGREEMENT_P", "TREND_MIN_SESSIONS", "TREND_EXACT_MAX"]
 
 _PER_PHOTODIODE = re.compile(r"_u\d+_p\d")
 """A per-photodiode parameter's name (a strength of the light on one photodiode, ``S_u0_p045``):
@@ -49,9 +49,15 @@ AGREEMENT_P = 0.01
 drifts with the sun when its rank correlation with the sun's elevation has a p-value below
 it."""
 
-TREND_MIN_SESSIONS = 4
-"""Fewest sessions with a known sun elevation for the rank correlation with it (with three,
-no correlation reaches p < 0.01)."""
+TREND_MIN_SESSIONS = 6
+"""Fewest sessions with a known sun elevation for the rank correlation with it: with five,
+even a perfect ordering has an exact two-sided p of 2/5! = 0.017, above
+:data:`AGREEMENT_P`."""
+
+TREND_EXACT_MAX = 9
+"""Up to this many sessions the trend's p-value is exact (all n! pairings, 0.6 s at 9);
+above, the Student-t approximation of ``scipy.stats.spearmanr``, which is close from about
+ten pairs on."""
 
 PARAMETER_SCOPE = {
     "fov": "instrument", "yaw_scale": "instrument", "tilt": "instrument",
@@ -141,20 +147,27 @@ def _se(p: dict):
 
 
 def sun_trend(values, sun_elevation_deg) -> tuple:
-    """Spearman's rank correlation of per-session values with the sessions' sun elevation
-    [3]_, and its two-sided p-value (``scipy.stats.spearmanr``).
+    """Spearman's rank correlation of per-session values with the sessions' sun elevation,
+    and its two-sided p-value.
 
     Parameters
     ----------
     values, sun_elevation_deg : array (n,)
-        Session estimates and each session's mean sun elevation [deg]; sessions whose
+        Session estimates and each session's sun elevation [deg]; sessions whose
         elevation is not finite are left out.
 
     Returns
     -------
     (rho, p) : tuple of float
         NaN for both when fewer than :data:`TREND_MIN_SESSIONS` sessions are left or the
-        values or elevations are all equal.
+        values or elevations are all equal. The p-value is exact (a permutation test over
+        every pairing, ``scipy.stats.permutation_test``) up to :data:`TREND_EXACT_MAX`
+        sessions: the t approximation gives p = 0 to any perfect ordering of a few.
+
+    References
+    ----------
+    C. Spearman, "The proof and measurement of association between two things", American
+    Journal of Psychology 15(1):72-101 (1904), doi:10.2307/1412159.
     """
     x, h = np.asarray(values, float), np.asarray(sun_elevation_deg, float)
     keep = np.isfinite(x) & np.isfinite(h)
@@ -162,11 +175,22 @@ def sun_trend(values, sun_elevation_deg) -> tuple:
     if x.size < TREND_MIN_SESSIONS or np.ptp(x) == 0 or np.ptp(h) == 0:
         return float("nan"), float("nan")
     rho, p = stats.spearmanr(x, h)
+    if x.size <= TREND_EXACT_MAX:
+        rh = stats.rankdata(h)
+        rh = rh - rh.mean()
+
+        def rank_correlation(a, axis=-1):       # Pearson's r of the ranks, batched
+            ra = stats.rankdata(a, axis=-1)
+            ra = ra - ra.mean(axis=-1, keepdims=True)
+            return (ra @ rh) / np.sqrt(np.sum(ra ** 2, axis=-1) * np.sum(rh ** 2))
+        p = stats.permutation_test((x,), rank_correlation, permutation_type="pairings",
+                                   n_resamples=np.inf, vectorized=True, batch=50_000).pvalue
     return float(rho), float(p)
 
 
 def _sun_elevation(report) -> float:
-    """The session's mean sun elevation [deg] from its report's data (NaN when unknown)."""
+    """The session's sun elevation [deg]: the midpoint of the lowest and highest in its
+    report's data (NaN when unknown)."""
     el = (report.data or {}).get("sun_elevation_deg")
     if el is None:
         return float("nan")
@@ -199,9 +223,11 @@ def shared_parameters(reports: dict, scope: dict | None = None,
         Columns ``candidate, parameter, scope, unit, sessions, mean, se, between_sd,
         spread, q, p, agree, sun_trend_rho, sun_trend_p, drifts_with_sun`` (empty when
         nothing is fitted twice); ``drifts_with_sun`` is True when the trend's p-value is
-        below :data:`AGREEMENT_P`.
+        below :data:`AGREEMENT_P`, None when there is no trend to test.
     """
     scope = PARAMETER_SCOPE if scope is None else scope
+    if min_share is not None and not 0.0 <= min_share <= 1.0:
+        raise InsufficientDataError(f"min_share = {min_share!r}: expected a share within 0-1")
     found: dict = {}
     for name, report in reports.items():
         for c in report.candidates:
@@ -229,7 +255,9 @@ def shared_parameters(reports: dict, scope: dict | None = None,
                      "sessions": est.n, "mean": est.mean, "se": est.se,
                      "between_sd": est.between_sd, "spread": est.spread, "q": est.q,
                      "p": est.p, "agree": est.agree, "sun_trend_rho": rho,
-                     "sun_trend_p": p_trend, "drifts_with_sun": bool(p_trend < AGREEMENT_P)})
+                     "sun_trend_p": p_trend,
+                     "drifts_with_sun": bool(p_trend < AGREEMENT_P) if np.isfinite(p_trend)
+                     else None})
     columns = ["candidate", "parameter", "scope", "unit", "sessions", "mean", "se",
                "between_sd", "spread", "q", "p", "agree", "sun_trend_rho", "sun_trend_p",
                "drifts_with_sun"]

@@ -958,6 +958,9 @@ class StrayLight(RingEffect):
         """The fall-off held at this value [deg] (:meth:`hold`), or None: fitted."""
 
     def hold(self, values: dict) -> None:
+        """Hold the fall-off ``scale_deg`` [deg] at ``values["scale_deg"]``, within its range
+        2-:data:`SCALE_MAX_DEG`; before :meth:`bind`, which then leaves it out of the
+        parameters (:func:`get_ring_effect` does both in this order)."""
         super().hold(values)
         v = float(values["scale_deg"])
         if not 2.0 <= v <= SCALE_MAX_DEG:
@@ -987,7 +990,8 @@ class StrayLight(RingEffect):
         return [np.r_[np.full(P, 0.05), s] for s in (5.0, 15.0, 30.0)]
 
     def _falloff(self, p, psi):
-        """``exp(-psi / psi_0)`` with the fitted or held fall-off."""
+        """``exp(-psi / psi_0)`` with the fitted or held fall-off ``psi_0`` [deg], ``psi``
+        the sun's distance from the unit's axis [deg]."""
         scale = self.held_scale_deg if self.held_scale_deg is not None else p[self.per_photodiode]
         return np.exp(-psi / scale)
 
@@ -1120,16 +1124,29 @@ _HELD = re.compile(r"^\s*(\w+)\s*\((.*)\)\s*$")
 
 
 def _held_values(name: str, text: str) -> dict:
+    """``{parameter: value}`` from the ``a=1, b=2`` inside a held candidate's parentheses
+    (values in the parameter's unit).
+
+    Raises
+    ------
+    UnknownEffectError
+        For nothing inside the parentheses, an item that is not ``parameter=number``, or a
+        parameter given twice, naming it.
+    """
     values = {}
-    for item in filter(None, (t.strip() for t in text.split(","))):
+    for item in (t.strip() for t in text.split(",")):
         key, sep, value = item.partition("=")
+        key = key.strip()
         try:
-            values[key.strip()] = float(value)
+            number = float(value)
         except ValueError:
             sep = ""
-        if not sep or not key.strip():
+        if not sep or not key:
             raise UnknownEffectError(f"{name!r}: {item!r} is not parameter=value "
                                      "(a number in the parameter's unit)")
+        if key in values:
+            raise UnknownEffectError(f"{name!r}: {key} is given twice")
+        values[key] = number
     return values
 
 

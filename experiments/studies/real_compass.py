@@ -20,7 +20,7 @@ from skysim.io import atomic_write, write_json_atomic
 from experiments.workflows.real_benchmark import session_files
 
 __all__ = ["DEFAULT_DATA", "DEFAULT_SEED", "session_files", "session_row", "run_sessions",
-           "day_parameters", "day_held_values", "day_held_check"]
+           "day_parameters", "day_held_values", "day_held_check", "DAY_HELD_COLUMNS"]
 
 DEFAULT_DATA = Path(__file__).resolve().parents[3] / "shared" / "reference" / "gkanias2023"
 DEFAULT_SEED = 2023
@@ -207,11 +207,16 @@ def day_held_values(reports: dict, effect: str = DAY_HELD[0], parameter: str = D
     ----------
     reports : dict
         Session key -> :class:`calibration.DiagnosisReport`.
+    effect, parameter : str
+        The candidate and its parameter (default :data:`DAY_HELD`).
+    min_share : float, optional
+        Least share of the excess the candidate removes in a session that counts (default:
+        the ring's ``min_share``, 0.5).
 
     Returns
     -------
     dict
-        Session key -> ``(own value, predicted value)``.
+        Session key -> ``(own value, predicted value)``, in the parameter's unit.
     """
     from calibration.photodiode_diagnosis.run import RING_THRESHOLDS
     min_share = RING_THRESHOLDS.min_share if min_share is None else min_share
@@ -228,13 +233,41 @@ def day_held_values(reports: dict, effect: str = DAY_HELD[0], parameter: str = D
             for k, v in own.items()}
 
 
+DAY_HELD_COLUMNS = ("session", "own", "own_se", "held", "share_own", "share_own_se",
+                    "share_alone", "share_alone_se", "share_held", "share_held_se",
+                    "converged_held", "at_bound_held", "wall_s", "error")
+"""Columns of ``day_fall_off.csv`` (:func:`day_held_check`)."""
+
+
 def day_held_check(files, reports: dict, out: Path, folds: int = 3,
                    seed: int = DEFAULT_SEED) -> pd.DataFrame:
     """Whether the day's sessions can share the side glare's fall-off (an instrument
-    parameter): each session where the side glare removes at least half of the excess is
-    diagnosed again with the fall-off held at the median of the other such sessions
-    (:func:`day_held_values`), and its share of the excess with the held fall-off is put
-    beside its share with its own. Writes ``day_fall_off.csv`` and returns the table."""
+    parameter): each session where the side glare removes at least the ring's ``min_share``
+    of the excess is diagnosed again with the side glare alone, once with its own fall-off
+    fitted and once with it held at the median of the other such sessions
+    (:func:`day_held_values`); the two shares of the excess are compared like for like (the
+    same candidate set, hence the same noise floor rule).
+
+    Parameters
+    ----------
+    files : list of path
+        The day's session files.
+    reports : dict
+        Session file -> its diagnosis with every candidate (the side glare among them).
+    out : Path
+        Folder of ``day_fall_off.csv`` (written, with its header only when no session
+        qualifies).
+    folds, seed : int
+        As in :func:`run_sessions`.
+
+    Returns
+    -------
+    pandas.DataFrame
+        Columns :data:`DAY_HELD_COLUMNS`: the fall-off [deg] fitted in the full diagnosis
+        (``own``, ``own_se``) and held (``held``); the side glare's share of the excess in
+        the full diagnosis (``share_own``), alone with its fall-off fitted
+        (``share_alone``) and alone with it held (``share_held``), each with its SE.
+    """
     from calibration import diagnose
     from calibration.diagnosis import DiagnosisError
     from sensor.photodiodes_io import read_photodiodes
@@ -246,26 +279,26 @@ def day_held_check(files, reports: dict, out: Path, folds: int = 3,
         if f not in predicted:
             continue
         mine, held = predicted[f]
-        free = reports[f].candidate(effect)
-        row = {"session": Path(f).name, f"own_{parameter}": mine,
-               f"own_{parameter}_se": free.params[parameter].get("uncertainty"),
-               f"held_{parameter}": held, "share_own": free.explained_share,
-               "share_own_se": free.explained_share_se}
+        full = reports[f].candidate(effect)
+        row = {"session": Path(f).name, "own": mine,
+               "own_se": full.params[parameter].get("uncertainty"), "held": held,
+               "share_own": full.explained_share, "share_own_se": full.explained_share_se}
         t0 = time.perf_counter()
+        data = read_photodiodes(f)
         try:
-            report = diagnose(read_photodiodes(f), (f"{effect}({parameter}={held:.6g})",),
-                              folds=folds, seed=seed, time_uncertainty_s=uncertain[Path(f)],
-                              where=f"{Path(f).name} with {parameter} held at {held:.4g}")
+            for tag, name in (("alone", effect), ("held", f"{effect}({parameter}={held:.6g})")):
+                c = diagnose(data, (name,), folds=folds, seed=seed,
+                             time_uncertainty_s=uncertain[Path(f)],
+                             where=f"{Path(f).name}, {name} alone").candidate(effect)
+                row.update({f"share_{tag}": c.explained_share,
+                            f"share_{tag}_se": c.explained_share_se})
         except DiagnosisError as exc:
             rows.append(dict(row, error=str(exc)))
             continue
-        c = report.candidate(effect)
-        rows.append(dict(row, share_held=c.explained_share, share_held_se=c.explained_share_se,
-                         converged_held=c.converged, at_bound_held=",".join(c.at_bound or []),
+        rows.append(dict(row, converged_held=c.converged, at_bound_held=",".join(c.at_bound or []),
                          wall_s=time.perf_counter() - t0))
-    table = pd.DataFrame(rows)
-    if len(table):
-        atomic_write(out / "day_fall_off.csv", lambda p: table.to_csv(p, index=False))
+    table = pd.DataFrame(rows, columns=list(DAY_HELD_COLUMNS))
+    atomic_write(out / "day_fall_off.csv", lambda p: table.to_csv(p, index=False))
     return table
 
 
@@ -285,11 +318,11 @@ def day_parameters(reports: dict) -> pd.DataFrame:
     parts = [shared_parameters(reports).assign(sessions_used="all"),
              shared_parameters(reports, min_share=RING_THRESHOLDS.min_share
                                ).assign(sessions_used="explaining")]
+    columns = ["sessions_used"] + list(shared_parameters({}).columns)
     parts = [t for t in parts if len(t)]
     if not parts:
-        return pd.DataFrame()
-    table = pd.concat(parts, ignore_index=True)
-    return table[["sessions_used"] + [c for c in table.columns if c != "sessions_used"]]
+        return pd.DataFrame(columns=columns)
+    return pd.concat(parts, ignore_index=True)[columns]
 
 
 def _table_md(table: pd.DataFrame, columns=SESSION_COLUMNS) -> str:
@@ -398,14 +431,16 @@ def _reproduce(args) -> int:
         print(_table_md(clocks, tuple(clocks.columns)))
         print(f"wall time of the clock check {t1 - t0 - elapsed:.0f} s")
     if len(day):
-        print("the side glare's fall-off of each session where it removes half the excess or "
-              "more, held at the median of the other such sessions: its share of the excess "
-              "with its own fall-off and with the held one")
+        print("the side glare's fall-off [deg] of each session where it removes half the "
+              "excess or more, held at the median of the other such sessions: its share of "
+              "the excess in the full diagnosis, alone with its own fall-off and alone with "
+              "the held one")
         print(_table_md(day, tuple(day.columns)))
     print(f"wrote {out}/sessions.csv, sessions.md, summary.json, shared_parameters.csv, "
           f"gap_and_heading_over_day.png"
           f"{', clock_check.csv' if len(clocks) else ''}"
-          f"{', day_fall_off.csv' if len(day) else ''} and one diagnosis.json per session")
+          f"{', day_fall_off.csv' if not args.quick else ''} and one diagnosis.json per "
+          "session")
     return 0
 
 

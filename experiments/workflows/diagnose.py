@@ -607,8 +607,9 @@ def register(sub) -> None:
                    "tilt (with --pointing-from only: it turns with the units), overcast (a "
                    "cloud layer over the whole sky), side_glare (glare stronger on the side "
                    "of a unit the sun is on) and read_lag (readings lagging the yaw record); "
-                   "side_glare(scale_deg=94) or stray_light(scale_deg=94) holds the glare's "
-                   "fall-off at a value [deg] (a day's, from other sessions); "
+                   "'side_glare(scale_deg=94)' or 'stray_light(scale_deg=94)' (quoted for "
+                   "the shell) holds the glare's fall-off at a value [deg] (a day's, from "
+                   "other sessions); "
                    "for camera frames: lens,polarizer_angles,"
                    "extinction_ratio,sky_dop,overcast (default) and crosstalk")
     d.add_argument("--out", type=output_dir,
