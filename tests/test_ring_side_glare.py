@@ -113,3 +113,16 @@ def test_a_candidate_asked_for_twice_is_refused():
     with pytest.raises(UnknownEffectError,
                        match=r"'side_glare' and 'side_glare\(scale_deg=94\)' are the same"):
         ring_candidates(["side_glare", "side_glare(scale_deg=94)"])
+
+
+def test_report_says_what_was_held():
+    """A candidate row carrying ``held`` (as the ring diagnosis writes it) survives the
+    report's JSON round trip and is shown in its markdown beside the candidate's name."""
+    from calibration.diagnosis.report import Candidate, DiagnosisReport, Verdict
+    c = Candidate.from_dict({"effect": "side_glare", "k": 64, "gap_after": 0.004, "shrink": 0.4,
+                             "score": -10.0, "explained": True, "held": {"scale_deg": 94.0}})
+    rep = DiagnosisReport(instrument="photodiodes", metric="relative reading", unit="1",
+                          verdict=Verdict(effect="side_glare", reason="test"), candidates=[c])
+    back = DiagnosisReport.from_dict(rep.to_dict())
+    assert back.candidate("side_glare").details["held"] == {"scale_deg": 94.0}
+    assert "| side_glare (scale_deg held at 94) | 64 |" in back.to_markdown()

@@ -80,7 +80,8 @@ def report_markdown(r) -> str:
                   f"{_fmt(c.paired_difference, 3)} ± {_fmt(c.paired_difference_se, 2)}")
         share = ("—" if c.explained_share is None else
                  f"{100 * c.explained_share:.0f} ± {100 * (c.explained_share_se or 0):.0f} %")
-        lines.append(f"| {i} | {c.effect} | {c.k} | {_fmt(c.gap_after, 4)} | "
+        held = "".join(f" ({k} held at {v:g})" for k, v in (c.details.get("held") or {}).items())
+        lines.append(f"| {i} | {c.effect}{held} | {c.k} | {_fmt(c.gap_after, 4)} | "
                      f"{100 * c.shrink:.1f} % | {c.score:.1f} | {paired} | {share} | "
                      f"{', '.join(c.at_bound) or '—'} | {'yes' if c.explained else 'no'} |")
     lines += ["", "## Where the gap lies (held-out residuals of the base model)", "",
