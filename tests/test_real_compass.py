@@ -114,3 +114,14 @@ def test_day_held_values_are_the_other_sessions_median():
     assert got["d"] == (200.0, 60.0)          # median of 50, 100, 60
     assert got["e"] == (60.0, 100.0)          # median of 50, 100, 200
     assert day_held_values({k: reports[k] for k in "abc"}) == {}
+
+
+def test_session_cell_summarises_per_photodiode_parameters():
+    """A glare candidate's 64 per-photodiode strengths are summarised in the day's table as
+    the largest of each kind and its photodiode; other parameters are listed."""
+    from experiments.studies.real_compass import _params_text
+    params = {"L_u0_p000": {"value": 0.2}, "L_u3_p090": {"value": 1.25},
+              "R_u1_p045": {"value": 0.4}, "R_u2_p135": {"value": 3e-113},
+              "scale_deg": {"value": 94.41}}
+    assert _params_text(params) == "max L=1.25 (u3_p090); max R=0.4 (u1_p045); scale_deg=94.41"
+    assert _params_text({"hwhm_deg": {"value": 40.45}}) == "hwhm_deg=40.45"

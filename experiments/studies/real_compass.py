@@ -9,6 +9,7 @@ Default data: the Gkanias et al. (2023) ring-compass recordings (Sardinia, May 2
 
 from __future__ import annotations
 
+import re
 import time
 from pathlib import Path
 
@@ -44,6 +45,8 @@ def session_row(name: str, report) -> dict:
             "gap_base": v.gap_before, "verdict": v.effect,
             "best": v.best_candidate, "gap_best": best.gap_after if best else None,
             "shrink": best.shrink if best else None,
+            "share_of_excess": v.explained_share, "share_of_excess_se": v.explained_share_se,
+            "group": "+".join(v.group or []),
             "params": _params_text(best.params if best else {}),
             "heading_rms_base_deg": he.get("base_deg"), "heading_rms_best_deg": he.get("best_deg"),
             "unit_elevation_offset_deg": base_fit.get("elevation_offset_mean_deg"),
@@ -55,14 +58,23 @@ def session_row(name: str, report) -> dict:
                                    for w in report.where[:3])}
 
 
+_PER_PHOTODIODE = re.compile(r"^(\w+?)_(u\d+_p\d+)$")
+"""A per-photodiode parameter: its kind (``S``, ``L``, ``R``) and photodiode (``u0_p045``)."""
+
+
 def _params_text(params: dict) -> str:
-    """Fitted parameters for a table cell; per-photodiode ones as their largest value."""
-    per_pd = {k: p for k, p in params.items() if k.startswith("S_u")}
-    rest = [f"{k}={p['value']:.4g}" for k, p in params.items() if k not in per_pd]
-    if per_pd:
-        k, p = max(per_pd.items(), key=lambda kv: kv[1]["value"])
-        rest.insert(0, f"max S={p['value']:.3g} ({k[2:]})")
-    return "; ".join(rest)
+    """Fitted parameters for a table cell; per-photodiode ones, per kind, as their largest
+    value and the photodiode that has it."""
+    kinds: dict = {}
+    rest = []
+    for k, p in params.items():
+        m = _PER_PHOTODIODE.match(k)
+        if m:
+            kinds.setdefault(m.group(1), []).append((p["value"], m.group(2)))
+        else:
+            rest.append(f"{k}={p['value']:.4g}")
+    tops = [f"max {kind}={max(v)[0]:.3g} ({max(v)[1]})" for kind, v in kinds.items()]
+    return "; ".join(tops + rest)
 
 
 ESTIMATED_TIMES_UNCERTAINTY_S = 120.0
@@ -302,8 +314,9 @@ def day_held_check(files, reports: dict, out: Path, folds: int = 3,
     return table
 
 
-SESSION_COLUMNS = ("session", "sun_elevation_deg", "faults", "gap_base", "verdict", "best",
-                   "gap_best", "shrink", "params", "heading_rms_base_deg",
+SESSION_COLUMNS = ("session", "sun_elevation_deg", "faults", "gap_base", "verdict", "group",
+                   "best", "gap_best", "shrink", "share_of_excess", "share_of_excess_se",
+                   "params", "heading_rms_base_deg",
                    "heading_rms_best_deg", "unit_elevation_offset_deg")
 
 
