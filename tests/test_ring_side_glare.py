@@ -74,7 +74,8 @@ def test_fall_off_held_at_a_day_value(name):
     free, held = get_ring_effect(name), get_ring_effect(f"{name}(scale_deg=94)")
     free.bind(inst)
     held.bind(inst)
-    assert held.name == free.name and held.held_scale_deg == 94.0
+    assert held.name == free.name and held.held_values == {"scale_deg": 94.0}
+    assert free.held_values == {}
     assert held.parameter_names == free.parameter_names[:-1]
     assert free.parameter_names[-1] == "scale_deg"
     for f in ("units", "null", "lower", "upper", "prior_sd", "fd_step"):

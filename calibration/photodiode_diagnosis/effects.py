@@ -260,6 +260,11 @@ class RingEffect:
                 f"{self.name} cannot hold {', '.join(bad)}; it can hold: "
                 f"{', '.join(self.holdable) or 'nothing'}")
 
+    @property
+    def held_values(self) -> dict:
+        """Parameters held at a value (:meth:`hold`): name -> value; empty when none."""
+        return {}
+
 
 class ClockOffset(RingEffect):
     name = "clock_offset"
@@ -967,6 +972,10 @@ class StrayLight(RingEffect):
             raise UnknownEffectError(f"{self.name}: scale_deg = {v!r} is outside its range "
                                      f"2-{SCALE_MAX_DEG:g} deg")
         self.held_scale_deg = v
+
+    @property
+    def held_values(self) -> dict:
+        return {} if self.held_scale_deg is None else {"scale_deg": self.held_scale_deg}
 
     def _strengths(self, names, P) -> None:
         """Parameter lists of ``P`` strengths named ``names`` and the fall-off, unless held."""

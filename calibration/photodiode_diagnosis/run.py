@@ -970,8 +970,8 @@ def _candidate_rows(s: _Session, held: judge.HeldOut, cand, floor: float, n_cal:
         row["sweeps_improved"] = row["blocks_improved"]
         row["at_bound"] = core.at_bound(P, e.lower, e.upper, e.parameter_names, null=e.null)
         row["params"] = _fold_params(e, P, [f.sd for f in fits if f.sd is not None])
-        if getattr(e, "held_scale_deg", None) is not None:
-            row["held"] = {"scale_deg": e.held_scale_deg}
+        if e.held_values:
+            row["held"] = e.held_values
         rows.append(row)
         if e.geometric:
             row["fitted_on"] = ("angle of polarization (DoP profiled out) of the "
