@@ -25,13 +25,15 @@ from calibration.diagnosis.identifiability import (
     run_matrix,
     score_matrix,
 )
+from calibration.photodiode_diagnosis.effects import RING_EFFECT_NAMES
 
 FOUND_MIN = 0.9
 Z_RMS_RANGE = (0.7, 1.5)
 
 
-def _goals(score: dict) -> list[str]:
-    """The goals a matrix misses (empty when it meets them all)."""
+def _goals(score: dict, z: bool = True) -> list[str]:
+    """The goals a matrix misses (empty when it meets them all); ``z=False`` leaves out the
+    z-score RMS, for a matrix whose SEs are calibrated over noise draws of their own."""
     missed = []
     if not score["found_rate"] >= FOUND_MIN:
         missed.append(f"named or in group {score['found_rate']:.2f} "
@@ -41,7 +43,7 @@ def _goals(score: dict) -> list[str]:
     if score["withheld_ok_rate"] != 1.0:
         missed.append(f"withheld never a single effect {score['withheld_ok_rate']:.2f}")
     missed += [f"z RMS {e} {r:.2f}" for e, r in score["z_rms"].items()
-               if not Z_RMS_RANGE[0] <= r <= Z_RMS_RANGE[1]]
+               if z and not Z_RMS_RANGE[0] <= r <= Z_RMS_RANGE[1]]
     return missed
 
 
@@ -172,19 +174,48 @@ def test_ring_session_design_is_a_real_sessions():
 
 @pytest.mark.slow
 @pytest.mark.matrix
-@pytest.mark.xfail(strict=True, reason=(
-    "measured on seed 31 on this code, both strengths: every effect named or in the named "
-    "group, clean data none, no single effect named with the truth withheld; missed: the z "
-    "RMS of the strong rows' aureole (0.45, two z-scores), neutral-point separation (0.53, "
-    "one) and stray light (0.56, 33 z-scores of one fit, conservative SEs). Over several "
-    "seeds the aureole's is 0.73 (31-38) and the stray light's 0.71 (eight draws)"))
 def test_ring_matrix_meets_the_goals():
-    """The strong strengths over one seed (each ring diagnosis takes about 70 s of CPU)."""
+    """The strong strengths over one seed (each ring diagnosis takes about 70 s of CPU): every
+    effect named or in the named group, clean data ``none``, no single effect named with the
+    truth withheld. The z-score goal is not asked of one seed here: it gives one or two
+    z-scores per parameter (and the 32 stray-light strengths of one fit err together), and a
+    calibrated SE puts the RMS of one z-score outside 0.7-1.5 with probability 0.65, of two
+    with 0.43; it is asked of twelve noise draws in
+    :func:`test_ring_standard_errors_are_calibrated`."""
     spec = matrix_spec("ring")
     spec = replace(spec, strengths={e: {"strong": v["strong"]}
                                     for e, v in spec.strengths.items()})
     s = score_matrix(run_matrix(spec))
-    assert _goals(s) == []
+    assert _goals(s, z=False) == []
+
+
+RING_Z_SEEDS = range(100, 112)
+"""Noise draws of the ring's SE calibration (12: the RMS of a calibrated SE's z-scores over
+12 independent draws has a relative spread of 1/sqrt(24) = 0.2 for one parameter and one
+strength, less for more)."""
+
+
+@pytest.mark.slow
+@pytest.mark.matrix
+@pytest.mark.parametrize("effect", RING_EFFECT_NAMES)
+def test_ring_standard_errors_are_calibrated(effect):
+    """Each ring candidate's reported SE (the fold mean's, :func:`.judge.fold_mean_se`) over
+    the twelve noise draws ``RING_Z_SEEDS`` of the matrix's ring session at both strengths,
+    each diagnosed with the candidate alone: the RMS of all its z-scores within 0.7-1.5 (the
+    matrix's goal). The 95 % interval from a bootstrap over draws (a draw's z-scores are
+    resampled together: its parameters, and for the stray light its two strengths, which add
+    light to the same noisy readings, err together) is printed with it. Every data set must
+    rank the candidate best and give it a z-score."""
+    from calibration.diagnosis.identifiability import z_over_draws
+    rows = z_over_draws(matrix_spec("ring"), effect, RING_Z_SEEDS)
+    missing = rows[rows.parameter.isna()]
+    assert missing.empty, missing[["seed", "strength", "verdict"]].to_dict("records")
+    by_draw = [g.z.to_numpy(float) for _, g in rows.groupby("seed")]
+    rms, (lo, hi) = _rms_with_interval(by_draw, np.random.default_rng(0))
+    print(f"{effect}: {len(rows)} z-scores over {len(by_draw)} draws, RMS {rms:.2f} "
+          f"(95 % interval {lo:.2f}-{hi:.2f}); diagnoses {rows.seconds.min():.0f}-"
+          f"{rows.seconds.max():.0f} s")
+    assert Z_RMS_RANGE[0] <= rms <= Z_RMS_RANGE[1], (rms, lo, hi)
 
 
 def test_ring_generator_skies_against_closed_forms():
@@ -216,13 +247,17 @@ def test_ring_generator_skies_against_closed_forms():
                                / (1.0 + 2.0 * np.exp(-psi / 15.0)), rtol=1e-12)
 
 
-def _rms_with_interval(z_by_draw: np.ndarray, rng: np.random.Generator) -> tuple:
-    """RMS of z-scores (rows: independent noise draws) and its 95 % interval from a
-    bootstrap over draws (the parameters of one draw are correlated, so draws are
-    resampled whole)."""
-    z = np.asarray(z_by_draw, float)
-    boot = [np.sqrt(np.mean(z[rng.integers(0, len(z), len(z))] ** 2)) for _ in range(2000)]
-    return float(np.sqrt(np.mean(z ** 2))), tuple(np.percentile(boot, [2.5, 97.5]))
+def _rms_with_interval(z_by_draw, rng: np.random.Generator) -> tuple:
+    """RMS of z-scores (one array per independent noise draw, of any length) and its 95 %
+    interval from a bootstrap over draws (the parameters of one draw are correlated, so
+    draws are resampled whole)."""
+    z = [np.atleast_1d(np.asarray(d, float)) for d in z_by_draw]
+
+    def rms(draws):
+        return float(np.sqrt(np.mean(np.concatenate(draws) ** 2)))
+
+    boot = [rms([z[i] for i in rng.integers(0, len(z), len(z))]) for _ in range(2000)]
+    return rms(z), tuple(np.percentile(boot, [2.5, 97.5]))
 
 
 def test_three_pair_multiple_scattering_standard_errors_are_calibrated():
