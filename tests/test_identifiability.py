@@ -24,6 +24,9 @@ from calibration.diagnosis.identifiability import (
     matrix_spec,
     run_matrix,
     score_matrix,
+    z_draws_markdown,
+    z_draws_summary,
+    z_rms_interval,
 )
 from calibration.photodiode_diagnosis.effects import RING_EFFECT_NAMES
 
@@ -73,6 +76,62 @@ def test_unknown_instrument_and_empty_seeds_refused():
         matrix_spec("dome")
     with pytest.raises(IdentifiabilityInputError, match="seeds"):
         run_matrix(matrix_spec("three-pair"), seeds=())
+
+
+def test_z_rms_interval_against_its_definition_and_a_calibrated_sample():
+    """The RMS is that of every z-score pooled over draws of different lengths (by hand:
+    sqrt((1 + 4 + 9 + 0) / 4)); on 400 draws of two independent standard normal z-scores
+    (a calibrated SE) the RMS is within 4 of its sampling SDs of 1 (1/sqrt(2 * 800) = 0.025)
+    and the bootstrap's 95 % interval holds it and spans about 2 x 1.96 of those SDs
+    (0.08-0.12 wide)."""
+    rms, (lo, hi) = z_rms_interval([[1.0, -2.0], [3.0], [0.0]])
+    assert rms == pytest.approx(np.sqrt(14.0 / 4.0))
+    assert lo <= rms <= hi
+    z = np.random.default_rng(5).standard_normal((400, 2))
+    rms, (lo, hi) = z_rms_interval(list(z), np.random.default_rng(1))
+    assert abs(rms - 1.0) < 4 * 0.025, rms
+    assert lo < rms < hi and 0.08 < hi - lo < 0.12, (lo, hi)
+    with pytest.raises(IdentifiabilityInputError, match="empty"):
+        z_rms_interval([])
+
+
+def test_z_draws_summary_and_table_on_a_hand_made_table():
+    """Counts, draws, data sets without a z-score and times from a hand-made table of two
+    effects (one data set of the second with no z-score)."""
+    rows = pd.DataFrame([
+        dict(effect="tilt", seed=1, strength="strong", parameter="a", z=1.0, verdict="tilt",
+             seconds=2.0),
+        dict(effect="tilt", seed=1, strength="strong", parameter="b", z=-1.0,
+             verdict="tilt", seconds=2.0),
+        dict(effect="tilt", seed=2, strength="strong", parameter="a", z=2.0, verdict="tilt",
+             seconds=4.0),
+        dict(effect="fov", seed=1, strength="strong", parameter=None, z=np.nan,
+             verdict="none", seconds=1.0)])
+    s = z_draws_summary(rows)
+    assert s["tilt"]["rms"] == pytest.approx(np.sqrt(2.0)) and s["tilt"]["draws"] == 2
+    assert s["tilt"]["z_count"] == 3 and s["tilt"]["without_z"] == 0
+    assert (s["tilt"]["seconds_min"], s["tilt"]["seconds_max"]) == (2.0, 4.0)
+    assert s["fov"]["without_z"] == 1 and s["fov"]["draws"] == 0
+    assert "| tilt | 2 | 3 | 1.41 |" in z_draws_markdown(s, "x")
+
+
+def test_z_over_draws_on_the_three_pair_and_its_refusals(tmp_path):
+    """The sun's motion on the three-pair (one seed, both strengths, the candidate alone):
+    one z-score per strength, the verdict naming the effect; an effect the matrix does not
+    simulate, no seeds, and a negative number of draws are refused naming the value."""
+    from calibration.diagnosis.identifiability import write_matrix, z_over_draws
+    spec = matrix_spec("three-pair")
+    rows = z_over_draws(spec, "sun_motion", [11])
+    assert len(rows) == 2 and set(rows.strength) == {"moderate", "strong"}
+    assert rows.parameter.notna().all() and (rows.verdict == "sun_motion").all()
+    assert np.all(np.abs(rows.z) < 3.0), rows.z.tolist()
+    with pytest.raises(IdentifiabilityInputError, match="'dome_glare'"):
+        z_over_draws(spec, "dome_glare", [1])
+    with pytest.raises(IdentifiabilityInputError, match="seeds"):
+        z_over_draws(spec, "sun_motion", [])
+    with pytest.raises(IdentifiabilityInputError, match="-2"):
+        write_matrix("three-pair", tmp_path, z_draws=-2)
+    assert not any(tmp_path.iterdir())
 
 
 def test_three_pair_geometric_effects_named_and_clean_is_none():
@@ -211,7 +270,7 @@ def test_ring_standard_errors_are_calibrated(effect):
     missing = rows[rows.parameter.isna()]
     assert missing.empty, missing[["seed", "strength", "verdict"]].to_dict("records")
     by_draw = [g.z.to_numpy(float) for _, g in rows.groupby("seed")]
-    rms, (lo, hi) = _rms_with_interval(by_draw, np.random.default_rng(0))
+    rms, (lo, hi) = z_rms_interval(by_draw, np.random.default_rng(0))
     print(f"{effect}: {len(rows)} z-scores over {len(by_draw)} draws, RMS {rms:.2f} "
           f"(95 % interval {lo:.2f}-{hi:.2f}); diagnoses {rows.seconds.min():.0f}-"
           f"{rows.seconds.max():.0f} s")
@@ -247,19 +306,6 @@ def test_ring_generator_skies_against_closed_forms():
                                / (1.0 + 2.0 * np.exp(-psi / 15.0)), rtol=1e-12)
 
 
-def _rms_with_interval(z_by_draw, rng: np.random.Generator) -> tuple:
-    """RMS of z-scores (one array per independent noise draw, of any length) and its 95 %
-    interval from a bootstrap over draws (the parameters of one draw are correlated, so
-    draws are resampled whole)."""
-    z = [np.atleast_1d(np.asarray(d, float)) for d in z_by_draw]
-
-    def rms(draws):
-        return float(np.sqrt(np.mean(np.concatenate(draws) ** 2)))
-
-    boot = [rms([z[i] for i in rng.integers(0, len(z), len(z))]) for _ in range(2000)]
-    return rms(z), tuple(np.percentile(boot, [2.5, 97.5]))
-
-
 def test_three_pair_multiple_scattering_standard_errors_are_calibrated():
     """The multiple-scattering candidate's reported SE (its fit on all data, Gauss-Newton
     covariance) over 24 noise draws per strength of the matrix's generator: z RMS within
@@ -278,7 +324,7 @@ def test_three_pair_multiple_scattering_standard_errors_are_calibrated():
             assert c.details["params_from"].startswith("all data") and not c.at_bound
             rows.append([(c.params[n]["value"] - truth[n]) / c.params[n]["se"]
                          for n in ("tau", "albedo")])
-    rms, (lo, hi) = _rms_with_interval(rows, np.random.default_rng(0))
+    rms, (lo, hi) = z_rms_interval(rows, np.random.default_rng(0))
     assert Z_RMS_RANGE[0] <= rms <= Z_RMS_RANGE[1], (rms, lo, hi)
     assert 0.6 <= lo and hi <= 1.6, (rms, lo, hi)
 
@@ -300,7 +346,7 @@ def test_camera_overcast_standard_errors_are_calibrated():
             P = C._parameters(fit, C.CAMERA_EFFECTS["overcast"], True)
             rows.append([(P[n]["value"] - truth[n]) / P[n]["se"]
                          for n in ("cloud_tau", "d_max")])
-    rms, (lo, hi) = _rms_with_interval(rows, np.random.default_rng(0))
+    rms, (lo, hi) = z_rms_interval(rows, np.random.default_rng(0))
     assert Z_RMS_RANGE[0] <= rms <= Z_RMS_RANGE[1], (rms, lo, hi)
     assert 0.6 <= lo and hi <= 1.6, (rms, lo, hi)
 

@@ -36,7 +36,7 @@ from .errors import DiagnosisError
 
 __all__ = ["INSTRUMENTS", "IdentifiabilityInputError", "InstrumentMatrix", "matrix_markdown",
            "matrix_spec", "ring_session", "run_matrix", "score_matrix", "write_matrix",
-           "z_over_draws"]
+           "z_draws_markdown", "z_draws_summary", "z_over_draws", "z_rms_interval"]
 
 INSTRUMENTS = ("three-pair", "sky", "camera", "ring")
 """Instruments with an identifiability matrix."""
@@ -285,6 +285,70 @@ def matrix_markdown(score: dict, instrument: str) -> str:
         lines.append(f"| {e} | {score['z_count'][e]} | {r:.2f} |")
     if not score["z_rms"]:
         lines.append("| (no candidate reported a parameter with a standard error) | 0 | - |")
+    return "\n".join(lines) + "\n"
+
+
+Z_DRAW_SEED0 = 100
+"""First noise seed of :func:`z_over_draws` in :func:`write_matrix` (apart from the
+matrices' own seeds)."""
+
+
+def z_rms_interval(z_by_draw, rng=None, n_boot: int = 2000) -> tuple:
+    """RMS of z-scores and its 95 % interval from a bootstrap over independent draws.
+
+    Parameters
+    ----------
+    z_by_draw : sequence of array_like
+        The z-scores of each noise draw (any number per draw). A draw's z-scores are
+        resampled together: the parameters of one fit err together.
+    rng : numpy.random.Generator, optional
+        Resampling generator (default ``numpy.random.default_rng(0)``).
+    n_boot : int
+        Bootstrap resamples.
+
+    Returns
+    -------
+    rms, (low, high) : float, tuple of float
+    """
+    rng = np.random.default_rng(0) if rng is None else rng
+    z = [np.atleast_1d(np.asarray(d, float)) for d in z_by_draw]
+    if not z:
+        raise IdentifiabilityInputError("no draws: z_by_draw is empty")
+
+    def rms(draws):
+        return float(np.sqrt(np.mean(np.concatenate(draws) ** 2)))
+
+    boot = [rms([z[i] for i in rng.integers(0, len(z), len(z))]) for _ in range(n_boot)]
+    return rms(z), tuple(float(b) for b in np.percentile(boot, [2.5, 97.5]))
+
+
+def z_draws_summary(rows: pd.DataFrame) -> dict:
+    """Per effect, from :func:`z_over_draws` rows (an ``effect`` column beside them): z-score
+    count, draws, RMS and its bootstrap interval (:func:`z_rms_interval`), data sets without
+    a z-score, and the diagnoses' time range [s]."""
+    out = {}
+    for effect, g in rows.groupby("effect", sort=False):
+        have = g[g.parameter.notna()]
+        by_draw = [d.z.to_numpy(float) for _, d in have.groupby("seed")]
+        rms, (lo, hi) = z_rms_interval(by_draw) if by_draw else (float("nan"), (np.nan, np.nan))
+        sets = g.drop_duplicates(["seed", "strength"])
+        out[effect] = {"z_count": int(len(have)), "draws": len(by_draw), "rms": rms,
+                       "rms_low": lo, "rms_high": hi,
+                       "without_z": int(sets.parameter.isna().sum()),
+                       "seconds_min": float(sets.seconds.min()),
+                       "seconds_max": float(sets.seconds.max())}
+    return out
+
+
+def z_draws_markdown(summary: dict, instrument: str) -> str:
+    """:func:`z_draws_summary` as a Markdown table."""
+    lines = [f"### {instrument}: standard errors over noise draws", "",
+             "| candidate | draws | z-scores | RMS of (fitted - true) / SE | 95 % interval "
+             "| data sets without a z-score | diagnosis [s] |", "|---|---|---|---|---|---|---|"]
+    for e, r in summary.items():
+        lines.append(f"| {e} | {r['draws']} | {r['z_count']} | {r['rms']:.2f} | "
+                     f"{r['rms_low']:.2f}-{r['rms_high']:.2f} | {r['without_z']} | "
+                     f"{r['seconds_min']:.0f}-{r['seconds_max']:.0f} |")
     return "\n".join(lines) + "\n"
 
 
@@ -848,10 +912,12 @@ def rows_to_json(rows: pd.DataFrame) -> list:
     return json.loads(rows.to_json(orient="records"))
 
 
-def write_matrix(instrument: str, out, *, quick: bool = False) -> dict:
+def write_matrix(instrument: str, out, *, quick: bool = False, z_draws: int = 0) -> dict:
     """Run the matrix of ``instrument`` and write ``identifiability.json`` (the score and
     every case) and ``identifiability.md`` (the tables) into the folder ``out``, each
-    atomically.
+    atomically; with ``z_draws``, also each candidate's z-scores over that many noise draws
+    (:func:`z_over_draws`, seeds from :data:`Z_DRAW_SEED0`) into ``z_over_draws.csv``, their
+    summary into the JSON (``z_over_draws``) and its table into the Markdown.
 
     Parameters
     ----------
@@ -861,11 +927,18 @@ def write_matrix(instrument: str, out, *, quick: bool = False) -> dict:
         Output folder (created).
     quick : bool
         The first noise seed and the strong strength only.
+    z_draws : int
+        Noise draws of the SE calibration (0: none).
 
     Returns
     -------
     dict
-        :func:`score_matrix` of the run.
+        :func:`score_matrix` of the run (with ``z_over_draws``, the summary, when asked).
+
+    Raises
+    ------
+    IdentifiabilityInputError
+        For a negative ``z_draws``.
     """
     from dataclasses import replace
     from pathlib import Path
@@ -875,13 +948,25 @@ def write_matrix(instrument: str, out, *, quick: bool = False) -> dict:
     if quick:
         spec = replace(spec, seeds=spec.seeds[:1],
                        strengths={e: {"strong": v["strong"]} for e, v in spec.strengths.items()})
+    if int(z_draws) != z_draws or z_draws < 0:
+        raise IdentifiabilityInputError(
+            f"z_draws = {z_draws!r}: give a whole number of noise draws, 0 or more")
     rows = run_matrix(spec)
     score = score_matrix(rows)
+    text = matrix_markdown(score, instrument)
+    draws = None
+    if z_draws:
+        seeds = range(Z_DRAW_SEED0, Z_DRAW_SEED0 + int(z_draws))
+        draws = pd.concat([z_over_draws(spec, e, seeds).assign(effect=e)
+                           for e in spec.strengths], ignore_index=True)
+        score["z_over_draws"] = z_draws_summary(draws)
+        text += "\n" + z_draws_markdown(score["z_over_draws"], instrument)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
+    if draws is not None:
+        atomic_write(out / "z_over_draws.csv", lambda p: draws.to_csv(p, index=False))
     write_json_atomic(out / "identifiability.json",
                       {"instrument": instrument, "seeds": list(spec.seeds), "quick": quick,
                        "score": score, "cases": rows_to_json(rows)})
-    text = matrix_markdown(score, instrument)
     atomic_write(out / "identifiability.md", lambda p: p.write_text(text))
     return score
