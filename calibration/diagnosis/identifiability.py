@@ -926,9 +926,9 @@ def write_matrix(instrument: str, out, *, quick: bool = False, z_draws: int = 0)
     out : path
         Output folder (created).
     quick : bool
-        The first noise seed and the strong strength only.
+        The first noise seed and the strong strength only (the z draws too).
     z_draws : int
-        Noise draws of the SE calibration (0: none).
+        Noise draws of the SE calibration (0: none), at both strengths.
 
     Returns
     -------
