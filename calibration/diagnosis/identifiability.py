@@ -129,7 +129,7 @@ def z_over_draws(spec: InstrumentMatrix, effect: str, seeds, *,
     seeds : sequence of int
         Noise seeds, one draw each.
     progress : callable, optional
-        Called with each finished row (dict).
+        Called with each finished data set's rows (list of dict).
 
     Returns
     -------
